@@ -1,0 +1,54 @@
+//! The one validation error every spec returns: it names the field, the
+//! offending value and what is allowed, so the CLI (exit 2) and the service
+//! (a 4xx problem+json) can show it as it is.
+
+use std::fmt;
+
+/// A rejected input: `field` is a dotted path (`estimator.cutoff_hz`),
+/// `value` the value as given, `allowed` a sentence saying what would be valid.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub struct SpecError {
+    pub field: String,
+    pub value: String,
+    pub allowed: String,
+}
+
+impl SpecError {
+    pub fn new(field: impl Into<String>, value: impl fmt::Display, allowed: impl Into<String>) -> Self {
+        Self {
+            field: field.into(),
+            value: value.to_string(),
+            allowed: allowed.into(),
+        }
+    }
+
+    /// Prefix the field path, e.g. `cutoff_hz` -> `estimator.cutoff_hz`.
+    pub fn within(mut self, parent: &str) -> Self {
+        self.field = format!("{parent}.{}", self.field);
+        self
+    }
+}
+
+impl fmt::Display for SpecError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} = {} is not allowed: {}", self.field, self.value, self.allowed)
+    }
+}
+
+/// `Ok(())` when `value` is finite and strictly positive.
+pub fn require_positive(field: &str, value: f64, unit: &str) -> Result<(), SpecError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(SpecError::new(field, value, format!("must be a finite number > 0 ({unit})")))
+    }
+}
+
+/// `Ok(())` when `value` is finite and not negative.
+pub fn require_non_negative(field: &str, value: f64, unit: &str) -> Result<(), SpecError> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(SpecError::new(field, value, format!("must be a finite number >= 0 ({unit})")))
+    }
+}

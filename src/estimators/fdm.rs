@@ -1,0 +1,49 @@
+//! Finite-difference method: `v_k = (y_k − y_{k−1})/T` (2011 paper eq. 2;
+//! Janabi-Sharifi et al. 2000 eq. 2). The first output is 0.
+
+use super::VelocityEstimator;
+
+#[derive(Debug, Clone)]
+pub struct Fdm {
+    inv_t: f64,
+    prev: Option<f64>,
+}
+
+impl Fdm {
+    /// `t`: sample period (s), already validated > 0.
+    pub fn new(t: f64) -> Self {
+        Self { inv_t: 1.0 / t, prev: None }
+    }
+}
+
+impl VelocityEstimator for Fdm {
+    #[inline]
+    fn update(&mut self, y: f64) -> f64 {
+        let v = match self.prev {
+            Some(p) => (y - p) * self.inv_t,
+            None => 0.0,
+        };
+        self.prev = Some(y);
+        v
+    }
+
+    fn reset(&mut self) {
+        self.prev = None;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hand_computed_steps() {
+        // T = 1 ms: (0.003 − 0.001)/0.001 = 2 m/s; (0.002 − 0.003)/0.001 = −1 m/s.
+        let mut f = Fdm::new(1e-3);
+        assert_eq!(f.update(0.001), 0.0);
+        assert!((f.update(0.003) - 2.0).abs() < 1e-12);
+        assert!((f.update(0.002) + 1.0).abs() < 1e-12);
+        f.reset();
+        assert_eq!(f.update(5.0), 0.0);
+    }
+}

@@ -1,0 +1,14 @@
+//! zwidth: how stiff and how damped a virtual wall a haptic device can render
+//! (its Z-width), for each velocity estimator.
+//!
+//! Pure numerics live in [`estimators`], [`signals`], [`accuracy`] and
+//! [`lipschitz`]; the CLI in `cli` only reads, calls them and prints.
+
+pub mod accuracy;
+pub mod error;
+pub mod estimators;
+pub mod lipschitz;
+pub mod plot;
+pub mod signals;
+
+pub use error::SpecError;
