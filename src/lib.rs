@@ -5,6 +5,7 @@
 //! [`lipschitz`]; the CLI in `cli` only reads, calls them and prints.
 
 pub mod accuracy;
+pub mod cli;
 pub mod error;
 pub mod estimators;
 pub mod lipschitz;
