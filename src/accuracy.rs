@@ -9,7 +9,8 @@
 //! - Levant "rule" gains use `hba_sc` with C = sup|f''| of the signal.
 //! - "Tuned" Levant gains: a 24 × 24 log grid over μ1 ∈ [0.25, 1000],
 //!   μ2 ∈ [0.1, 100] (α = μ1·C, λ = μ2·√C) minimizing the RMS error at 10 kHz,
-//!   the paper's loop rate, then held fixed across rates as the paper did.
+//!   the paper's loop rate, refined on a 9 × 9 grid one coarse step around
+//!   the best, then held fixed across rates as the paper did.
 //!   The implicit discretization is tuned the same way, separately.
 //! - Kalman and adaptive Kalman use the 2018 paper's tuned q = 2.5e4 (white jerk).
 //! - FOAW uses `max_window` 32.
@@ -19,7 +20,8 @@ use serde::Serialize;
 
 use crate::error::SpecError;
 use crate::estimators::{
-    Discretization, EstimatorKind, EstimatorSpec, FoawFit, FoawSpec, GainReport, GainRule, LevantSpec, QModel, Sampling, VelocityEstimator,
+    Discretization, EstimatorKind, EstimatorSpec, FoawFit, FoawSpec, GainReport, GainRule,
+    LevantSpec, QModel, Sampling, VelocityEstimator,
 };
 use crate::signals::{sample, DampedSine};
 
@@ -55,16 +57,31 @@ impl Default for AccuracyConfig {
 impl AccuracyConfig {
     pub fn validate(&self) -> Result<(), SpecError> {
         if self.rates.is_empty() {
-            return Err(SpecError::new("rates", "[]", "give at least one sample rate (Hz)"));
+            return Err(SpecError::new(
+                "rates",
+                "[]",
+                "give at least one sample rate (Hz)",
+            ));
         }
         for &r in &self.rates {
             if !(r.is_finite() && (10.0..=1e7).contains(&r)) {
-                return Err(SpecError::new("rates", r, "each rate must be between 10 Hz and 10 MHz"));
+                return Err(SpecError::new(
+                    "rates",
+                    r,
+                    "each rate must be between 10 Hz and 10 MHz",
+                ));
             }
         }
         Sampling::new(self.tuning_rate_hz, self.quantization)?;
-        if !(self.transient_s >= 0.0 && self.duration_s > self.transient_s && self.duration_s <= 60.0) {
-            return Err(SpecError::new("duration_s", self.duration_s, "must exceed the transient and be at most 60 s"));
+        if !(self.transient_s >= 0.0
+            && self.duration_s > self.transient_s
+            && self.duration_s <= 60.0)
+        {
+            return Err(SpecError::new(
+                "duration_s",
+                self.duration_s,
+                "must exceed the transient and be at most 60 s",
+            ));
         }
         Ok(())
     }
@@ -91,7 +108,13 @@ pub struct AccuracyReport {
 }
 
 /// RMS of (estimate − exact) over samples at or after `skip`.
-pub fn rms_error(spec: &EstimatorSpec, positions: &[f64], exact: &[f64], s: Sampling, skip: usize) -> Result<f64, SpecError> {
+pub fn rms_error(
+    spec: &EstimatorSpec,
+    positions: &[f64],
+    exact: &[f64],
+    s: Sampling,
+    skip: usize,
+) -> Result<f64, SpecError> {
     let mut est = spec.build(s)?;
     let mut sum = 0.0;
     let mut n = 0usize;
@@ -121,20 +144,47 @@ fn logspace(lo: f64, hi: f64, n: usize) -> impl Iterator<Item = f64> + Clone {
 }
 
 /// Grid-search (μ1, μ2) minimizing the RMS error at the tuning rate.
-pub fn tune_levant(cfg: &AccuracyConfig, c: f64, d: Discretization) -> Result<(f64, f64, f64), SpecError> {
+pub fn tune_levant(
+    cfg: &AccuracyConfig,
+    c: f64,
+    d: Discretization,
+) -> Result<(f64, f64, f64), SpecError> {
     let s = Sampling::new(cfg.tuning_rate_hz, cfg.quantization)?;
     let (pos, vel) = sample(&cfg.signal, s.rate_hz, cfg.duration_s, cfg.quantization);
     let skip = (cfg.transient_s * s.rate_hz).round() as usize;
-    let grid: Vec<(f64, f64)> = logspace(0.25, 1000.0, 24).flat_map(|m1| logspace(0.1, 100.0, 24).map(move |m2| (m1, m2))).collect();
+    let grid: Vec<(f64, f64)> = logspace(0.25, 1000.0, 24)
+        .flat_map(|m1| logspace(0.1, 100.0, 24).map(move |m2| (m1, m2)))
+        .collect();
     let scored: Vec<(f64, f64, f64)> = grid
         .par_iter()
         .map(|&(m1, m2)| rms_error(&levant(m1, m2, c, d), &pos, &vel, s, skip).map(|e| (m1, m2, e)))
         .collect::<Result<_, _>>()?;
-    Ok(scored.into_iter().min_by(|a, b| a.2.total_cmp(&b.2)).expect("grid is not empty"))
+    let best = |v: Vec<(f64, f64, f64)>| {
+        v.into_iter()
+            .min_by(|a, b| a.2.total_cmp(&b.2))
+            .expect("grid is not empty")
+    };
+    let (c1, c2, _) = best(scored);
+    // Refine: a 9 × 9 grid spanning one coarse step either side of the best.
+    let (r1, r2) = (
+        (1000.0f64 / 0.25).powf(1.0 / 23.0),
+        (1000.0f64).powf(1.0 / 23.0),
+    );
+    let fine: Vec<(f64, f64)> = logspace(c1 / r1, c1 * r1, 9)
+        .flat_map(|m1| logspace(c2 / r2, c2 * r2, 9).map(move |m2| (m1, m2)))
+        .collect();
+    let scored: Vec<(f64, f64, f64)> = fine
+        .par_iter()
+        .map(|&(m1, m2)| rms_error(&levant(m1, m2, c, d), &pos, &vel, s, skip).map(|e| (m1, m2, e)))
+        .collect::<Result<_, _>>()?;
+    Ok(best(scored))
 }
 
 /// The estimators of the study, named; Levant gains resolved against C.
-pub fn study_estimators(cfg: &AccuracyConfig, c: f64) -> Result<Vec<(String, EstimatorSpec)>, SpecError> {
+pub fn study_estimators(
+    cfg: &AccuracyConfig,
+    c: f64,
+) -> Result<Vec<(String, EstimatorSpec)>, SpecError> {
     let (m1, m2, _) = tune_levant(cfg, c, Discretization::Explicit)?;
     let (i1, i2, _) = tune_levant(cfg, c, Discretization::Implicit)?;
     let foaw = |fit| {
@@ -147,8 +197,22 @@ pub fn study_estimators(cfg: &AccuracyConfig, c: f64) -> Result<Vec<(String, Est
     };
     Ok(vec![
         ("fdm".into(), EstimatorKind::Fdm {}.into()),
-        ("butterworth 100 Hz".into(), EstimatorKind::Butterworth { cutoff_hz: 100.0, order: 2 }.into()),
-        ("kalman q=2.5e4".into(), EstimatorKind::Kalman { q: 2.5e4, q_model: QModel::WhiteJerk }.into()),
+        (
+            "butterworth 100 Hz".into(),
+            EstimatorKind::Butterworth {
+                cutoff_hz: 100.0,
+                order: 2,
+            }
+            .into(),
+        ),
+        (
+            "kalman q=2.5e4".into(),
+            EstimatorKind::Kalman {
+                q: 2.5e4,
+                q_model: QModel::WhiteJerk,
+            }
+            .into(),
+        ),
         (
             "adaptive kalman q=2.5e4".into(),
             EstimatorKind::AdaptiveKalman {
@@ -169,9 +233,18 @@ pub fn study_estimators(cfg: &AccuracyConfig, c: f64) -> Result<Vec<(String, Est
             })
             .into(),
         ),
-        ("levant 2018 mu=(6.6,2.45)".into(), levant(6.6, 2.45, c, Discretization::Explicit)),
-        (format!("levant tuned mu=({m1:.3},{m2:.3})"), levant(m1, m2, c, Discretization::Explicit)),
-        (format!("levant implicit tuned mu=({i1:.3},{i2:.3})"), levant(i1, i2, c, Discretization::Implicit)),
+        (
+            "levant 2018 mu=(6.6,2.45)".into(),
+            levant(6.6, 2.45, c, Discretization::Explicit),
+        ),
+        (
+            format!("levant tuned mu=({m1:.3},{m2:.3})"),
+            levant(m1, m2, c, Discretization::Explicit),
+        ),
+        (
+            format!("levant implicit tuned mu=({i1:.3},{i2:.3})"),
+            levant(i1, i2, c, Discretization::Implicit),
+        ),
     ])
 }
 
@@ -231,7 +304,13 @@ impl AccuracyReport {
             self.config.transient_s,
             self.lipschitz
         );
-        let w = self.rows.iter().map(|r| r.name.len()).max().unwrap_or(10).max(10);
+        let w = self
+            .rows
+            .iter()
+            .map(|r| r.name.len())
+            .max()
+            .unwrap_or(10)
+            .max(10);
         s.push_str(&format!("{:<w$}", "estimator"));
         for r in &self.rates {
             s.push_str(&format!(" {:>9}", format_rate(*r)));
@@ -245,7 +324,11 @@ impl AccuracyReport {
             s.push('\n');
         }
         for row in self.rows.iter().filter(|r| r.gains.is_some()) {
-            s.push_str(&format!("{}: {}\n", row.name, row.gains.as_ref().expect("filtered")));
+            s.push_str(&format!(
+                "{}: {}\n",
+                row.name,
+                row.gains.as_ref().expect("filtered")
+            ));
         }
         s
     }
@@ -276,8 +359,11 @@ mod tests {
         let (pos, vel) = sample(&sig, rate, 5.0, 1e-15);
         let s = Sampling::new(rate, 1e-15).unwrap();
         let e = rms_error(&EstimatorKind::Fdm {}.into(), &pos, &vel, s, 1000).unwrap();
-        let acc: Vec<f64> = (1000..5000).map(|k| sig.acceleration(k as f64 / rate)).collect();
-        let theory = 0.5 / rate * (acc.iter().map(|a| a * a).sum::<f64>() / acc.len() as f64).sqrt();
+        let acc: Vec<f64> = (1000..5000)
+            .map(|k| sig.acceleration(k as f64 / rate))
+            .collect();
+        let theory =
+            0.5 / rate * (acc.iter().map(|a| a * a).sum::<f64>() / acc.len() as f64).sqrt();
         assert!((e / theory - 1.0).abs() < 0.01, "{e} vs {theory}");
     }
 }

@@ -16,7 +16,11 @@ use crate::plot::{loglog_svg, Series};
 pub const DEFAULT_QUANTIZATION: f64 = 1e-6;
 
 #[derive(Parser, Debug)]
-#[command(name = "zwidth", version, about = "Velocity estimators and Z-width of haptic devices (SI units throughout)")]
+#[command(
+    name = "zwidth",
+    version,
+    about = "Velocity estimators and Z-width of haptic devices (SI units throughout)"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -132,7 +136,11 @@ pub fn read_samples(input: impl BufRead) -> Result<Vec<f64>, CliError> {
 
 pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(), CliError> {
     match cli.command {
-        Command::Estimate { rate, estimator, quantization } => {
+        Command::Estimate {
+            rate,
+            estimator,
+            quantization,
+        } => {
             let sampling = Sampling::new(rate, quantization)?;
             let spec = EstimatorSpec::from_json(&estimator)?;
             let mut est = spec.build(sampling)?;
@@ -141,13 +149,20 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
             for y in ys {
                 let v = est.update(y);
                 if !v.is_finite() {
-                    return Err(CliError::Failure(format!("internal error: non-finite estimate for input {y}")));
+                    return Err(CliError::Failure(format!(
+                        "internal error: non-finite estimate for input {y}"
+                    )));
                 }
                 writeln!(out, "{v}").map_err(io)?;
             }
             out.flush().map_err(io)
         }
-        Command::Accuracy { rates, json, svg, quantization } => {
+        Command::Accuracy {
+            rates,
+            json,
+            svg,
+            quantization,
+        } => {
             let cfg = AccuracyConfig {
                 rates,
                 quantization,
@@ -160,7 +175,12 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                     .iter()
                     .map(|r| Series {
                         name: r.name.clone(),
-                        points: report.rates.iter().copied().zip(r.rms_error.iter().copied()).collect(),
+                        points: report
+                            .rates
+                            .iter()
+                            .copied()
+                            .zip(r.rms_error.iter().copied())
+                            .collect(),
                     })
                     .collect();
                 let text = loglog_svg(
@@ -170,20 +190,28 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                     &series,
                 )
                 .map_err(CliError::Failure)?;
-                std::fs::write(&path, text).map_err(|e| CliError::Failure(format!("cannot write {}: {e}", path.display())))?;
+                std::fs::write(&path, text).map_err(|e| {
+                    CliError::Failure(format!("cannot write {}: {e}", path.display()))
+                })?;
             }
             if json {
-                serde_json::to_writer_pretty(&mut *stdout, &report).map_err(|e| CliError::Failure(e.to_string()))?;
+                serde_json::to_writer_pretty(&mut *stdout, &report)
+                    .map_err(|e| CliError::Failure(e.to_string()))?;
                 writeln!(stdout).map_err(io)
             } else {
                 write!(stdout, "{}", report.table()).map_err(io)
             }
         }
-        Command::Lipschitz { rate, quantization, json } => {
+        Command::Lipschitz {
+            rate,
+            quantization,
+            json,
+        } => {
             let ys = read_samples(stdin)?;
             let est = lipschitz::estimate(&ys, rate, quantization)?;
             if json {
-                serde_json::to_writer_pretty(&mut *stdout, &est).map_err(|e| CliError::Failure(e.to_string()))?;
+                serde_json::to_writer_pretty(&mut *stdout, &est)
+                    .map_err(|e| CliError::Failure(e.to_string()))?;
                 writeln!(stdout).map_err(io)
             } else {
                 writeln!(
@@ -209,7 +237,8 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
             };
             let report = l.gains()?.report();
             if json {
-                serde_json::to_writer_pretty(&mut *stdout, &report).map_err(|e| CliError::Failure(e.to_string()))?;
+                serde_json::to_writer_pretty(&mut *stdout, &report)
+                    .map_err(|e| CliError::Failure(e.to_string()))?;
                 writeln!(stdout).map_err(io)
             } else {
                 writeln!(stdout, "{report}").map_err(io)

@@ -14,7 +14,11 @@ pub struct SpecError {
 }
 
 impl SpecError {
-    pub fn new(field: impl Into<String>, value: impl fmt::Display, allowed: impl Into<String>) -> Self {
+    pub fn new(
+        field: impl Into<String>,
+        value: impl fmt::Display,
+        allowed: impl Into<String>,
+    ) -> Self {
         Self {
             field: field.into(),
             value: value.to_string(),
@@ -31,7 +35,11 @@ impl SpecError {
 
 impl fmt::Display for SpecError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{} = {} is not allowed: {}", self.field, self.value, self.allowed)
+        write!(
+            f,
+            "{} = {} is not allowed: {}",
+            self.field, self.value, self.allowed
+        )
     }
 }
 
@@ -40,7 +48,11 @@ pub fn require_positive(field: &str, value: f64, unit: &str) -> Result<(), SpecE
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {
-        Err(SpecError::new(field, value, format!("must be a finite number > 0 ({unit})")))
+        Err(SpecError::new(
+            field,
+            value,
+            format!("must be a finite number > 0 ({unit})"),
+        ))
     }
 }
 
@@ -49,6 +61,10 @@ pub fn require_non_negative(field: &str, value: f64, unit: &str) -> Result<(), S
     if value.is_finite() && value >= 0.0 {
         Ok(())
     } else {
-        Err(SpecError::new(field, value, format!("must be a finite number >= 0 ({unit})")))
+        Err(SpecError::new(
+            field,
+            value,
+            format!("must be a finite number >= 0 ({unit})"),
+        ))
     }
 }

@@ -61,16 +61,28 @@ fn second_derivatives(y: &[f64], m: usize, t: f64) -> (Vec<f64>, f64, f64) {
 }
 
 /// Estimate C from positions `y` (m) sampled at `rate_hz`; `quantization` (m) if known.
-pub fn estimate(y: &[f64], rate_hz: f64, quantization: Option<f64>) -> Result<LipschitzEstimate, SpecError> {
+pub fn estimate(
+    y: &[f64],
+    rate_hz: f64,
+    quantization: Option<f64>,
+) -> Result<LipschitzEstimate, SpecError> {
     require_positive("rate", rate_hz, "Hz")?;
     if let Some(d) = quantization {
         require_positive("quantization", d, "m")?;
     }
     if y.len() < 5 {
-        return Err(SpecError::new("positions", y.len(), "need at least 5 samples"));
+        return Err(SpecError::new(
+            "positions",
+            y.len(),
+            "need at least 5 samples",
+        ));
     }
     if let Some(k) = y.iter().position(|v| !v.is_finite()) {
-        return Err(SpecError::new(format!("positions[{k}]"), y[k], "every sample must be a finite number (m)"));
+        return Err(SpecError::new(
+            format!("positions[{k}]"),
+            y[k],
+            "every sample must be a finite number (m)",
+        ));
     }
     let t = 1.0 / rate_hz;
     let mut m = 2usize;
@@ -79,7 +91,13 @@ pub fn estimate(y: &[f64], rate_hz: f64, quantization: Option<f64>) -> Result<Li
         let (acc, s, resid) = second_derivatives(y, m, t);
         let sigma = quantization.map(|d| d / 3f64.sqrt()).unwrap_or(resid);
         let noise = 2.0 * sigma / (t * t * s.sqrt());
-        let (k, c) = acc.iter().enumerate().fold((0, 0.0f64), |best, (k, a)| if a.abs() > best.1 { (k, a.abs()) } else { best });
+        let (k, c) = acc.iter().enumerate().fold((0, 0.0f64), |best, (k, a)| {
+            if a.abs() > best.1 {
+                (k, a.abs())
+            } else {
+                best
+            }
+        });
         let next = (m + m / 4).max(m + 1);
         if 3.0 * noise <= 0.1 * c || next > max_m {
             return Ok(LipschitzEstimate {
@@ -110,23 +128,39 @@ mod tests {
         let exact = sig.lipschitz(5.0);
         for q in [Some(1e-6), None] {
             let est = estimate(&y, 1e4, q).unwrap();
-            assert!((est.lipschitz / exact - 1.0).abs() < 0.1, "{q:?}: {est:?} vs {exact}");
-            assert!(est.noise_floor * 3.0 <= 0.1 * est.lipschitz || est.half_window * 2 + 1 >= y.len() - 1);
+            assert!(
+                (est.lipschitz / exact - 1.0).abs() < 0.1,
+                "{q:?}: {est:?} vs {exact}"
+            );
+            assert!(
+                est.noise_floor * 3.0 <= 0.1 * est.lipschitz
+                    || est.half_window * 2 + 1 >= y.len() - 1
+            );
         }
     }
 
     #[test]
     fn exact_parabola_gives_its_curvature() {
         // y = 0.5·a·t² with a = 3 m/s²: every local quadratic fit is exact.
-        let y: Vec<f64> = (0..100).map(|k| 0.5 * 3.0 * (k as f64 * 1e-3).powi(2)).collect();
+        let y: Vec<f64> = (0..100)
+            .map(|k| 0.5 * 3.0 * (k as f64 * 1e-3).powi(2))
+            .collect();
         let est = estimate(&y, 1e3, Some(1e-12)).unwrap();
         assert!((est.lipschitz - 3.0).abs() < 1e-6, "{est:?}");
     }
 
     #[test]
     fn rejects_bad_input() {
-        assert_eq!(estimate(&[0.0; 3], 1e3, None).unwrap_err().field, "positions");
-        assert_eq!(estimate(&[0.0, 1.0, f64::NAN, 0.0, 0.0], 1e3, None).unwrap_err().field, "positions[2]");
+        assert_eq!(
+            estimate(&[0.0; 3], 1e3, None).unwrap_err().field,
+            "positions"
+        );
+        assert_eq!(
+            estimate(&[0.0, 1.0, f64::NAN, 0.0, 0.0], 1e3, None)
+                .unwrap_err()
+                .field,
+            "positions[2]"
+        );
         assert_eq!(estimate(&[0.0; 10], 0.0, None).unwrap_err().field, "rate");
     }
 }

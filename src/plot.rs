@@ -10,8 +10,18 @@ pub struct Series {
 
 /// A log–log line chart, one coloured line with markers per series and a
 /// legend; returns the SVG text.
-pub fn loglog_svg(title: &str, x_label: &str, y_label: &str, series: &[Series]) -> Result<String, String> {
-    let pts = || series.iter().flat_map(|s| s.points.iter()).filter(|(x, y)| *x > 0.0 && *y > 0.0 && x.is_finite() && y.is_finite());
+pub fn loglog_svg(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+) -> Result<String, String> {
+    let pts = || {
+        series
+            .iter()
+            .flat_map(|s| s.points.iter())
+            .filter(|(x, y)| *x > 0.0 && *y > 0.0 && x.is_finite() && y.is_finite())
+    };
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for &(x, y) in pts() {
         x0 = x0.min(x);
@@ -45,12 +55,19 @@ pub fn loglog_svg(title: &str, x_label: &str, y_label: &str, series: &[Series]) 
             .map_err(|e| e.to_string())?;
         for (i, s) in series.iter().enumerate() {
             let colour = Palette99::pick(i).to_rgba();
-            let data: Vec<(f64, f64)> = s.points.iter().copied().filter(|(x, y)| *x > 0.0 && *y > 0.0).collect();
+            let data: Vec<(f64, f64)> = s
+                .points
+                .iter()
+                .copied()
+                .filter(|(x, y)| *x > 0.0 && *y > 0.0)
+                .collect();
             chart
                 .draw_series(LineSeries::new(data.clone(), colour.stroke_width(2)))
                 .map_err(|e| e.to_string())?
                 .label(s.name.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+                });
             chart
                 .draw_series(data.into_iter().map(|p| Circle::new(p, 3, colour.filled())))
                 .map_err(|e| e.to_string())?;

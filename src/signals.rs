@@ -42,14 +42,18 @@ impl DampedSine {
     /// Exact acceleration (m/s²): `A e^{−at} ((a² − ω²) sin ωt − 2aω cos ωt)`.
     pub fn acceleration(&self, t: f64) -> f64 {
         let (w, a) = (self.w(), self.decay);
-        self.amplitude * (-a * t).exp() * ((a * a - w * w) * (w * t).sin() - 2.0 * a * w * (w * t).cos())
+        self.amplitude
+            * (-a * t).exp()
+            * ((a * a - w * w) * (w * t).sin() - 2.0 * a * w * (w * t).cos())
     }
 
     /// sup |f''| over [0, duration] (m/s²), the Lipschitz constant C of f'
     /// (2011 paper eq. 5), on a 1 µs grid: far finer than f's 1 s time scale.
     pub fn lipschitz(&self, duration: f64) -> f64 {
         let n = (duration / 1e-6).ceil() as usize;
-        (0..=n).map(|k| self.acceleration(k as f64 * 1e-6).abs()).fold(0.0, f64::max)
+        (0..=n)
+            .map(|k| self.acceleration(k as f64 * 1e-6).abs())
+            .fold(0.0, f64::max)
     }
 }
 
@@ -88,7 +92,11 @@ mod tests {
         // |f''(0)| = 2aωA = 0.2π; the sup is a little later, below the
         // envelope A(a² + ω²) = 2.024 m/s².
         let c = s.lipschitz(5.0);
-        assert!(c >= 0.2 * std::f64::consts::PI && c <= 0.05 * (1.0 + 4.0 * std::f64::consts::PI.powi(2)), "{c}");
+        assert!(
+            c >= 0.2 * std::f64::consts::PI
+                && c <= 0.05 * (1.0 + 4.0 * std::f64::consts::PI.powi(2)),
+            "{c}"
+        );
     }
 
     #[test]

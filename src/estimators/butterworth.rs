@@ -21,7 +21,11 @@ pub type Sos = [f64; 6];
 /// Design the low-pass (see module doc). `cutoff_hz` in (0, fs/2), `order` in 1..=MAX_ORDER.
 pub fn design_lowpass(order: u32, cutoff_hz: f64, fs: f64) -> Result<Vec<Sos>, SpecError> {
     if !(1..=MAX_ORDER).contains(&order) {
-        return Err(SpecError::new("order", order, format!("must be a whole number from 1 to {MAX_ORDER}")));
+        return Err(SpecError::new(
+            "order",
+            order,
+            format!("must be a whole number from 1 to {MAX_ORDER}"),
+        ));
     }
     let nyq = fs / 2.0;
     if !(cutoff_hz.is_finite() && cutoff_hz > 0.0 && cutoff_hz < nyq) {
@@ -67,7 +71,11 @@ fn cplx_real(roots: Vec<C>) -> Vec<C> {
         })
         .collect();
     // Complex first (by real part), then reals (by value), as scipy's _cplxreal.
-    out.sort_by(|a, b| (a.im == 0.0).cmp(&(b.im == 0.0)).then(a.re.total_cmp(&b.re)));
+    out.sort_by(|a, b| {
+        (a.im == 0.0)
+            .cmp(&(b.im == 0.0))
+            .then(a.re.total_cmp(&b.re))
+    });
     out
 }
 
@@ -91,7 +99,11 @@ fn worst(poles: &[C], real_only: bool) -> usize {
         .iter()
         .enumerate()
         .filter(|(_, p)| !real_only || is_real(**p))
-        .min_by(|a, b| (1.0 - a.1.norm()).abs().total_cmp(&(1.0 - b.1.norm()).abs()))
+        .min_by(|a, b| {
+            (1.0 - a.1.norm())
+                .abs()
+                .total_cmp(&(1.0 - b.1.norm()).abs())
+        })
         .map(|(i, _)| i)
         .expect("a pole remains")
 }
@@ -125,7 +137,11 @@ fn zpk_to_sos_nearest(zeros: Vec<C>, poles: Vec<C>, gain: f64) -> Vec<Sos> {
             pz = (z1, zero);
             pp = (p1, zero);
         } else {
-            let p2 = if is_real(p1) { p.remove(worst(&p, true)) } else { p1.conj() };
+            let p2 = if is_real(p1) {
+                p.remove(worst(&p, true))
+            } else {
+                p1.conj()
+            };
             pp = (p1, p2);
             let z1 = z.remove(nearest(&z, p1, false).expect("a zero remains"));
             pz = if !is_real(z1) {
@@ -197,6 +213,8 @@ impl VelocityEstimator for Butterworth {
 }
 
 #[cfg(test)]
+// Reference values are kept exactly as scipy printed them.
+#[allow(clippy::excessive_precision)]
 mod tests {
     use super::*;
 
@@ -219,25 +237,60 @@ mod tests {
     fn matches_scipy_butter_sos() {
         assert_sos(
             &design_lowpass(2, 100.0, 10_000.0).unwrap(),
-            &[[9.4469184384015075e-04, 1.8893836876803015e-03, 9.4469184384015075e-04, 1.0, -1.9111970674260730e+00, 9.1497583480143363e-01]],
+            &[[
+                9.4469184384015075e-04,
+                1.8893836876803015e-03,
+                9.4469184384015075e-04,
+                1.0,
+                -1.9111970674260730e+00,
+                9.1497583480143363e-01,
+            ]],
         );
         assert_sos(
             &design_lowpass(3, 100.0, 1000.0).unwrap(),
             &[
-                [0.01809893300751443, 0.03619786601502886, 0.01809893300751443, 1.0, -0.5095254494944288, 0.0],
+                [
+                    0.01809893300751443,
+                    0.03619786601502886,
+                    0.01809893300751443,
+                    1.0,
+                    -0.5095254494944288,
+                    0.0,
+                ],
                 [1.0, 1.0, 0.0, 1.0, -1.2505164308487402, 0.5457233155094579],
             ],
         );
         assert_sos(
             &design_lowpass(4, 499.0, 10_000.0).unwrap(),
             &[
-                [4.1356578315955415e-04, 8.2713156631910830e-04, 4.1356578315955415e-04, 1.0, -1.4806119459353926e+00, 5.5649007494548652e-01],
-                [1.0, 2.0, 1.0, 1.0, -1.7016592711978158e+00, 7.8886559292555125e-01],
+                [
+                    4.1356578315955415e-04,
+                    8.2713156631910830e-04,
+                    4.1356578315955415e-04,
+                    1.0,
+                    -1.4806119459353926e+00,
+                    5.5649007494548652e-01,
+                ],
+                [
+                    1.0,
+                    2.0,
+                    1.0,
+                    1.0,
+                    -1.7016592711978158e+00,
+                    7.8886559292555125e-01,
+                ],
             ],
         );
         assert_sos(
             &design_lowpass(1, 30.0, 1000.0).unwrap(),
-            &[[0.08636402701376217, 0.08636402701376217, 0.0, 1.0, -0.8272719459724756, 0.0]],
+            &[[
+                0.08636402701376217,
+                0.08636402701376217,
+                0.0,
+                1.0,
+                -0.8272719459724756,
+                0.0,
+            ]],
         );
     }
 
@@ -246,15 +299,30 @@ mod tests {
     // b = K² n [1, 2, 1], a = [1, 2(K² − 1) n, (1 − √2 K + K²) n].
     #[test]
     fn order_two_closed_form() {
-        for (fc, fs) in [(30.0, 1000.0), (499.0, 10_000.0), (4_000.0, 10_000.0), (10.0, 1e6)] {
+        for (fc, fs) in [
+            (30.0, 1000.0),
+            (499.0, 10_000.0),
+            (4_000.0, 10_000.0),
+            (10.0, 1e6),
+        ] {
             let k: f64 = (std::f64::consts::PI * fc / fs).tan();
             let s2 = std::f64::consts::SQRT_2;
             let n = 1.0 / (1.0 + s2 * k + k * k);
             let b0 = k * k * n;
-            let want = [b0, 2.0 * b0, b0, 1.0, 2.0 * (k * k - 1.0) * n, (1.0 - s2 * k + k * k) * n];
+            let want = [
+                b0,
+                2.0 * b0,
+                b0,
+                1.0,
+                2.0 * (k * k - 1.0) * n,
+                (1.0 - s2 * k + k * k) * n,
+            ];
             let got = design_lowpass(2, fc, fs).unwrap();
             for (x, y) in got[0].iter().zip(want) {
-                assert!((x - y).abs() <= 1e-11 * y.abs().max(1e-6), "{fc}/{fs}: {got:?} vs {want:?}");
+                assert!(
+                    (x - y).abs() <= 1e-11 * y.abs().max(1e-6),
+                    "{fc}/{fs}: {got:?} vs {want:?}"
+                );
             }
         }
     }
@@ -265,9 +333,17 @@ mod tests {
     #[test]
     fn unit_dc_gain() {
         for order in 1..=MAX_ORDER {
-            for (fc, fs) in [(30.0, 1000.0), (100.0, 10_000.0), (2_000.0, 5_000.0), (50.0, 1e6)] {
+            for (fc, fs) in [
+                (30.0, 1000.0),
+                (100.0, 10_000.0),
+                (2_000.0, 5_000.0),
+                (50.0, 1e6),
+            ] {
                 let sos = design_lowpass(order, fc, fs).unwrap();
-                let g: f64 = sos.iter().map(|c| (c[0] + c[1] + c[2]) / (c[3] + c[4] + c[5])).product();
+                let g: f64 = sos
+                    .iter()
+                    .map(|c| (c[0] + c[1] + c[2]) / (c[3] + c[4] + c[5]))
+                    .product();
                 assert!((g - 1.0).abs() < 1e-7, "order {order} fc {fc} fs {fs}: {g}");
             }
         }
@@ -305,6 +381,9 @@ mod tests {
         assert!(e.allowed.contains("Nyquist frequency 500 Hz"));
         assert_eq!(design_lowpass(0, 10.0, 1000.0).unwrap_err().field, "order");
         assert_eq!(design_lowpass(11, 10.0, 1000.0).unwrap_err().field, "order");
-        assert_eq!(design_lowpass(2, f64::NAN, 1000.0).unwrap_err().field, "cutoff_hz");
+        assert_eq!(
+            design_lowpass(2, f64::NAN, 1000.0).unwrap_err().field,
+            "cutoff_hz"
+        );
     }
 }

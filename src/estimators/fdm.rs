@@ -12,7 +12,10 @@ pub struct Fdm {
 impl Fdm {
     /// `t`: sample period (s), already validated > 0.
     pub fn new(t: f64) -> Self {
-        Self { inv_t: 1.0 / t, prev: None }
+        Self {
+            inv_t: 1.0 / t,
+            prev: None,
+        }
     }
 }
 

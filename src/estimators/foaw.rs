@@ -26,9 +26,11 @@
 //! only over exactly collinear samples, whose end-fit slope is the FDM slope,
 //! so it equals FDM (tested).
 //!
-//! Cost: each candidate window checks up to n samples, so a window that grows
-//! to N costs O(N²) comparisons; the history is kept contiguous (a mirrored
-//! ring) so the checks are plain slice loops.
+//! Cost: `end` and `best` lines are anchored at y_k, so the slopes that fit
+//! each sample form an interval and the window test is an interval
+//! intersection that grows by one sample per n: O(N) per sample for a window
+//! of N. `best_r` (and outlier tolerance) rescan the window for each n, O(N²),
+//! in a branch-free loop over contiguous slices.
 
 use serde::{Deserialize, Serialize};
 
@@ -89,6 +91,12 @@ pub struct Foaw {
     /// `j % cap` and `j % cap + cap`, so the newest `cap` are contiguous.
     buf: Vec<f64>,
     cap: usize,
+    /// Scratch: u_i = y_{k−i} − y_k; and the constants i and 1/i as f64.
+    u: Vec<f64>,
+    idx: Vec<f64>,
+    inv_idx: Vec<f64>,
+    /// 6/(n(n+1)(n+2)), eq. 17's denominator.
+    inv_lsq: Vec<f64>,
     count: usize,
     last_window: usize,
 }
@@ -97,7 +105,11 @@ impl Foaw {
     /// `d` ≥ 0 already checked by the caller; `t` > 0.
     pub fn new(spec: &FoawSpec, d: f64, t: f64) -> Result<Self, SpecError> {
         if !(1..=MAX_WINDOW_LIMIT).contains(&spec.max_window) {
-            return Err(SpecError::new("max_window", spec.max_window, format!("must be 1 to {MAX_WINDOW_LIMIT} samples")));
+            return Err(SpecError::new(
+                "max_window",
+                spec.max_window,
+                format!("must be 1 to {MAX_WINDOW_LIMIT} samples"),
+            ));
         }
         let cap = spec.max_window + 1;
         Ok(Self {
@@ -108,6 +120,20 @@ impl Foaw {
             t,
             buf: vec![0.0; 2 * cap],
             cap,
+            u: vec![0.0; cap],
+            idx: (0..cap).map(|i| i as f64).collect(),
+            inv_idx: (0..cap)
+                .map(|i| if i == 0 { 0.0 } else { 1.0 / i as f64 })
+                .collect(),
+            inv_lsq: (0..cap)
+                .map(|n| {
+                    if n == 0 {
+                        0.0
+                    } else {
+                        6.0 / (n * (n + 1) * (n + 2)) as f64
+                    }
+                })
+                .collect(),
             count: 0,
             last_window: 0,
         })
@@ -118,18 +144,113 @@ impl Foaw {
         self.last_window
     }
 
-    /// Does every residual fit in ±d? With outlier tolerance, only two
-    /// consecutive misses fail.
+    /// `end` and `best` without outlier tolerance. The line y_k − s·i fits
+    /// sample i iff s ∈ [(−d − u_i)/i, (d − u_i)/i], so a window fits iff its
+    /// slope lies in the intersection over its samples, which grows by one
+    /// sample per n: O(max_window) per sample instead of O(n²).
+    /// Returns (slope as rise per sample, window length).
     #[inline]
-    fn fits(&self, residuals: impl Iterator<Item = f64>) -> bool {
+    fn anchored_window(&self, avail: usize) -> (f64, usize) {
+        let d = self.d;
+        let u = &self.u[1..=avail];
+        let idx = &self.idx[1..=avail];
+        let inv = &self.inv_idx[1..=avail];
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        let mut best = (-u[0], 1);
+        match self.fit {
+            FoawFit::End => {
+                // Window n = j + 1 checks the interior i = 1..n−1: add i = n−1 = j.
+                for j in 1..u.len() {
+                    let (a, b) = ((-d - u[j - 1]) * inv[j - 1], (d - u[j - 1]) * inv[j - 1]);
+                    lo = if a > lo { a } else { lo };
+                    hi = if b < hi { b } else { hi };
+                    // Line through y_k and y_{k−n} (eq. 14).
+                    let step = -u[j] * inv[j];
+                    if !(lo <= step && step <= hi) {
+                        break;
+                    }
+                    best = (step, j + 1);
+                }
+            }
+            _ => {
+                let lsq = &self.inv_lsq[1..=avail];
+                let (mut s0, mut s1) = (0.0, 0.0);
+                // Window n = j + 1 checks i = 1..n: add i = n.
+                for j in 0..u.len() {
+                    s0 += u[j];
+                    s1 += idx[j] * u[j];
+                    // Eq. 17: b_n·T = (n Σ u_i − 2 Σ i u_i) · 6/(n(n+1)(n+2)).
+                    let step = (idx[j] * s0 - 2.0 * s1) * lsq[j];
+                    let (a, b) = ((-d - u[j]) * inv[j], (d - u[j]) * inv[j]);
+                    lo = if a > lo { a } else { lo };
+                    hi = if b < hi { b } else { hi };
+                    if !(lo <= step && step <= hi) {
+                        break;
+                    }
+                    best = (step, j + 1);
+                }
+            }
+        }
+        best
+    }
+
+    /// `best_r`, or any fit with outlier tolerance: every window is rescanned.
+    fn rescanned_window(&self, avail: usize) -> (f64, usize) {
+        let (u, idx) = (&self.u[..=avail], &self.idx[..=avail]);
+        let mut best = (-u[1], 1);
+        let (mut s0, mut s1) = (0.0, 0.0);
+        let mut failed_once = false;
+        for n in 1..=avail {
+            let nf = idx[n];
+            s0 += u[n];
+            s1 += nf * u[n];
+            let step = match self.fit {
+                FoawFit::End => -u[n] * self.inv_idx[n],
+                FoawFit::Best | FoawFit::BestR => (nf * s0 - 2.0 * s1) * self.inv_lsq[n],
+            };
+            // Residual r_i = u_i + step·i − c over the checked samples.
+            let ok = match self.fit {
+                FoawFit::End => self.fits(&u[1..n], &idx[1..n], step, 0.0),
+                FoawFit::Best => self.fits(&u[1..=n], &idx[1..=n], step, 0.0),
+                // Through the centroid: c = ū + step·n/2.
+                FoawFit::BestR => self.fits(
+                    &u[..=n],
+                    &idx[..=n],
+                    step,
+                    s0 / (nf + 1.0) + 0.5 * step * nf,
+                ),
+            };
+            if !ok {
+                // With tolerance a single failing length (an outlier at the
+                // far end of the window) is skipped; two in a row stop growth.
+                if self.outlier_tolerance && !failed_once {
+                    failed_once = true;
+                    continue;
+                }
+                break;
+            }
+            failed_once = false;
+            best = (step, n);
+        }
+        best
+    }
+
+    /// Does every residual `u_i + step·i − c` fit in ±d? With outlier
+    /// tolerance, only two consecutive misses fail.
+    #[inline]
+    fn fits(&self, u: &[f64], idx: &[f64], step: f64, c: f64) -> bool {
         let d = self.d;
         if !self.outlier_tolerance {
-            // `fold` rather than `all`: no early exit lets the loop vectorize.
-            residuals.fold(true, |ok, r| ok & (r.abs() <= d))
+            // No early exit, so the loop vectorizes.
+            let mut ok = true;
+            for (&ui, &i) in u.iter().zip(idx) {
+                ok &= (ui + step * i - c).abs() <= d;
+            }
+            ok
         } else {
             let mut prev_miss = false;
-            for r in residuals {
-                let miss = r.abs() > d;
+            for (&ui, &i) in u.iter().zip(idx) {
+                let miss = (ui + step * i - c).abs() > d;
                 if miss && prev_miss {
                     return false;
                 }
@@ -152,61 +273,20 @@ impl VelocityEstimator for Foaw {
             self.last_window = 0;
             return 0.0;
         }
-        // w[0..=avail] oldest..newest, so y_{k−i} = w[avail − i].
-        let end = slot + self.cap + 1;
-        let w = &self.buf[end - avail - 1..end];
-        let yk = w[avail];
-        let t = self.t;
-        let mut best = (yk - w[avail - 1]) / t;
-        let mut best_n = 1;
-        // Running sums over i = 0..=n of y_{k−i} and i·y_{k−i} for eq. 17.
-        let (mut s0, mut s1) = (yk + w[avail - 1], w[avail - 1]);
-        let mut failed_once = false;
-        for n in 1..=avail {
-            if n > 1 {
-                let yn = w[avail - n];
-                s0 += yn;
-                s1 += n as f64 * yn;
-            }
-            let nf = n as f64;
-            let win = &w[avail - n..=avail]; // y_{k−n} … y_k
-            let (ok, slope) = match self.fit {
-                FoawFit::End => {
-                    // Line through y_k and y_{k−n}; interior samples checked.
-                    let step = (yk - win[0]) / nf; // rise per sample
-                    let ok = n == 1 || self.fits(win[1..n].iter().enumerate().map(|(j, &v)| v - (win[0] + step * (j + 1) as f64)));
-                    (ok, step / t)
-                }
-                FoawFit::Best | FoawFit::BestR => {
-                    // Eq. 17: b_n = (n Σ y_{k−i} − 2 Σ i y_{k−i}) / (T n(n+1)(n+2)/6).
-                    let step = (nf * s0 - 2.0 * s1) / (nf * (nf + 1.0) * (nf + 2.0) / 6.0);
-                    let ok = if self.fit == FoawFit::Best {
-                        // Anchored at y_k: L(k−i) = y_k − step·i.
-                        self.fits(win[..n].iter().enumerate().map(|(j, &v)| v - (yk - step * (n - j) as f64)))
-                    } else {
-                        // Through the centroid (mean at i = n/2).
-                        let mean = s0 / (nf + 1.0);
-                        let half = 0.5 * nf;
-                        self.fits(win.iter().enumerate().map(|(j, &v)| v - (mean + step * (j as f64 - half))))
-                    };
-                    (ok, step / t)
-                }
-            };
-            if !ok {
-                // With tolerance a single failing length (an outlier at the
-                // far end of the window) is skipped; two in a row stop growth.
-                if self.outlier_tolerance && !failed_once {
-                    failed_once = true;
-                    continue;
-                }
-                break;
-            }
-            failed_once = false;
-            best = slope;
-            best_n = n;
+        // u_i = y_{k−i} − y_k, i = 0..=avail: positions relative to the newest
+        // sample (small numbers even 10 m from the origin). Every line below
+        // is written in these terms; a slope is "rise per sample" (m).
+        let base = slot + self.cap;
+        for i in 0..=avail {
+            self.u[i] = self.buf[base - i] - y;
         }
+        let (best, best_n) = if !self.outlier_tolerance && self.fit != FoawFit::BestR {
+            self.anchored_window(avail)
+        } else {
+            self.rescanned_window(avail)
+        };
         self.last_window = best_n;
-        best
+        best / self.t
     }
 
     fn reset(&mut self) {
@@ -243,6 +323,80 @@ mod tests {
                 let a = f.update(y);
                 let b = fdm.update(y);
                 prop_assert!((a - b).abs() <= 1e-9 * b.abs().max(1.0), "{} vs {}", a, b);
+            }
+        }
+    }
+
+    /// The definition written out plainly (y terms, every window rescanned):
+    /// the independent reference for the interval-intersection shortcut.
+    fn brute_force(
+        fit: FoawFit,
+        d: f64,
+        max_window: usize,
+        t: f64,
+        ys: &[f64],
+    ) -> Vec<(f64, usize)> {
+        (0..ys.len())
+            .map(|k| {
+                if k == 0 {
+                    return (0.0, 0);
+                }
+                let y = |i: usize| ys[k - i];
+                let mut best = ((y(0) - y(1)) / t, 1);
+                for n in 1..=k.min(max_window) {
+                    let (slope, fits) = match fit {
+                        FoawFit::End => {
+                            let b = (y(0) - y(n)) / (n as f64 * t);
+                            (
+                                b,
+                                (1..n).all(|i| (y(i) - (y(0) - b * i as f64 * t)).abs() <= d),
+                            )
+                        }
+                        _ => {
+                            let s0: f64 = (0..=n).map(y).sum();
+                            let s1: f64 = (0..=n).map(|i| i as f64 * y(i)).sum();
+                            let nf = n as f64;
+                            let b = (nf * s0 - 2.0 * s1) / (t * nf * (nf + 1.0) * (nf + 2.0) / 6.0);
+                            let fits = if fit == FoawFit::Best {
+                                (1..=n).all(|i| (y(i) - (y(0) - b * i as f64 * t)).abs() <= d)
+                            } else {
+                                let mean = s0 / (nf + 1.0);
+                                (0..=n).all(|i| {
+                                    (y(i) - (mean + b * t * (nf / 2.0 - i as f64))).abs() <= d
+                                })
+                            };
+                            (b, fits)
+                        }
+                    };
+                    if !fits {
+                        break;
+                    }
+                    best = (slope, n);
+                }
+                best
+            })
+            .collect()
+    }
+
+    proptest! {
+        #[test]
+        fn matches_brute_force_definition(
+            steps in proptest::collection::vec(-2i32..=3, 2..150),
+            mw in 1usize..40,
+            which in 0usize..3,
+        ) {
+            // A quantized random walk (1 µm steps at 1 kHz), band d = 1.2345 µm
+            // so that no residual (a rational in µm with a small denominator)
+            // sits exactly on the band edge, where rounding would decide.
+            let fit = [FoawFit::End, FoawFit::Best, FoawFit::BestR][which];
+            let mut y = 0.0;
+            let ys: Vec<f64> = steps.iter().map(|&s| { y += s as f64 * 1e-6; y }).collect();
+            let want = brute_force(fit, 1.2345e-6, mw, 1e-3, &ys);
+            let mut f = foaw(fit, 1.2345e-6, mw, 1e-3);
+            for (k, (&yk, (wv, wn))) in ys.iter().zip(want).enumerate() {
+                let v = f.update(yk);
+                prop_assert_eq!(f.last_window(), wn, "k={}", k);
+                prop_assert!((v - wv).abs() <= 1e-9 * wv.abs().max(1e-3), "k={}: {} vs {}", k, v, wv);
             }
         }
     }
@@ -299,7 +453,9 @@ mod tests {
     fn outlier_tolerance_skips_a_single_miss() {
         // Ramp with one spike at k=5: the plain end-fit window stops at the
         // spike; with tolerance it grows past it.
-        let ys: Vec<f64> = (0..12).map(|k| k as f64 + if k == 5 { 3.0 } else { 0.0 }).collect();
+        let ys: Vec<f64> = (0..12)
+            .map(|k| k as f64 + if k == 5 { 3.0 } else { 0.0 })
+            .collect();
         let mut plain = foaw(FoawFit::End, 0.1, 10, 1.0);
         let mut spec = FoawSpec {
             fit: FoawFit::End,

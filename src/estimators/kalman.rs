@@ -87,7 +87,11 @@ impl Kalman {
         require_positive("q", q, "process-noise intensity")?;
         if let Some(rho) = rho {
             if !(rho.is_finite() && rho > 0.0 && rho < 1.0) {
-                return Err(SpecError::new("rho", rho, "must be strictly between 0 and 1"));
+                return Err(SpecError::new(
+                    "rho",
+                    rho,
+                    "must be strictly between 0 and 1",
+                ));
             }
         }
         let t = s.period();
@@ -122,7 +126,14 @@ impl Kalman {
     pub fn covariance(&self) -> [f64; 6] {
         let (t, t2) = (self.t, self.t * self.t);
         let p = &self.p;
-        [p[0], p[1] / t, p[2] / t2, p[3] / t2, p[4] / (t * t2), p[5] / (t2 * t2)]
+        [
+            p[0],
+            p[1] / t,
+            p[2] / t2,
+            p[3] / t2,
+            p[4] / (t * t2),
+            p[5] / (t2 * t2),
+        ]
     }
 
     /// The fading factor used at the last step (1 for the plain filter).
@@ -169,7 +180,11 @@ impl Kalman {
         let s = pp[0] + self.r;
         let inv_s = 1.0 / s;
         let k = [pp[0] * inv_s, pp[1] * inv_s, pp[2] * inv_s];
-        self.z = [zp[0] + k[0] * gamma, zp[1] + k[1] * gamma, zp[2] + k[2] * gamma];
+        self.z = [
+            zp[0] + k[0] * gamma,
+            zp[1] + k[1] * gamma,
+            zp[2] + k[2] * gamma,
+        ];
         self.p = [
             pp[0] * self.r * inv_s,
             pp[1] - k[0] * pp[1],
@@ -226,14 +241,27 @@ mod tests {
         let qm = match model {
             QModel::WhiteJerk => {
                 let (t2, t3, t4, t5) = (t * t, t.powi(3), t.powi(4), t.powi(5));
-                [[t5 / 20.0, t4 / 8.0, t3 / 6.0], [t4 / 8.0, t3 / 3.0, t2 / 2.0], [t3 / 6.0, t2 / 2.0, t]].map(|r| r.map(|v| v * q))
+                [
+                    [t5 / 20.0, t4 / 8.0, t3 / 6.0],
+                    [t4 / 8.0, t3 / 3.0, t2 / 2.0],
+                    [t3 / 6.0, t2 / 2.0, t],
+                ]
+                .map(|r| r.map(|v| v * q))
             }
             QModel::Diagonal => [[0.0; 3], [0.0; 3], [0.0, 0.0, q]],
         };
         let r = d * d / 3.0;
         let mut out = vec![0.0, (ys[1] - ys[0]) / t, (ys[2] - ys[1]) / t];
-        let mut x = [ys[2], (ys[2] - ys[1]) / t, (ys[2] - 2.0 * ys[1] + ys[0]) / (t * t)];
-        let mut p = [[d * d / 3.0, 0.0, 0.0], [0.0, 2.0 * d * d / (3.0 * t * t), 0.0], [0.0, 0.0, 2.0 * d * d / t.powi(4)]];
+        let mut x = [
+            ys[2],
+            (ys[2] - ys[1]) / t,
+            (ys[2] - 2.0 * ys[1] + ys[0]) / (t * t),
+        ];
+        let mut p = [
+            [d * d / 3.0, 0.0, 0.0],
+            [0.0, 2.0 * d * d / (3.0 * t * t), 0.0],
+            [0.0, 0.0, 2.0 * d * d / t.powi(4)],
+        ];
         let mm = |a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]| {
             let mut c = [[0.0; 3]; 3];
             for i in 0..3 {
@@ -245,7 +273,11 @@ mod tests {
             }
             c
         };
-        let at = [[a[0][0], a[1][0], a[2][0]], [a[0][1], a[1][1], a[2][1]], [a[0][2], a[1][2], a[2][2]]];
+        let at = [
+            [a[0][0], a[1][0], a[2][0]],
+            [a[0][1], a[1][1], a[2][1]],
+            [a[0][2], a[1][2], a[2][2]],
+        ];
         for &y in &ys[3..] {
             let xp = [x[0] + t * x[1] + t * t / 2.0 * x[2], x[1] + t * x[2], x[2]];
             let mut pp = mm(&mm(&a, &p), &at);
@@ -271,13 +303,18 @@ mod tests {
     #[test]
     fn equals_textbook_filter() {
         // At 1 kHz the unscaled textbook filter is still well conditioned.
-        let ys: Vec<f64> = (0..400).map(|k| ((0.003 * (k as f64).powf(1.3)).sin() * 1e4).round() * 1e-6).collect();
+        let ys: Vec<f64> = (0..400)
+            .map(|k| ((0.003 * (k as f64).powf(1.3)).sin() * 1e4).round() * 1e-6)
+            .collect();
         for model in [QModel::WhiteJerk, QModel::Diagonal] {
             let want = reference(2.5e4, model, 1000.0, 1e-6, &ys);
             let mut f = Kalman::new(2.5e4, model, None, sampling(1000.0, 1e-6)).unwrap();
             for (k, (&y, w)) in ys.iter().zip(want).enumerate() {
                 let v = f.update(y);
-                assert!((v - w).abs() <= 1e-7 * w.abs().max(1e-3), "{model:?} k={k}: {v} vs {w}");
+                assert!(
+                    (v - w).abs() <= 1e-7 * w.abs().max(1e-3),
+                    "{model:?} k={k}: {v} vs {w}"
+                );
             }
         }
     }
@@ -299,7 +336,13 @@ mod tests {
 
     #[test]
     fn fading_factor_is_at_least_one_and_reacts_to_a_jump() {
-        let mut f = Kalman::new(1e2, QModel::WhiteJerk, Some(DEFAULT_RHO), sampling(1000.0, 1e-6)).unwrap();
+        let mut f = Kalman::new(
+            1e2,
+            QModel::WhiteJerk,
+            Some(DEFAULT_RHO),
+            sampling(1000.0, 1e-6),
+        )
+        .unwrap();
         for _ in 0..2000 {
             f.update(0.0);
             assert!(f.last_lambda() >= 1.0);
@@ -312,8 +355,23 @@ mod tests {
     #[test]
     fn rejects_bad_parameters() {
         let s = sampling(1000.0, 1e-6);
-        assert_eq!(Kalman::new(0.0, QModel::WhiteJerk, None, s).unwrap_err().field, "q");
-        assert_eq!(Kalman::new(f64::INFINITY, QModel::WhiteJerk, None, s).unwrap_err().field, "q");
-        assert_eq!(Kalman::new(1.0, QModel::WhiteJerk, Some(1.0), s).unwrap_err().field, "rho");
+        assert_eq!(
+            Kalman::new(0.0, QModel::WhiteJerk, None, s)
+                .unwrap_err()
+                .field,
+            "q"
+        );
+        assert_eq!(
+            Kalman::new(f64::INFINITY, QModel::WhiteJerk, None, s)
+                .unwrap_err()
+                .field,
+            "q"
+        );
+        assert_eq!(
+            Kalman::new(1.0, QModel::WhiteJerk, Some(1.0), s)
+                .unwrap_err()
+                .field,
+            "rho"
+        );
     }
 }

@@ -105,8 +105,16 @@ impl LevantSpec {
     pub fn label(&self) -> String {
         let g = match (self.rule, self.mu1, self.alpha) {
             (Some(r), _, _) => format!("{}, C={}", r.name(), self.lipschitz.unwrap_or(f64::NAN)),
-            (_, Some(m1), _) => format!("mu1={m1}, mu2={}, C={}", self.mu2.unwrap_or(f64::NAN), self.lipschitz.unwrap_or(f64::NAN)),
-            _ => format!("alpha={}, lambda={}", self.alpha.unwrap_or(f64::NAN), self.lambda.unwrap_or(f64::NAN)),
+            (_, Some(m1), _) => format!(
+                "mu1={m1}, mu2={}, C={}",
+                self.mu2.unwrap_or(f64::NAN),
+                self.lipschitz.unwrap_or(f64::NAN)
+            ),
+            _ => format!(
+                "alpha={}, lambda={}",
+                self.alpha.unwrap_or(f64::NAN),
+                self.lambda.unwrap_or(f64::NAN)
+            ),
         };
         match self.discretization {
             Discretization::Explicit => g,
@@ -121,7 +129,10 @@ impl LevantSpec {
         }
         let explicit = self.alpha.is_some() || self.lambda.is_some();
         let normalized = self.mu1.is_some() || self.mu2.is_some();
-        let forms = [explicit, self.rule.is_some(), normalized].iter().filter(|&&b| b).count();
+        let forms = [explicit, self.rule.is_some(), normalized]
+            .iter()
+            .filter(|&&b| b)
+            .count();
         if forms != 1 {
             return Err(SpecError::new(
                 "levant",
@@ -130,20 +141,33 @@ impl LevantSpec {
             ));
         }
         let need_c = |form: &str| {
-            self.lipschitz
-                .ok_or_else(|| SpecError::new("lipschitz", "missing", format!("{form} needs lipschitz, the bound C on |acceleration| (m/s²)")))
+            self.lipschitz.ok_or_else(|| {
+                SpecError::new(
+                    "lipschitz",
+                    "missing",
+                    format!("{form} needs lipschitz, the bound C on |acceleration| (m/s²)"),
+                )
+            })
         };
         let (alpha, lambda) = if explicit {
-            let a = self.alpha.ok_or_else(|| SpecError::new("alpha", "missing", "alpha and lambda go together"))?;
-            let l = self.lambda.ok_or_else(|| SpecError::new("lambda", "missing", "alpha and lambda go together"))?;
+            let a = self.alpha.ok_or_else(|| {
+                SpecError::new("alpha", "missing", "alpha and lambda go together")
+            })?;
+            let l = self.lambda.ok_or_else(|| {
+                SpecError::new("lambda", "missing", "alpha and lambda go together")
+            })?;
             (a, l)
         } else if let Some(rule) = self.rule {
             let c = need_c("rule")?;
             let (m1, m2) = rule.normalized();
             (m1 * c, m2 * c.sqrt())
         } else {
-            let m1 = self.mu1.ok_or_else(|| SpecError::new("mu1", "missing", "mu1 and mu2 go together"))?;
-            let m2 = self.mu2.ok_or_else(|| SpecError::new("mu2", "missing", "mu1 and mu2 go together"))?;
+            let m1 = self
+                .mu1
+                .ok_or_else(|| SpecError::new("mu1", "missing", "mu1 and mu2 go together"))?;
+            let m2 = self
+                .mu2
+                .ok_or_else(|| SpecError::new("mu2", "missing", "mu1 and mu2 go together"))?;
             require_positive("mu1", m1, "alpha = mu1·C")?;
             require_positive("mu2", m2, "lambda = mu2·√C")?;
             let c = need_c("mu1/mu2")?;
@@ -197,7 +221,11 @@ impl std::fmt::Display for GainReport {
             Some(false) => "NOT met",
             None => "unknown (no lipschitz C given)",
         };
-        write!(f, "alpha = {:.6} m/s², lambda = {:.6} m^½/s", self.alpha, self.lambda)?;
+        write!(
+            f,
+            "alpha = {:.6} m/s², lambda = {:.6} m^½/s",
+            self.alpha, self.lambda
+        )?;
         if let (Some(c), Some(m1), Some(m2)) = (self.lipschitz, self.mu1, self.mu2) {
             write!(f, ", C = {c:.6} m/s² (mu1 = {m1:.4}, mu2 = {m2:.4})")?;
         }
@@ -302,7 +330,11 @@ mod tests {
     use super::*;
 
     fn explicit(alpha: f64, lambda: f64, t: f64) -> Levant {
-        let g = LevantGains { alpha, lambda, lipschitz: None };
+        let g = LevantGains {
+            alpha,
+            lambda,
+            lipschitz: None,
+        };
         Levant::new(g, Discretization::Explicit, t)
     }
 
@@ -349,7 +381,8 @@ mod tests {
                 let t = k as f64 * 1e-5;
                 let v = l.update(0.01 * (2.0 * std::f64::consts::PI * t).sin());
                 if t > 1.0 {
-                    let exact = 0.02 * std::f64::consts::PI * (2.0 * std::f64::consts::PI * t).cos();
+                    let exact =
+                        0.02 * std::f64::consts::PI * (2.0 * std::f64::consts::PI * t).cos();
                     worst = worst.max((v - exact).abs());
                 }
             }
@@ -382,7 +415,10 @@ mod tests {
         }
         .report();
         assert_eq!((r.levant_1998, r.moreno_osorio), (Some(true), Some(true)));
-        for (rule, want) in [(GainRule::Hba, (Some(true), Some(false))), (GainRule::Lfba, (Some(false), Some(true)))] {
+        for (rule, want) in [
+            (GainRule::Hba, (Some(true), Some(false))),
+            (GainRule::Lfba, (Some(false), Some(true))),
+        ] {
             let spec = LevantSpec {
                 rule: Some(rule),
                 lipschitz: Some(3.0),

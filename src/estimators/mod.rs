@@ -105,12 +105,17 @@ impl<'de> Deserialize<'de> for EstimatorSpec {
                 None | Some(serde_json::Value::Null) => Ok(None),
                 Some(v) => serde_json::from_value::<usize>(v.clone())
                     .map(Some)
-                    .map_err(|_| D::Error::custom(format!("{name} = {v} is not allowed: must be a whole number of samples >= 1"))),
+                    .map_err(|_| {
+                        D::Error::custom(format!(
+                            "{name} = {v} is not allowed: must be a whole number of samples >= 1"
+                        ))
+                    }),
             }
         };
         let median_position = take_window("median_position")?;
         let median_velocity = take_window("median_velocity")?;
-        let kind = EstimatorKind::deserialize(serde_json::Value::Object(map)).map_err(D::Error::custom)?;
+        let kind =
+            EstimatorKind::deserialize(serde_json::Value::Object(map)).map_err(D::Error::custom)?;
         Ok(Self {
             kind,
             median_position,
@@ -143,7 +148,10 @@ impl Sampling {
     pub fn new(rate_hz: f64, quantization: f64) -> Result<Self, SpecError> {
         require_positive("rate", rate_hz, "Hz")?;
         require_positive("quantization", quantization, "m")?;
-        Ok(Self { rate_hz, quantization })
+        Ok(Self {
+            rate_hz,
+            quantization,
+        })
     }
 
     /// Sample period T (s).
@@ -155,17 +163,29 @@ impl Sampling {
 impl EstimatorSpec {
     /// Parse the JSON form; the error text is serde's, which names the field.
     pub fn from_json(text: &str) -> Result<Self, SpecError> {
-        serde_json::from_str(text).map_err(|e| SpecError::new("estimator", text.trim(), format!("is not a valid estimator spec: {e}")))
+        serde_json::from_str(text).map_err(|e| {
+            SpecError::new(
+                "estimator",
+                text.trim(),
+                format!("is not a valid estimator spec: {e}"),
+            )
+        })
     }
 
     /// A short human label, e.g. `butterworth(100 Hz, order 2)`.
     pub fn label(&self) -> String {
         let base = match &self.kind {
             EstimatorKind::Fdm {} => "fdm".to_string(),
-            EstimatorKind::Butterworth { cutoff_hz, order } => format!("butterworth({cutoff_hz} Hz, order {order})"),
+            EstimatorKind::Butterworth { cutoff_hz, order } => {
+                format!("butterworth({cutoff_hz} Hz, order {order})")
+            }
             EstimatorKind::Kalman { q, q_model } => format!("kalman(q={q:e}, {})", q_model.name()),
-            EstimatorKind::AdaptiveKalman { q, q_model, .. } => format!("adaptive_kalman(q={q:e}, {})", q_model.name()),
-            EstimatorKind::Foaw(f) => format!("foaw({}, max_window {})", f.fit.name(), f.max_window),
+            EstimatorKind::AdaptiveKalman { q, q_model, .. } => {
+                format!("adaptive_kalman(q={q:e}, {})", q_model.name())
+            }
+            EstimatorKind::Foaw(f) => {
+                format!("foaw({}, max_window {})", f.fit.name(), f.max_window)
+            }
             EstimatorKind::Levant(l) => format!("levant({})", l.label()),
         };
         let mut s = base;
@@ -185,7 +205,11 @@ impl EstimatorSpec {
             match w {
                 None => Ok(None),
                 Some(w) if (1..=MAX_MEDIAN_WINDOW).contains(&w) => Ok(Some(RunningMedian::new(w))),
-                Some(w) => Err(SpecError::new(field, w, format!("median window must be 1 to {MAX_MEDIAN_WINDOW} samples"))),
+                Some(w) => Err(SpecError::new(
+                    field,
+                    w,
+                    format!("median window must be 1 to {MAX_MEDIAN_WINDOW} samples"),
+                )),
             }
         };
         Ok(Estimator {
@@ -201,15 +225,23 @@ impl EstimatorKind {
         let t = s.period();
         Ok(match self {
             EstimatorKind::Fdm {} => Core::Fdm(Fdm::new(t)),
-            EstimatorKind::Butterworth { cutoff_hz, order } => Core::Butterworth(Butterworth::new(*cutoff_hz, *order, s)?),
-            EstimatorKind::Kalman { q, q_model } => Core::Kalman(Kalman::new(*q, *q_model, None, s)?),
-            EstimatorKind::AdaptiveKalman { q, q_model, rho } => Core::Kalman(Kalman::new(*q, *q_model, Some(*rho), s)?),
+            EstimatorKind::Butterworth { cutoff_hz, order } => {
+                Core::Butterworth(Butterworth::new(*cutoff_hz, *order, s)?)
+            }
+            EstimatorKind::Kalman { q, q_model } => {
+                Core::Kalman(Kalman::new(*q, *q_model, None, s)?)
+            }
+            EstimatorKind::AdaptiveKalman { q, q_model, rho } => {
+                Core::Kalman(Kalman::new(*q, *q_model, Some(*rho), s)?)
+            }
             EstimatorKind::Foaw(spec) => {
                 let d = spec.d.unwrap_or(s.quantization);
                 require_non_negative("d", d, "m")?;
                 Core::Foaw(Foaw::new(spec, d, t)?)
             }
-            EstimatorKind::Levant(spec) => Core::Levant(Levant::new(spec.gains()?, spec.discretization, t)),
+            EstimatorKind::Levant(spec) => {
+                Core::Levant(Levant::new(spec.gains()?, spec.discretization, t))
+            }
         })
     }
 }
@@ -307,7 +339,8 @@ mod tests {
             // Round trip: what we serialize parses back to the same spec.
             let back = serde_json::to_string(&spec).unwrap();
             assert_eq!(parse(&back).unwrap(), spec, "{s} -> {back}");
-            spec.build(Sampling::new(10_000.0, 1e-6).unwrap()).unwrap_or_else(|e| panic!("{s}: {e}"));
+            spec.build(Sampling::new(10_000.0, 1e-6).unwrap())
+                .unwrap_or_else(|e| panic!("{s}: {e}"));
         }
     }
 
@@ -316,7 +349,11 @@ mod tests {
         let s = Sampling::new(10_000.0, 1e-6).unwrap();
         let err = |j: &str| match parse(j) {
             Err(e) => e.to_string(),
-            Ok(spec) => spec.build(s).err().map(|e| e.to_string()).unwrap_or_default(),
+            Ok(spec) => spec
+                .build(s)
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default(),
         };
         assert!(err(r#"{"kind":"nope"}"#).contains("unknown variant `nope`"));
         assert!(err(r#"{"kind":"butterworth","cuttoff_hz":100}"#).contains("cuttoff_hz"));
@@ -330,7 +367,13 @@ mod tests {
         assert!(err(r#"{"kind":"levant","alpha":1}"#).contains("lambda"));
         assert!(err(r#"{"kind":"levant","rule":"hba"}"#).contains("lipschitz"));
         assert!(err("not json").contains("not a valid estimator spec"));
-        assert!(Sampling::new(0.0, 1e-6).unwrap_err().to_string().contains("rate = 0"));
-        assert!(Sampling::new(1e3, 0.0).unwrap_err().to_string().contains("quantization = 0"));
+        assert!(Sampling::new(0.0, 1e-6)
+            .unwrap_err()
+            .to_string()
+            .contains("rate = 0"));
+        assert!(Sampling::new(1e3, 0.0)
+            .unwrap_err()
+            .to_string()
+            .contains("quantization = 0"));
     }
 }

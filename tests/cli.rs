@@ -1,0 +1,259 @@
+//! The `zwidth` binary as users call it: outputs, exit codes, error lines.
+
+use std::io::Write;
+use std::process::{Command, Stdio};
+
+struct Out {
+    code: i32,
+    stdout: String,
+    stderr: String,
+}
+
+fn zwidth(args: &[&str], stdin: &str) -> Out {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn zwidth");
+    // The program may exit before reading stdin (bad flags): ignore EPIPE.
+    let _ = child.stdin.take().unwrap().write_all(stdin.as_bytes());
+    let o = child.wait_with_output().unwrap();
+    Out {
+        code: o.status.code().unwrap_or(-1),
+        stdout: String::from_utf8_lossy(&o.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&o.stderr).into_owned(),
+    }
+}
+
+#[test]
+fn estimate_fdm_prints_backward_differences() {
+    // T = 1 ms: 0, (0.002−0.001)/1e-3 = 1, (0.0015−0.002)/1e-3 = −0.5 m/s.
+    let o = zwidth(
+        &[
+            "estimate",
+            "--rate",
+            "1000",
+            "--estimator",
+            r#"{"kind":"fdm"}"#,
+        ],
+        "0.001\n0.002\n\n0.0015\n",
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let v: Vec<f64> = o.stdout.lines().map(|l| l.parse().unwrap()).collect();
+    assert_eq!(v.len(), 3);
+    assert_eq!(v[0], 0.0);
+    assert!(
+        (v[1] - 1.0).abs() < 1e-12 && (v[2] + 0.5).abs() < 1e-12,
+        "{v:?}"
+    );
+}
+
+#[test]
+fn estimate_every_kind_runs() {
+    let input: String = (0..300)
+        .map(|k| format!("{}\n", ((k as f64 * 0.01).sin() * 1e4).round() * 1e-6))
+        .collect();
+    for spec in [
+        r#"{"kind":"butterworth","cutoff_hz":100}"#,
+        r#"{"kind":"kalman","q":2.5e4}"#,
+        r#"{"kind":"adaptive_kalman","q":2.5e4}"#,
+        r#"{"kind":"foaw","fit":"best","max_window":16}"#,
+        r#"{"kind":"levant","rule":"lfba","lipschitz":5}"#,
+        r#"{"kind":"levant","alpha":13,"lambda":1.58,"discretization":"implicit","median_velocity":3}"#,
+    ] {
+        let o = zwidth(
+            &[
+                "estimate",
+                "--rate",
+                "1000",
+                "--estimator",
+                spec,
+                "--quantization",
+                "1e-6",
+            ],
+            &input,
+        );
+        assert_eq!(o.code, 0, "{spec}: {}", o.stderr);
+        assert_eq!(o.stdout.lines().count(), 300);
+        assert!(
+            o.stdout
+                .lines()
+                .all(|l| l.parse::<f64>().unwrap().is_finite()),
+            "{spec}"
+        );
+    }
+}
+
+/// Exit 2, nothing on stdout, one stderr line containing `needle`.
+fn rejects(args: &[&str], stdin: &str, needle: &str) {
+    let o = zwidth(args, stdin);
+    assert_eq!(
+        o.code, 2,
+        "{args:?}: stdout {} stderr {}",
+        o.stdout, o.stderr
+    );
+    assert!(o.stdout.is_empty(), "{args:?} printed {}", o.stdout);
+    assert!(
+        o.stderr.contains(needle),
+        "{args:?}: {:?} lacks {needle:?}",
+        o.stderr
+    );
+    assert_eq!(
+        o.stderr.trim_end().lines().count(),
+        1,
+        "{args:?}: {}",
+        o.stderr
+    );
+}
+
+#[test]
+fn estimate_bad_inputs_exit_2_with_one_clear_line() {
+    let est = |spec: &'static str| ["estimate", "--rate", "1000", "--estimator", spec];
+    rejects(&est("{kind:fdm"), "0\n", "not a valid estimator spec");
+    rejects(
+        &est(r#"{"kind":"magic"}"#),
+        "0\n",
+        "unknown variant `magic`",
+    );
+    rejects(
+        &est(r#"{"kind":"butterworth","cutoff_hz":500}"#),
+        "0\n",
+        "cutoff_hz = 500",
+    );
+    rejects(
+        &est(r#"{"kind":"butterworth","cutoff_hz":900}"#),
+        "0\n",
+        "Nyquist",
+    );
+    rejects(&est(r#"{"kind":"kalman","q":0}"#), "0\n", "q = 0");
+    rejects(
+        &est(r#"{"kind":"adaptive_kalman","q":-5}"#),
+        "0\n",
+        "q = -5",
+    );
+    rejects(
+        &est(r#"{"kind":"foaw","fit":"end","d":-1e-6}"#),
+        "0\n",
+        "d = -0.000001",
+    );
+    rejects(
+        &est(r#"{"kind":"foaw","fit":"end","max_window":0}"#),
+        "0\n",
+        "max_window = 0",
+    );
+    rejects(
+        &est(r#"{"kind":"fdm","median_position":0}"#),
+        "0\n",
+        "median_position = 0",
+    );
+    rejects(
+        &est(r#"{"kind":"levant","rule":"hba"}"#),
+        "0\n",
+        "lipschitz",
+    );
+    rejects(
+        &[
+            "estimate",
+            "--rate",
+            "1000",
+            "--estimator",
+            r#"{"kind":"fdm"}"#,
+            "--quantization",
+            "0",
+        ],
+        "0\n",
+        "quantization = 0",
+    );
+    rejects(
+        &["estimate", "--rate=-1", "--estimator", r#"{"kind":"fdm"}"#],
+        "0\n",
+        "rate = -1",
+    );
+    rejects(&est(r#"{"kind":"fdm"}"#), "0.1\nNaN\n", "line 2");
+    rejects(&est(r#"{"kind":"fdm"}"#), "0.1\ninf\n", "line 2");
+    rejects(
+        &est(r#"{"kind":"fdm"}"#),
+        "0.1\n0.2\nabc\n",
+        "line 3 = \"abc\"",
+    );
+    // Missing required flag: clap's usage error, also exit 2.
+    let o = zwidth(&["estimate", "--rate", "1000"], "");
+    assert_eq!(o.code, 2);
+}
+
+#[test]
+fn accuracy_json_has_every_estimator_and_svg() {
+    let svg = std::env::temp_dir().join(format!("zwidth-acc-{}.svg", std::process::id()));
+    let o = zwidth(
+        &[
+            "accuracy",
+            "--rates",
+            "1000,10000",
+            "--json",
+            "--svg",
+            svg.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let v: serde_json::Value = serde_json::from_str(&o.stdout).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 10);
+    for r in rows {
+        let e = r["rms_error"].as_array().unwrap();
+        assert_eq!(e.len(), 2);
+        assert!(e.iter().all(|x| x.as_f64().unwrap() > 0.0));
+    }
+    // FDM's error grows with the rate (2011 paper §2.2: noise amplification).
+    let fdm = &rows[0]["rms_error"];
+    assert!(fdm[1].as_f64().unwrap() > 5.0 * fdm[0].as_f64().unwrap());
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.contains("<svg") && text.contains("levant"));
+    let _ = std::fs::remove_file(svg);
+    rejects(&["accuracy", "--rates", "0"], "", "rates = 0");
+}
+
+#[test]
+fn lipschitz_and_gains_commands() {
+    // y = 0.5·4·t² at 1 kHz: C = 4 m/s².
+    let input: String = (0..200)
+        .map(|k| format!("{}\n", 2.0 * (k as f64 * 1e-3).powi(2)))
+        .collect();
+    let o = zwidth(
+        &[
+            "lipschitz",
+            "--rate",
+            "1000",
+            "--quantization",
+            "1e-12",
+            "--json",
+        ],
+        &input,
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let v: serde_json::Value = serde_json::from_str(&o.stdout).unwrap();
+    assert!((v["lipschitz"].as_f64().unwrap() - 4.0).abs() < 1e-6, "{v}");
+    rejects(
+        &["lipschitz", "--rate", "1000"],
+        "1\n2\n",
+        "need at least 5 samples",
+    );
+
+    let o = zwidth(
+        &[
+            "gains",
+            "--estimator",
+            r#"{"kind":"levant","rule":"hba_sc","lipschitz":12}"#,
+        ],
+        "",
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert!(
+        o.stdout.contains("Levant 1998") && o.stdout.contains("NOT met"),
+        "{}",
+        o.stdout
+    );
+    rejects(&["gains", "--estimator", r#"{"kind":"fdm"}"#], "", "levant");
+}
