@@ -401,6 +401,47 @@ mod tests {
         }
     }
 
+    /// SplitMix64 -> uniform in [−1, 1): a small deterministic noise source.
+    fn uniform(state: &mut u64) -> f64 {
+        *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = *state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    }
+
+    #[test]
+    fn end_fit_variance_follows_eq_16() {
+        // Janabi-Sharifi eq. 16: with noise uniform in ±d, the end-fit slope
+        // over a window of n has variance 2d²/(3n²T²). A band of 2d + ε
+        // holds every interior sample (|e_i − interpolated endpoint error|
+        // ≤ 2d), so the window is always n and eq. 16 applies exactly.
+        let (d, t, v) = (1e-6, 1e-3, 0.05);
+        let mut rng = 0x5EED;
+        for n in [1usize, 4, 16] {
+            let mut f = foaw(FoawFit::End, 2.0 * d + 1e-12, n, t);
+            let (mut sum, mut sum2, mut count) = (0.0, 0.0, 0.0);
+            for k in 0..200_000 {
+                let y = v * k as f64 * t + d * uniform(&mut rng);
+                let e = f.update(y);
+                if k > n {
+                    assert_eq!(f.last_window(), n);
+                    sum += e;
+                    sum2 += e * e;
+                    count += 1.0;
+                }
+            }
+            let mean = sum / count;
+            let var = sum2 / count - mean * mean;
+            let theory = 2.0 * d * d / (3.0 * (n * n) as f64 * t * t);
+            // 2e5 samples: the sample variance's relative standard error is
+            // below 1 %; allow 4 %.
+            assert!((var / theory - 1.0).abs() < 0.04, "n={n}: {var} vs {theory}");
+            assert!((mean - v).abs() < 4.0 * (theory / count).sqrt() * (n as f64).sqrt(), "n={n}: mean {mean}");
+        }
+    }
+
     #[test]
     fn exact_ramp_grows_to_max_window_and_is_exact() {
         for fit in [FoawFit::End, FoawFit::Best, FoawFit::BestR] {
