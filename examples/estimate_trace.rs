@@ -26,7 +26,11 @@ fn main() -> Result<(), zwidth::SpecError> {
                 n += 1;
             }
         }
-        println!("{:<50} RMS error {:.3} mm/s", spec.label(), 1e3 * (sum / n as f64).sqrt());
+        println!(
+            "{:<50} RMS error {:.3} mm/s",
+            spec.label(),
+            1e3 * (sum / n as f64).sqrt()
+        );
     }
     Ok(())
 }

@@ -34,7 +34,9 @@ pub fn loglog_svg(
     }
     // Pad the ranges a little (and make a single point a visible range);
     // the top gets room for the legend, one line per series.
-    let top = 1.5 * (1.0 + 0.12 * series.len() as f64) * (y1 / y0).max(10.0).powf(0.04 * series.len() as f64);
+    let top = 1.5
+        * (1.0 + 0.12 * series.len() as f64)
+        * (y1 / y0).max(10.0).powf(0.04 * series.len() as f64);
     let (x0, x1, y0, y1) = (x0 / 1.2, x1 * 1.2, y0 / 1.5, y1 * top);
     let mut svg = String::new();
     {

@@ -437,8 +437,14 @@ mod tests {
             let theory = 2.0 * d * d / (3.0 * (n * n) as f64 * t * t);
             // 2e5 samples: the sample variance's relative standard error is
             // below 1 %; allow 4 %.
-            assert!((var / theory - 1.0).abs() < 0.04, "n={n}: {var} vs {theory}");
-            assert!((mean - v).abs() < 4.0 * (theory / count).sqrt() * (n as f64).sqrt(), "n={n}: mean {mean}");
+            assert!(
+                (var / theory - 1.0).abs() < 0.04,
+                "n={n}: {var} vs {theory}"
+            );
+            assert!(
+                (mean - v).abs() < 4.0 * (theory / count).sqrt() * (n as f64).sqrt(),
+                "n={n}: mean {mean}"
+            );
         }
     }
 
