@@ -10,6 +10,8 @@ pub mod error;
 pub mod estimators;
 pub mod lipschitz;
 pub mod plot;
+pub mod rig;
 pub mod signals;
+pub mod zwidth;
 
 pub use error::SpecError;

@@ -1,0 +1,205 @@
+//! The device `m ẍ + b ẋ = F − f_c·sign(ẋ)` advanced exactly over intervals
+//! where the applied force F is constant (zero-order hold).
+//!
+//! Exact solution with `a = b·t/m` (DESIGN.md, "Plant between force updates"):
+//! `v(t) = v0·e^{−a} + (F/m)·t·φ(a)`, `x(t) = x0 + v0·t·φ(a) + (F/m)·t²·ψ(a)`,
+//! `φ(a) = (1 − e^{−a})/a`, `ψ(a) = (a − 1 + e^{−a})/a²`. Written this way
+//! there is no `1/b²`: φ and ψ use `expm1` and, for small a, their Taylor
+//! series, so b = 0 (a pure mass) is exact too.
+//!
+//! Coulomb friction with real stick–slip (static = kinetic, 2018 paper §V):
+//! while moving, friction is `−f_c·sign(v)`; when v reaches 0 inside an
+//! interval (found exactly from the closed form) the handle sticks if
+//! `|F| ≤ f_c`, else slips on in the direction of F.
+
+/// φ(a) = (1 − e^{−a})/a.
+#[inline]
+pub fn phi(a: f64) -> f64 {
+    if a < 1e-8 {
+        1.0 - 0.5 * a
+    } else {
+        -(-a).exp_m1() / a
+    }
+}
+
+/// ψ(a) = (a − 1 + e^{−a})/a², → 1/2 as a → 0.
+#[inline]
+pub fn psi(a: f64) -> f64 {
+    if a < 1e-3 {
+        0.5 - a / 6.0 + a * a / 24.0 - a * a * a / 120.0
+    } else {
+        (a + (-a).exp_m1()) / (a * a)
+    }
+}
+
+/// Position (m) and velocity (m/s).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PlantState {
+    pub x: f64,
+    pub v: f64,
+}
+
+/// The plant with its step constants for one fixed interval `dt`.
+#[derive(Debug, Clone, Copy)]
+pub struct Plant {
+    pub mass: f64,
+    pub damping: f64,
+    pub coulomb: f64,
+    dt: f64,
+    /// x += v·c_xv + F·c_xf; v = v·c_vv + F·c_vf.
+    c_xv: f64,
+    c_xf: f64,
+    c_vv: f64,
+    c_vf: f64,
+}
+
+impl Plant {
+    /// `mass` > 0, `damping` ≥ 0, `coulomb` ≥ 0, `dt` > 0 (validated by the scene).
+    pub fn new(mass: f64, damping: f64, coulomb: f64, dt: f64) -> Self {
+        let a = damping * dt / mass;
+        Self {
+            mass,
+            damping,
+            coulomb,
+            dt,
+            c_xv: dt * phi(a),
+            c_xf: dt * dt * psi(a) / mass,
+            c_vv: (-a).exp(),
+            c_vf: dt * phi(a) / mass,
+        }
+    }
+
+    /// The ZOH-discretized plant `x_{k+1} = A x_k + B F_k` for the fixed dt:
+    /// `A = [[1, c_xv], [0, c_vv]]`, `B = [c_xf, c_vf]`.
+    pub fn zoh(&self) -> ([[f64; 2]; 2], [f64; 2]) {
+        ([[1.0, self.c_xv], [0.0, self.c_vv]], [self.c_xf, self.c_vf])
+    }
+
+    /// One fixed interval, no friction: the exact ZOH step.
+    #[inline]
+    pub fn step_linear(&self, s: &mut PlantState, f: f64) {
+        let x = s.x + s.v * self.c_xv + f * self.c_xf;
+        s.v = s.v * self.c_vv + f * self.c_vf;
+        s.x = x;
+    }
+
+    /// Advance by an arbitrary `t` under constant net force `f`, no friction.
+    #[inline]
+    fn advance(&self, s: &mut PlantState, f: f64, t: f64) {
+        let a = self.damping * t / self.mass;
+        let (ph, ps) = (phi(a), psi(a));
+        s.x += s.v * t * ph + f / self.mass * t * t * ps;
+        s.v = s.v * (-a).exp() + f / self.mass * t * ph;
+    }
+
+    /// Time for the velocity to reach 0 from `v0 ≠ 0` under net force `f`
+    /// opposing it (closed form of v(t) = 0).
+    #[inline]
+    fn time_to_stop(&self, v0: f64, f: f64) -> f64 {
+        if self.damping == 0.0 {
+            -v0 * self.mass / f
+        } else {
+            // v(t) = v∞ + (v0 − v∞)e^{−t/τ}, v∞ = f/b: zero at t = τ·ln(1 − v0/v∞).
+            let tau = self.mass / self.damping;
+            tau * (-v0 * self.damping / f).ln_1p()
+        }
+    }
+
+    /// One fixed interval with Coulomb friction and stick–slip; `f` is the
+    /// applied (motor + external) force.
+    #[inline]
+    pub fn step_friction(&self, s: &mut PlantState, f: f64) {
+        let fc = self.coulomb;
+        let mut left = self.dt;
+        let mut full = true; // the whole fixed interval: use the precomputed step
+        for _ in 0..3 {
+            let dir = if s.v != 0.0 {
+                s.v.signum()
+            } else if f.abs() <= fc {
+                return; // sticks for the rest of the interval
+            } else {
+                f.signum()
+            };
+            let net = f - fc * dir;
+            if s.v != 0.0 && net * dir < 0.0 {
+                let t_stop = self.time_to_stop(s.v, net);
+                if t_stop < left {
+                    self.advance(s, net, t_stop);
+                    s.v = 0.0;
+                    left -= t_stop;
+                    full = false;
+                    continue;
+                }
+            }
+            if full {
+                self.step_linear(s, net);
+            } else {
+                self.advance(s, net, left);
+            }
+            return;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn series_and_closed_forms_agree() {
+        for a in [1e-9, 1e-6, 5e-4, 1.5e-3, 0.1, 1.0, 30.0] {
+            let p = (1.0 - (-a as f64).exp()) / a;
+            let q = (a - 1.0 + (-a as f64).exp()) / (a * a);
+            assert!((phi(a) - p).abs() < 1e-9 * p.max(1e-3) || a < 1e-5, "phi {a}");
+            assert!((psi(a) - q).abs() < 1e-9 || a < 1e-4, "psi {a}");
+        }
+        assert_eq!(psi(0.0), 0.5);
+        assert_eq!(phi(0.0), 1.0);
+    }
+
+    #[test]
+    fn exact_against_analytic_solution() {
+        // m = 0.5, b = 2, F = 1 from rest: v(t) = (F/b)(1 − e^{−bt/m}),
+        // x(t) = (F/b)(t − (m/b)(1 − e^{−bt/m})).
+        let p = Plant::new(0.5, 2.0, 0.0, 1e-3);
+        let mut s = PlantState::default();
+        for _ in 0..1000 {
+            p.step_linear(&mut s, 1.0);
+        }
+        let t: f64 = 1.0;
+        let v = 0.5 * (1.0 - (-4.0 * t).exp());
+        let x = 0.5 * (t - 0.25 * (1.0 - (-4.0 * t).exp()));
+        assert!((s.v - v).abs() < 1e-12 && (s.x - x).abs() < 1e-12, "{s:?}");
+        // b = 0: a pure mass, x = F t²/(2m).
+        let p = Plant::new(2.0, 0.0, 0.0, 1e-2);
+        let mut s = PlantState::default();
+        for _ in 0..100 {
+            p.step_linear(&mut s, 3.0);
+        }
+        assert!((s.x - 0.75).abs() < 1e-12 && (s.v - 1.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn coulomb_stops_and_sticks() {
+        // m = 1, b = 0, f_c = 1, v0 = 1, F = 0.5 (< f_c): decelerates at 0.5 m/s²,
+        // stops at t = 2 s after x = v0²/(2·0.5) = 1 m, then sticks.
+        let p = Plant::new(1.0, 0.0, 1.0, 0.3);
+        let mut s = PlantState { x: 0.0, v: 1.0 };
+        for _ in 0..20 {
+            p.step_friction(&mut s, 0.5);
+        }
+        assert_eq!(s.v, 0.0);
+        assert!((s.x - 1.0).abs() < 1e-12, "{s:?}");
+        // From rest, a force above f_c slips: F = 3 gives a = 2 m/s².
+        let p = Plant::new(1.0, 0.0, 1.0, 0.5);
+        let mut s = PlantState::default();
+        p.step_friction(&mut s, 3.0);
+        assert!((s.v - 1.0).abs() < 1e-12 && (s.x - 0.25).abs() < 1e-12);
+        // Reversal: moving at −1 m/s with F = +3: stops after 0.25 s (net 4 N),
+        // then slips forward with net 2 N for the remaining 0.25 s.
+        let mut s = PlantState { x: 0.0, v: -1.0 };
+        p.step_friction(&mut s, 3.0);
+        assert!((s.v - 0.5).abs() < 1e-12, "{s:?}");
+        assert!((s.x - (-0.125 + 0.0625)).abs() < 1e-12, "{s:?}");
+    }
+}

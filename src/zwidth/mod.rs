@@ -1,0 +1,9 @@
+//! Z-width engines: the scene, the time-domain wall hit, the frequency-domain
+//! impedance probe, the analytic model, and the (K, B) searches.
+
+pub mod analytic;
+pub mod hit;
+pub mod poly;
+pub mod scene;
+
+pub use scene::{Scene, SceneSpec};

@@ -1,0 +1,440 @@
+//! The scene: device, control loop, estimator, wall, hit protocol and probe —
+//! one serde document (field names are a contract). Everything optional
+//! defaults to the seeds' values; `SceneSpec::validate` checks every field
+//! once and returns a [`Scene`] the engines trust.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{require_non_negative, require_positive, SpecError};
+use crate::estimators::{Estimator, EstimatorKind, EstimatorSpec, Sampling};
+
+/// The encoder step the estimators are built for when the scene's sensor is
+/// ideal (`quantization: 0`): Kalman needs `r = d²/3 > 0`. 1 nm is finer than
+/// any encoder the papers consider.
+pub const IDEAL_SENSOR_ESTIMATOR_STEP: f64 = 1e-9;
+
+/// The haptic device: `m ẍ + b ẋ = F − f_c·sign(ẋ)` (2018 paper §V: m = 0.52 kg,
+/// b = 13.2 N·s/m, f_c = 0.19 N, 1 µm encoder).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DeviceSpec {
+    /// Moving mass (kg).
+    #[serde(default = "d_mass")]
+    pub mass: f64,
+    /// Viscous damping b (N·s/m).
+    #[serde(default = "d_damping")]
+    pub damping: f64,
+    /// Coulomb friction f_c (N); static equals kinetic, as the 2018 paper assumes.
+    #[serde(default = "d_coulomb")]
+    pub coulomb: f64,
+    /// Encoder step (m); 0 is an ideal sensor.
+    #[serde(default = "d_quantization")]
+    pub quantization: f64,
+    /// Motor force saturation (N), or null for none.
+    #[serde(default)]
+    pub force_limit: Option<f64>,
+}
+
+fn d_mass() -> f64 {
+    0.52
+}
+fn d_damping() -> f64 {
+    13.2
+}
+fn d_coulomb() -> f64 {
+    0.19
+}
+fn d_quantization() -> f64 {
+    1e-6
+}
+
+impl Default for DeviceSpec {
+    fn default() -> Self {
+        Self {
+            mass: d_mass(),
+            damping: d_damping(),
+            coulomb: d_coulomb(),
+            quantization: d_quantization(),
+            force_limit: None,
+        }
+    }
+}
+
+/// The control loop (2011 paper §2.3: encoder and estimators at 10 kHz, wall
+/// rendered at 1 kHz).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoopSpec {
+    /// Rate the encoder is read and the estimator runs (Hz).
+    #[serde(default = "d_sample_hz")]
+    pub sample_hz: f64,
+    /// Rate the wall force is computed and held, zero-order (Hz); divides `sample_hz`.
+    #[serde(default = "d_render_hz")]
+    pub render_hz: f64,
+    /// Extra whole render periods between reading and applying the force.
+    #[serde(default)]
+    pub delay_samples: u32,
+}
+
+fn d_sample_hz() -> f64 {
+    10_000.0
+}
+fn d_render_hz() -> f64 {
+    1_000.0
+}
+
+impl Default for LoopSpec {
+    fn default() -> Self {
+        Self {
+            sample_hz: d_sample_hz(),
+            render_hz: d_render_hz(),
+            delay_samples: 0,
+        }
+    }
+}
+
+/// The virtual wall's location (m); it pushes back on the handle when the
+/// measured position is past it (2011 paper eq. 12).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WallSpec {
+    #[serde(default)]
+    pub position: f64,
+}
+
+/// The wall-hit protocol (2011 paper §2.4).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HitSpec {
+    /// Start this far before the wall (m).
+    #[serde(default = "d_home")]
+    pub home_distance: f64,
+    /// Constant motor force driving the handle into the wall (N).
+    #[serde(default = "d_push")]
+    pub push_force: f64,
+    /// Wait this long before measuring (s).
+    #[serde(default = "d_settle")]
+    pub settle_s: f64,
+    /// Measure the RMS about the mean position over this long (s).
+    #[serde(default = "d_measure")]
+    pub measure_s: f64,
+    /// Stable iff that RMS is below this (m); 1.06e-4 mm in the paper.
+    #[serde(default = "d_threshold")]
+    pub threshold: f64,
+}
+
+fn d_home() -> f64 {
+    0.07
+}
+fn d_push() -> f64 {
+    0.3572
+}
+fn d_settle() -> f64 {
+    4.0
+}
+fn d_measure() -> f64 {
+    2.0
+}
+fn d_threshold() -> f64 {
+    1.06e-7
+}
+
+impl Default for HitSpec {
+    fn default() -> Self {
+        Self {
+            home_distance: d_home(),
+            push_force: d_push(),
+            settle_s: d_settle(),
+            measure_s: d_measure(),
+            threshold: d_threshold(),
+        }
+    }
+}
+
+/// The multisine impedance probe (2018 paper §V). Defaults are ours: the
+/// band 1–100 Hz covers the device's 30 Hz bandwidth and the paper's Fig. 6;
+/// 0.5 N peak stays well inside the 4 N motor; 4 averaged periods.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProbeSpec {
+    /// Lowest excited line and line spacing (Hz); one period is 1/f_min s.
+    #[serde(default = "d_fmin")]
+    pub f_min_hz: f64,
+    /// Highest excited line (Hz), below the render Nyquist frequency.
+    #[serde(default = "d_fmax")]
+    pub f_max_hz: f64,
+    /// Peak force of the multisine (N).
+    #[serde(default = "d_amp")]
+    pub amplitude: f64,
+    /// Periods averaged once the response is periodic.
+    #[serde(default = "d_periods")]
+    pub periods: u32,
+}
+
+fn d_fmin() -> f64 {
+    1.0
+}
+fn d_fmax() -> f64 {
+    100.0
+}
+fn d_amp() -> f64 {
+    0.5
+}
+fn d_periods() -> u32 {
+    4
+}
+
+impl Default for ProbeSpec {
+    fn default() -> Self {
+        Self {
+            f_min_hz: d_fmin(),
+            f_max_hz: d_fmax(),
+            amplitude: d_amp(),
+            periods: d_periods(),
+        }
+    }
+}
+
+fn d_estimator() -> EstimatorSpec {
+    EstimatorKind::Fdm {}.into()
+}
+
+/// The whole scene document.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneSpec {
+    #[serde(default)]
+    pub device: DeviceSpec,
+    #[serde(default, rename = "loop")]
+    pub control: LoopSpec,
+    #[serde(default = "d_estimator")]
+    pub estimator: EstimatorSpec,
+    #[serde(default)]
+    pub wall: WallSpec,
+    #[serde(default)]
+    pub hit: HitSpec,
+    #[serde(default)]
+    pub probe: ProbeSpec,
+}
+
+impl Default for SceneSpec {
+    fn default() -> Self {
+        Self {
+            device: DeviceSpec::default(),
+            control: LoopSpec::default(),
+            estimator: d_estimator(),
+            wall: WallSpec::default(),
+            hit: HitSpec::default(),
+            probe: ProbeSpec::default(),
+        }
+    }
+}
+
+/// A validated scene. Fields are public for reading; build one only through
+/// [`SceneSpec::validate`].
+#[derive(Debug, Clone)]
+pub struct Scene {
+    pub spec: SceneSpec,
+    /// Encoder samples per render period.
+    pub ratio: usize,
+    /// Sample period (s) and render period (s).
+    pub dt: f64,
+    pub render_dt: f64,
+    /// What the estimator is built for.
+    pub sampling: Sampling,
+}
+
+fn is_whole(x: f64) -> bool {
+    (x - x.round()).abs() <= 1e-9 * x.abs().max(1.0)
+}
+
+impl SceneSpec {
+    pub fn from_json(text: &str) -> Result<Self, SpecError> {
+        serde_json::from_str(text).map_err(|e| SpecError::new("scene", "(document)", format!("is not a valid scene: {e}")))
+    }
+
+    pub fn validate(&self) -> Result<Scene, SpecError> {
+        let d = &self.device;
+        let dev = |e: SpecError| e.within("device");
+        require_positive("mass", d.mass, "kg").map_err(dev)?;
+        if d.mass > 1e4 {
+            return Err(SpecError::new("device.mass", d.mass, "must be at most 1e4 kg"));
+        }
+        require_non_negative("damping", d.damping, "N·s/m").map_err(dev)?;
+        require_non_negative("coulomb", d.coulomb, "N").map_err(dev)?;
+        require_non_negative("quantization", d.quantization, "m; 0 is an ideal sensor").map_err(dev)?;
+        if d.quantization > 0.01 {
+            return Err(SpecError::new("device.quantization", d.quantization, "must be at most 0.01 m"));
+        }
+        if let Some(f) = d.force_limit {
+            require_positive("force_limit", f, "N, or null for none").map_err(dev)?;
+        }
+        let l = &self.control;
+        let lp = |e: SpecError| e.within("loop");
+        require_positive("sample_hz", l.sample_hz, "Hz").map_err(lp)?;
+        if !(10.0..=1e7).contains(&l.sample_hz) {
+            return Err(SpecError::new("loop.sample_hz", l.sample_hz, "must be 10 Hz to 10 MHz"));
+        }
+        require_positive("render_hz", l.render_hz, "Hz").map_err(lp)?;
+        let ratio = l.sample_hz / l.render_hz;
+        if l.render_hz > l.sample_hz || !is_whole(ratio) {
+            return Err(SpecError::new(
+                "loop.render_hz",
+                l.render_hz,
+                format!("must divide loop.sample_hz = {} Hz a whole number of times", l.sample_hz),
+            ));
+        }
+        if l.delay_samples > 100 {
+            return Err(SpecError::new("loop.delay_samples", l.delay_samples, "must be 0 to 100 render periods"));
+        }
+        let h = &self.hit;
+        let hp = |e: SpecError| e.within("hit");
+        require_non_negative("home_distance", h.home_distance, "m").map_err(hp)?;
+        if !h.push_force.is_finite() {
+            return Err(SpecError::new("hit.push_force", h.push_force, "must be a finite force (N)"));
+        }
+        require_positive("settle_s", h.settle_s, "s").map_err(hp)?;
+        require_positive("measure_s", h.measure_s, "s").map_err(hp)?;
+        require_positive("threshold", h.threshold, "m").map_err(hp)?;
+        if h.settle_s + h.measure_s > 3600.0 {
+            return Err(SpecError::new("hit.settle_s", h.settle_s, "settle_s + measure_s must be at most 3600 s"));
+        }
+        if (h.settle_s + h.measure_s) * l.sample_hz > 1e9 {
+            return Err(SpecError::new("hit.measure_s", h.measure_s, "a trial may have at most 1e9 samples"));
+        }
+        let p = &self.probe;
+        let pp = |e: SpecError| e.within("probe");
+        require_positive("f_min_hz", p.f_min_hz, "Hz").map_err(pp)?;
+        let nyq = l.render_hz / 2.0;
+        if !(p.f_max_hz.is_finite() && p.f_max_hz > p.f_min_hz && p.f_max_hz < nyq) {
+            return Err(SpecError::new(
+                "probe.f_max_hz",
+                p.f_max_hz,
+                format!("must be above f_min_hz = {} Hz and below the render Nyquist frequency {nyq} Hz", p.f_min_hz),
+            ));
+        }
+        if !is_whole(l.sample_hz / p.f_min_hz) {
+            return Err(SpecError::new(
+                "probe.f_min_hz",
+                p.f_min_hz,
+                format!("one period (1/f_min_hz) must be a whole number of samples at loop.sample_hz = {} Hz", l.sample_hz),
+            ));
+        }
+        if p.f_max_hz / p.f_min_hz > 100_000.0 {
+            return Err(SpecError::new("probe.f_max_hz", p.f_max_hz, "at most 100 000 lines (f_max_hz / f_min_hz)"));
+        }
+        require_positive("amplitude", p.amplitude, "N").map_err(pp)?;
+        if !(1..=1000).contains(&p.periods) {
+            return Err(SpecError::new("probe.periods", p.periods, "must be 1 to 1000"));
+        }
+        let step = if d.quantization > 0.0 { d.quantization } else { IDEAL_SENSOR_ESTIMATOR_STEP };
+        let sampling = Sampling::new(l.sample_hz, step)?;
+        self.estimator.build(sampling).map_err(|e| e.within("estimator"))?;
+        Ok(Scene {
+            spec: self.clone(),
+            ratio: ratio.round() as usize,
+            dt: 1.0 / l.sample_hz,
+            render_dt: 1.0 / l.render_hz,
+            sampling,
+        })
+    }
+}
+
+impl Scene {
+    /// A fresh estimator (validated at scene construction, so this cannot fail).
+    pub fn estimator(&self) -> Estimator {
+        self.spec.estimator.build(self.sampling).expect("validated with the scene")
+    }
+
+    /// The same scene with another estimator (validated).
+    pub fn with_estimator(&self, e: EstimatorSpec) -> Result<Scene, SpecError> {
+        SceneSpec {
+            estimator: e,
+            ..self.spec.clone()
+        }
+        .validate()
+    }
+
+    /// Single-rate, no quantization, no friction, no saturation, and a linear
+    /// estimator: the analytic engine is exact for it.
+    pub fn linear_reason(&self) -> Option<String> {
+        let d = &self.spec.device;
+        let e = &self.spec.estimator;
+        if self.ratio != 1 {
+            return Some(format!("multi-rate loop (sample_hz/render_hz = {})", self.ratio));
+        }
+        if d.quantization > 0.0 {
+            return Some("quantization".into());
+        }
+        if d.coulomb > 0.0 {
+            return Some("Coulomb friction".into());
+        }
+        if d.force_limit.is_some() {
+            return Some("force saturation".into());
+        }
+        if e.median_position.is_some() || e.median_velocity.is_some() {
+            return Some("median smoothing".into());
+        }
+        match e.kind {
+            EstimatorKind::Fdm {} | EstimatorKind::Butterworth { .. } | EstimatorKind::Kalman { .. } => None,
+            _ => Some("a nonlinear or adaptive estimator".into()),
+        }
+    }
+
+    pub fn is_linear(&self) -> bool {
+        self.linear_reason().is_none()
+    }
+}
+
+/// Check a wall's stiffness K (N/m) and damping B (N·s/m).
+pub fn validate_wall(k: f64, b: f64) -> Result<(), SpecError> {
+    if !(k.is_finite() && (0.0..=1e9).contains(&k)) {
+        return Err(SpecError::new("k", k, "wall stiffness must be 0 to 1e9 N/m"));
+    }
+    if !(b.is_finite() && b.abs() <= 1e7) {
+        return Err(SpecError::new("b", b, "wall damping must be finite, |B| <= 1e7 N·s/m"));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn issue_example_parses_and_defaults_fill_in() {
+        let json = r#"{
+          "device":   {"mass": 0.52, "damping": 13.2, "coulomb": 0.19, "quantization": 1e-6, "force_limit": null},
+          "loop":     {"sample_hz": 10000, "render_hz": 1000, "delay_samples": 0},
+          "estimator": {"kind": "fdm"},
+          "wall":     {"position": 0.0},
+          "hit":      {"home_distance": 0.07, "push_force": 0.3572, "settle_s": 4, "measure_s": 2, "threshold": 1.06e-7},
+          "probe":    {"f_min_hz": 1, "f_max_hz": 100, "amplitude": 0.5, "periods": 4}
+        }"#;
+        let s = SceneSpec::from_json(json).unwrap();
+        assert_eq!(s, SceneSpec::default());
+        assert_eq!(SceneSpec::from_json("{}").unwrap(), SceneSpec::default());
+        let partial = SceneSpec::from_json(r#"{"device":{"coulomb":0}}"#).unwrap();
+        assert_eq!(partial.device.mass, 0.52);
+        let sc = s.validate().unwrap();
+        assert_eq!(sc.ratio, 10);
+        assert!(!sc.is_linear());
+    }
+
+    #[test]
+    fn errors_name_the_field() {
+        let bad = |j: &str| match SceneSpec::from_json(j) {
+            Err(e) => e.to_string(),
+            Ok(s) => s.validate().err().map(|e| e.to_string()).unwrap_or_default(),
+        };
+        assert!(bad(r#"{"device":{"mass":0}}"#).contains("device.mass = 0"));
+        assert!(bad(r#"{"device":{"damping":-1}}"#).contains("device.damping = -1"));
+        assert!(bad(r#"{"loop":{"sample_hz":10000,"render_hz":3000}}"#).contains("loop.render_hz = 3000"));
+        assert!(bad(r#"{"probe":{"f_max_hz":600}}"#).contains("probe.f_max_hz = 600"));
+        assert!(bad(r#"{"probe":{"f_min_hz":3}}"#).contains("probe.f_min_hz = 3"));
+        assert!(bad(r#"{"estimator":{"kind":"butterworth","cutoff_hz":6000}}"#).contains("estimator.cutoff_hz = 6000"));
+        assert!(bad(r#"{"devise":{}}"#).contains("devise"));
+        assert!(bad(r#"{"hit":{"threshold":0}}"#).contains("hit.threshold = 0"));
+        assert!(validate_wall(-1.0, 0.0).is_err() && validate_wall(1.0, f64::NAN).is_err());
+    }
+}
