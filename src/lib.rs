@@ -12,6 +12,7 @@ pub mod lipschitz;
 pub mod plot;
 pub mod rig;
 pub mod signals;
+pub mod spectral;
 pub mod zwidth;
 
 pub use error::SpecError;

@@ -4,6 +4,7 @@
 pub mod analytic;
 pub mod hit;
 pub mod poly;
+pub mod probe;
 pub mod scene;
 
 pub use scene::{Scene, SceneSpec};
