@@ -26,7 +26,10 @@ impl Multisine {
     pub fn schroeder(f0: f64, f_max: f64, peak: f64) -> Self {
         let l = ((f_max / f0) + 1e-9).floor().max(1.0) as usize;
         let lines: Vec<usize> = (1..=l).collect();
-        let phases: Vec<f64> = lines.iter().map(|&k| -std::f64::consts::PI * (k * (k - 1)) as f64 / l as f64).collect();
+        let phases: Vec<f64> = lines
+            .iter()
+            .map(|&k| -std::f64::consts::PI * (k * (k - 1)) as f64 / l as f64)
+            .collect();
         let unit = Self {
             f0,
             lines: lines.clone(),
@@ -34,9 +37,15 @@ impl Multisine {
         };
         // Peak on a grid 64 points per period of the highest line.
         let n = 64 * l;
-        let unit_peak = (0..n).map(|i| unit.value(i as f64 / (n as f64 * f0)).abs()).fold(0.0, f64::max);
+        let unit_peak = (0..n)
+            .map(|i| unit.value(i as f64 / (n as f64 * f0)).abs())
+            .fold(0.0, f64::max);
         Self {
-            amplitudes: unit.amplitudes.iter().map(|a| a * (peak / unit_peak)).collect(),
+            amplitudes: unit
+                .amplitudes
+                .iter()
+                .map(|a| a * (peak / unit_peak))
+                .collect(),
             ..unit
         }
     }
@@ -45,13 +54,18 @@ impl Multisine {
         self.lines
             .iter()
             .zip(&self.amplitudes)
-            .map(|(&k, a)| (a * C::from_polar(1.0, 2.0 * std::f64::consts::PI * self.f0 * k as f64 * t)).re)
+            .map(|(&k, a)| {
+                (a * C::from_polar(1.0, 2.0 * std::f64::consts::PI * self.f0 * k as f64 * t)).re
+            })
             .sum()
     }
 
     /// Angular frequencies of the lines (rad/s).
     pub fn omegas(&self) -> Vec<f64> {
-        self.lines.iter().map(|&k| 2.0 * std::f64::consts::PI * self.f0 * k as f64).collect()
+        self.lines
+            .iter()
+            .map(|&k| 2.0 * std::f64::consts::PI * self.f0 * k as f64)
+            .collect()
     }
 }
 
@@ -70,7 +84,12 @@ impl LineAnalyzer {
         let input = fft.make_input_vec();
         let spectrum = fft.make_output_vec();
         let scratch = fft.make_scratch_vec();
-        Self { fft, input, spectrum, scratch }
+        Self {
+            fft,
+            input,
+            spectrum,
+            scratch,
+        }
     }
 
     /// `X_k = (2/N)·Σ x_n e^{−j2πkn/N}` for each bin k in `lines`, written to `out`.

@@ -61,9 +61,18 @@ impl ImpedanceCurve {
     /// Build from complex Z at the lines; shared with the frequency engine.
     pub fn from_z(omegas: &[f64], z: &[C], k: f64, b: f64) -> Self {
         let ideal = |w: f64| C::new(b, -k / w).norm();
-        let fidelity = (omegas.iter().zip(z).map(|(&w, z)| (z.norm() - ideal(w)).powi(2)).sum::<f64>() / omegas.len() as f64).sqrt();
+        let fidelity = (omegas
+            .iter()
+            .zip(z)
+            .map(|(&w, z)| (z.norm() - ideal(w)).powi(2))
+            .sum::<f64>()
+            / omegas.len() as f64)
+            .sqrt();
         Self {
-            freq_hz: omegas.iter().map(|w| w / (2.0 * std::f64::consts::PI)).collect(),
+            freq_hz: omegas
+                .iter()
+                .map(|w| w / (2.0 * std::f64::consts::PI))
+                .collect(),
             magnitude: z.iter().map(|z| z.norm()).collect(),
             phase_deg: z.iter().map(|z| z.arg().to_degrees()).collect(),
             passive: z.iter().all(|z| z.re >= 0.0),
@@ -91,7 +100,11 @@ fn state_space_tf(f: &[[f64; 3]; 3], g: [f64; 3], c: [f64; 3]) -> (Poly, Poly) {
     den[n] = 1.0;
     let mut adj_terms = Vec::new(); // c·M_k·g for k = 1..n, coefficient of z^{n−k}
     for k in 1..=n {
-        adj_terms.push((0..3).map(|i| c[i] * (0..3).map(|j| m[i][j] * g[j]).sum::<f64>()).sum::<f64>());
+        adj_terms.push(
+            (0..3)
+                .map(|i| c[i] * (0..3).map(|j| m[i][j] * g[j]).sum::<f64>())
+                .sum::<f64>(),
+        );
         let fm = matmul(f, &m);
         let ck = -(fm[0][0] + fm[1][1] + fm[2][2]) / k as f64;
         den[n - k] = ck;
@@ -115,19 +128,30 @@ fn kalman_steady_gain(q: f64, model: QModel, t: f64, d: f64) -> [f64; 3] {
     let qs = match model {
         QModel::WhiteJerk => {
             let s5 = q * t.powi(5);
-            [[s5 / 20.0, s5 / 8.0, s5 / 6.0], [s5 / 8.0, s5 / 3.0, s5 / 2.0], [s5 / 6.0, s5 / 2.0, s5]]
+            [
+                [s5 / 20.0, s5 / 8.0, s5 / 6.0],
+                [s5 / 8.0, s5 / 3.0, s5 / 2.0],
+                [s5 / 6.0, s5 / 2.0, s5],
+            ]
         }
         QModel::Diagonal => [[0.0; 3], [0.0; 3], [0.0, 0.0, q * t.powi(4)]],
     };
     let a = [[1.0, 1.0, 0.5], [0.0, 1.0, 1.0], [0.0, 0.0, 1.0]];
     let r = d * d / 3.0;
-    let mut p = [[d * d / 3.0, 0.0, 0.0], [0.0, 2.0 * d * d / 3.0, 0.0], [0.0, 0.0, 2.0 * d * d]];
+    let mut p = [
+        [d * d / 3.0, 0.0, 0.0],
+        [0.0, 2.0 * d * d / 3.0, 0.0],
+        [0.0, 0.0, 2.0 * d * d],
+    ];
     let mut gain = [0.0; 3];
     for it in 0..2_000_000 {
         let mut pp = [[0.0; 3]; 3];
         for i in 0..3 {
             for j in 0..3 {
-                pp[i][j] = (0..3).map(|k| (0..3).map(|l| a[i][k] * p[k][l] * a[j][l]).sum::<f64>()).sum::<f64>() + qs[i][j];
+                pp[i][j] = (0..3)
+                    .map(|k| (0..3).map(|l| a[i][k] * p[k][l] * a[j][l]).sum::<f64>())
+                    .sum::<f64>()
+                    + qs[i][j];
             }
         }
         let s = pp[0][0] + r;
@@ -137,7 +161,9 @@ fn kalman_steady_gain(q: f64, model: QModel, t: f64, d: f64) -> [f64; 3] {
                 p[i][j] = pp[i][j] - new_gain[i] * pp[0][j];
             }
         }
-        let change = (0..3).map(|i| (new_gain[i] - gain[i]).abs() / new_gain[i].abs().max(1e-300)).fold(0.0, f64::max);
+        let change = (0..3)
+            .map(|i| (new_gain[i] - gain[i]).abs() / new_gain[i].abs().max(1e-300))
+            .fold(0.0, f64::max);
         gain = new_gain;
         if it > 10 && change < 1e-13 {
             break;
@@ -161,7 +187,8 @@ impl LinearModel {
         let (v_num, v_den) = match &s.estimator.kind {
             EstimatorKind::Fdm {} => (vec![-1.0, 1.0], vec![0.0, t]),
             EstimatorKind::Butterworth { cutoff_hz, order } => {
-                let sos = design_lowpass(*order, *cutoff_hz, s.control.sample_hz).map_err(|e| e.within("estimator"))?;
+                let sos = design_lowpass(*order, *cutoff_hz, s.control.sample_hz)
+                    .map_err(|e| e.within("estimator"))?;
                 let mut num = vec![-1.0, 1.0];
                 let mut den = vec![0.0, t];
                 for c in sos {
@@ -192,7 +219,9 @@ impl LinearModel {
         let g_den = poly::mul(&[-1.0, 1.0], &[-e, 1.0]);
         let p = &s.probe;
         let lines = (p.f_max_hz / p.f_min_hz + 1e-9).floor() as usize;
-        let omegas = (1..=lines).map(|k| 2.0 * std::f64::consts::PI * p.f_min_hz * k as f64).collect();
+        let omegas = (1..=lines)
+            .map(|k| 2.0 * std::f64::consts::PI * p.f_min_hz * k as f64)
+            .collect();
         Ok(Self {
             mass: s.device.mass,
             damping: s.device.damping,
@@ -231,7 +260,11 @@ impl LinearModel {
     }
 
     pub fn impedance(&self, k: f64, b: f64) -> ImpedanceCurve {
-        let z: Vec<C> = self.omegas.iter().map(|&w| self.impedance_at(k, b, w)).collect();
+        let z: Vec<C> = self
+            .omegas
+            .iter()
+            .map(|&w| self.impedance_at(k, b, w))
+            .collect();
         ImpedanceCurve::from_z(&self.omegas, &z, k, b)
     }
 
@@ -244,7 +277,10 @@ impl LinearModel {
 
     /// Largest closed-loop eigenvalue magnitude; stable iff < 1.
     pub fn spectral_radius(&self, k: f64, b: f64) -> f64 {
-        poly::roots(&self.characteristic(k, b)).iter().map(|z| z.norm()).fold(0.0, f64::max)
+        poly::roots(&self.characteristic(k, b))
+            .iter()
+            .map(|z| z.norm())
+            .fold(0.0, f64::max)
     }
 
     /// Per θ: (a, c, r) of the strict-passivity constraint `K·a + B·c ≤ r`.
@@ -265,7 +301,8 @@ impl LinearModel {
         const N: usize = 8192;
         let (mut lo, mut hi) = (0.0f64, f64::INFINITY);
         let mut arg_hi = None;
-        let thetas = std::iter::once(std::f64::consts::PI * 1e-7).chain((1..=N).map(|i| std::f64::consts::PI * i as f64 / N as f64));
+        let thetas = std::iter::once(std::f64::consts::PI * 1e-7)
+            .chain((1..=N).map(|i| std::f64::consts::PI * i as f64 / N as f64));
         for (i, th) in thetas.enumerate() {
             let (a, c, r) = self.passivity_terms(th);
             let slack = r - b * c;
@@ -284,8 +321,15 @@ impl LinearModel {
         // Refine the binding θ between its grid neighbours (golden section).
         if let Some(i) = arg_hi {
             let step = std::f64::consts::PI / N as f64;
-            let centre = if i == 0 { std::f64::consts::PI * 1e-7 } else { step * i as f64 };
-            let (mut x0, mut x1) = ((centre - step).max(std::f64::consts::PI * 1e-7), (centre + step).min(std::f64::consts::PI));
+            let centre = if i == 0 {
+                std::f64::consts::PI * 1e-7
+            } else {
+                step * i as f64
+            };
+            let (mut x0, mut x1) = (
+                (centre - step).max(std::f64::consts::PI * 1e-7),
+                (centre + step).min(std::f64::consts::PI),
+            );
             let f = |th: f64| {
                 let (a, c, r) = self.passivity_terms(th);
                 if a > 0.0 {
@@ -315,7 +359,9 @@ mod tests {
     use crate::zwidth::scene::SceneSpec;
 
     fn linear(extra: &str) -> Scene {
-        let j = format!(r#"{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000{extra}}}}}"#);
+        let j = format!(
+            r#"{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000{extra}}}}}"#
+        );
         SceneSpec::from_json(&j).unwrap().validate().unwrap()
     }
 
@@ -373,7 +419,10 @@ mod tests {
                 }
             }
             let rule = 33.2 / (0.5e-3 + td);
-            assert!((lo / rule - 1.0).abs() < 0.06, "delay {delay}: {lo} vs {rule}");
+            assert!(
+                (lo / rule - 1.0).abs() < 0.06,
+                "delay {delay}: {lo} vs {rule}"
+            );
         }
     }
 
@@ -388,7 +437,9 @@ mod tests {
             .unwrap();
         let m = LinearModel::new(&sc).unwrap();
         let spec = EstimatorSpec::from_json(r#"{"kind":"kalman","q":2.5e4}"#).unwrap();
-        let mut est = spec.build(Sampling::new(1000.0, sc.sampling.quantization).unwrap()).unwrap();
+        let mut est = spec
+            .build(Sampling::new(1000.0, sc.sampling.quantization).unwrap())
+            .unwrap();
         let w = 2.0 * std::f64::consts::PI * 37.0;
         let theta = w * 1e-3;
         let v = m.v(theta);
@@ -400,6 +451,9 @@ mod tests {
             // Steady-state response to Im(e^{jθk}) is Im(V e^{jθk}).
             want = 1e-3 * (v * C::from_polar(1.0, theta * k as f64)).im;
         }
-        assert!((last - want).abs() < 1e-6 * v.norm() * 1e-3 + 1e-9, "{last} vs {want}");
+        assert!(
+            (last - want).abs() < 1e-6 * v.norm() * 1e-3 + 1e-9,
+            "{last} vs {want}"
+        );
     }
 }

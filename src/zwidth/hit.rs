@@ -5,9 +5,12 @@
 //! and the estimator updated; every render period the wall force
 //! `−(K(y − x_wall) + B·v̂)` is computed while the measured y is past the wall
 //! (else 0, 2011 eq. 12), delayed by `delay_samples` render periods, added to
-//! the push force, saturated, and held. After `settle_s` the RMS of the
-//! measured position about its mean over `measure_s` decides: stable iff
-//! below `threshold`. A trial that diverges (|x| > 10 m, |v| > 1e3 m/s) stops
+//! the push force, saturated, and held. `settle_s` after the first contact
+//! (the paper counts from the start; the 7 cm approach then eats 2.6 of its
+//! 4 s, and a shorter setting would measure before the handle arrives; a
+//! push that cannot beat friction never arrives and is measured at once) the
+//! RMS of the measured position about its mean over `measure_s` decides:
+//! stable iff below `threshold`. A trial that diverges (|x| > 10 m, |v| > 1e3 m/s) stops
 //! at once and is unstable.
 //!
 //! Only what the scene has is simulated: without friction the plant step is
@@ -72,7 +75,13 @@ const DIVERGED_X: f64 = 10.0;
 const DIVERGED_V: f64 = 1e3;
 
 /// One wall hit with stiffness `k` (N/m) and damping `b` (N·s/m), already validated.
-pub fn wall_hit(scene: &Scene, k: f64, b: f64, knobs: HitKnobs, rec: &mut impl Recorder) -> HitOutcome {
+pub fn wall_hit(
+    scene: &Scene,
+    k: f64,
+    b: f64,
+    knobs: HitKnobs,
+    rec: &mut impl Recorder,
+) -> HitOutcome {
     let d = &scene.spec.device;
     match (d.coulomb > 0.0, d.quantization > 0.0) {
         (true, true) => run::<true, true>(scene, k, b, knobs, rec),
@@ -82,7 +91,13 @@ pub fn wall_hit(scene: &Scene, k: f64, b: f64, knobs: HitKnobs, rec: &mut impl R
     }
 }
 
-fn run<const FRICTION: bool, const QUANT: bool>(scene: &Scene, k: f64, b: f64, knobs: HitKnobs, rec: &mut impl Recorder) -> HitOutcome {
+fn run<const FRICTION: bool, const QUANT: bool>(
+    scene: &Scene,
+    k: f64,
+    b: f64,
+    knobs: HitKnobs,
+    rec: &mut impl Recorder,
+) -> HitOutcome {
     let s = &scene.spec;
     let plant = Plant::new(s.device.mass, s.device.damping, s.device.coulomb, scene.dt);
     let mut est = scene.estimator();
@@ -91,7 +106,29 @@ fn run<const FRICTION: bool, const QUANT: bool>(scene: &Scene, k: f64, b: f64, k
     let push = s.hit.push_force;
     let limit = s.device.force_limit.unwrap_or(f64::INFINITY);
     let settle = (knobs.settle_s / scene.dt).round() as usize;
-    let total = settle + (knobs.measure_s / scene.dt).round().max(1.0) as usize;
+    let measure = (knobs.measure_s / scene.dt).round().max(1.0) as usize;
+    // Settling counts from the first contact. A push that cannot overcome
+    // friction never moves the handle: measure right after `settle`. Else
+    // wait for contact up to ten times the approach time (terminal-velocity
+    // estimate), then measure anyway.
+    let dev = &s.device;
+    let drive = push.abs().min(limit) - dev.coulomb;
+    let will_move = push > 0.0 && drive > 0.0 && s.hit.home_distance > 0.0;
+    let approach_s = if !will_move {
+        0.0
+    } else if dev.damping > 0.0 {
+        s.hit.home_distance * dev.damping / drive + dev.mass / dev.damping
+    } else {
+        (2.0 * s.hit.home_distance * dev.mass / drive).sqrt()
+    };
+    let cap = ((10.0 * approach_s + 1.0) / scene.dt).min(1e9) as usize;
+    let mut measure_from = if will_move { usize::MAX } else { settle };
+    let mut total = if will_move {
+        cap + settle + measure
+    } else {
+        settle + measure
+    };
+    let mut touched = false;
     // Delay line of computed wall forces, `delay_samples` render periods deep.
     let delay = s.control.delay_samples as usize;
     let mut line = vec![0.0f64; delay + 1];
@@ -104,17 +141,37 @@ fn run<const FRICTION: bool, const QUANT: bool>(scene: &Scene, k: f64, b: f64, k
     // Welford mean/variance of y over the measure window.
     let (mut n, mut mean, mut m2) = (0.0f64, 0.0f64, 0.0f64);
     let mut phase = 0usize;
-    for i in 0..total {
+    let mut i = 0usize;
+    while i < total {
         let y = if QUANT { (st.x / q).round() * q } else { st.x };
+        if !touched && y > wall {
+            touched = true;
+            if measure_from == usize::MAX {
+                measure_from = i + settle;
+                total = measure_from + measure;
+            }
+        }
+        if measure_from == usize::MAX && i >= cap {
+            measure_from = i;
+            total = i + measure;
+        }
         let v_est = est.update(y);
         if phase == 0 {
-            let f_wall = if y > wall { -(k * (y - wall) + b * v_est) } else { 0.0 };
+            let f_wall = if y > wall {
+                -(k * (y - wall) + b * v_est)
+            } else {
+                0.0
+            };
             line[head] = f_wall;
             head = if head == delay { 0 } else { head + 1 };
             // After the write, `head` points at the oldest entry: written `delay` renders ago.
             applied = (push + line[head]).clamp(-limit, limit);
         }
-        phase = if phase + 1 == scene.ratio { 0 } else { phase + 1 };
+        phase = if phase + 1 == scene.ratio {
+            0
+        } else {
+            phase + 1
+        };
         rec.record(TraceRow {
             t: i as f64 * scene.dt,
             x: st.x,
@@ -123,7 +180,7 @@ fn run<const FRICTION: bool, const QUANT: bool>(scene: &Scene, k: f64, b: f64, k
             v: st.v,
             force: applied,
         });
-        if i >= settle {
+        if i >= measure_from {
             n += 1.0;
             let dlt = y - mean;
             mean += dlt / n;
@@ -143,6 +200,7 @@ fn run<const FRICTION: bool, const QUANT: bool>(scene: &Scene, k: f64, b: f64, k
                 samples: i + 1,
             };
         }
+        i += 1;
     }
     let rms = (m2 / n.max(1.0)).max(0.0).sqrt();
     HitOutcome {

@@ -6,5 +6,7 @@ pub mod hit;
 pub mod poly;
 pub mod probe;
 pub mod scene;
+pub mod search;
+pub mod settings;
 
 pub use scene::{Scene, SceneSpec};

@@ -66,9 +66,19 @@ pub fn roots(p: &[f64]) -> Vec<C> {
     let lead = p[n];
     let pc: Vec<C> = p.iter().map(|&c| C::new(c / lead, 0.0)).collect();
     // Initial guesses on a circle of the Cauchy-bound-like radius, rotated off the axes.
-    let radius = pc[..n].iter().map(|c| c.norm().powf(1.0 / n as f64)).fold(0.0, f64::max).max(1e-3) * 1.1;
+    let radius = pc[..n]
+        .iter()
+        .map(|c| c.norm().powf(1.0 / n as f64))
+        .fold(0.0, f64::max)
+        .max(1e-3)
+        * 1.1;
     let mut z: Vec<C> = (0..n)
-        .map(|k| C::from_polar(radius, 2.0 * std::f64::consts::PI * (k as f64 + 0.25) / n as f64 + 0.4))
+        .map(|k| {
+            C::from_polar(
+                radius,
+                2.0 * std::f64::consts::PI * (k as f64 + 0.25) / n as f64 + 0.4,
+            )
+        })
         .collect();
     for _ in 0..500 {
         let mut moved = 0.0f64;
@@ -78,7 +88,10 @@ pub fn roots(p: &[f64]) -> Vec<C> {
                 continue;
             }
             let ratio = v / d;
-            let s: C = (0..n).filter(|&j| j != i).map(|j| C::new(1.0, 0.0) / (z[i] - z[j])).sum();
+            let s: C = (0..n)
+                .filter(|&j| j != i)
+                .map(|j| C::new(1.0, 0.0) / (z[i] - z[j]))
+                .sum();
             let w = ratio / (C::new(1.0, 0.0) - ratio * s);
             if w.is_finite() {
                 z[i] -= w;
@@ -102,7 +115,12 @@ mod tests {
         let p = mul(&mul(&[-0.5, 1.0], &[2.0, 1.0]), &[1.0, 0.0, 1.0]);
         let r = roots(&p);
         assert_eq!(r.len(), 4);
-        for w in [C::new(-2.0, 0.0), C::new(0.0, -1.0), C::new(0.0, 1.0), C::new(0.5, 0.0)] {
+        for w in [
+            C::new(-2.0, 0.0),
+            C::new(0.0, -1.0),
+            C::new(0.0, 1.0),
+            C::new(0.5, 0.0),
+        ] {
             assert!(r.iter().any(|g| (g - w).norm() < 1e-12), "{w} not in {r:?}");
         }
         // Roots of unity, degree 12, on |z| = 1.

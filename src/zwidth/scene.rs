@@ -250,7 +250,9 @@ fn is_whole(x: f64) -> bool {
 
 impl SceneSpec {
     pub fn from_json(text: &str) -> Result<Self, SpecError> {
-        serde_json::from_str(text).map_err(|e| SpecError::new("scene", "(document)", format!("is not a valid scene: {e}")))
+        serde_json::from_str(text).map_err(|e| {
+            SpecError::new("scene", "(document)", format!("is not a valid scene: {e}"))
+        })
     }
 
     pub fn validate(&self) -> Result<Scene, SpecError> {
@@ -258,13 +260,22 @@ impl SceneSpec {
         let dev = |e: SpecError| e.within("device");
         require_positive("mass", d.mass, "kg").map_err(dev)?;
         if d.mass > 1e4 {
-            return Err(SpecError::new("device.mass", d.mass, "must be at most 1e4 kg"));
+            return Err(SpecError::new(
+                "device.mass",
+                d.mass,
+                "must be at most 1e4 kg",
+            ));
         }
         require_non_negative("damping", d.damping, "N·s/m").map_err(dev)?;
         require_non_negative("coulomb", d.coulomb, "N").map_err(dev)?;
-        require_non_negative("quantization", d.quantization, "m; 0 is an ideal sensor").map_err(dev)?;
+        require_non_negative("quantization", d.quantization, "m; 0 is an ideal sensor")
+            .map_err(dev)?;
         if d.quantization > 0.01 {
-            return Err(SpecError::new("device.quantization", d.quantization, "must be at most 0.01 m"));
+            return Err(SpecError::new(
+                "device.quantization",
+                d.quantization,
+                "must be at most 0.01 m",
+            ));
         }
         if let Some(f) = d.force_limit {
             require_positive("force_limit", f, "N, or null for none").map_err(dev)?;
@@ -273,7 +284,11 @@ impl SceneSpec {
         let lp = |e: SpecError| e.within("loop");
         require_positive("sample_hz", l.sample_hz, "Hz").map_err(lp)?;
         if !(10.0..=1e7).contains(&l.sample_hz) {
-            return Err(SpecError::new("loop.sample_hz", l.sample_hz, "must be 10 Hz to 10 MHz"));
+            return Err(SpecError::new(
+                "loop.sample_hz",
+                l.sample_hz,
+                "must be 10 Hz to 10 MHz",
+            ));
         }
         require_positive("render_hz", l.render_hz, "Hz").map_err(lp)?;
         let ratio = l.sample_hz / l.render_hz;
@@ -281,26 +296,45 @@ impl SceneSpec {
             return Err(SpecError::new(
                 "loop.render_hz",
                 l.render_hz,
-                format!("must divide loop.sample_hz = {} Hz a whole number of times", l.sample_hz),
+                format!(
+                    "must divide loop.sample_hz = {} Hz a whole number of times",
+                    l.sample_hz
+                ),
             ));
         }
         if l.delay_samples > 100 {
-            return Err(SpecError::new("loop.delay_samples", l.delay_samples, "must be 0 to 100 render periods"));
+            return Err(SpecError::new(
+                "loop.delay_samples",
+                l.delay_samples,
+                "must be 0 to 100 render periods",
+            ));
         }
         let h = &self.hit;
         let hp = |e: SpecError| e.within("hit");
         require_non_negative("home_distance", h.home_distance, "m").map_err(hp)?;
         if !h.push_force.is_finite() {
-            return Err(SpecError::new("hit.push_force", h.push_force, "must be a finite force (N)"));
+            return Err(SpecError::new(
+                "hit.push_force",
+                h.push_force,
+                "must be a finite force (N)",
+            ));
         }
         require_positive("settle_s", h.settle_s, "s").map_err(hp)?;
         require_positive("measure_s", h.measure_s, "s").map_err(hp)?;
         require_positive("threshold", h.threshold, "m").map_err(hp)?;
         if h.settle_s + h.measure_s > 3600.0 {
-            return Err(SpecError::new("hit.settle_s", h.settle_s, "settle_s + measure_s must be at most 3600 s"));
+            return Err(SpecError::new(
+                "hit.settle_s",
+                h.settle_s,
+                "settle_s + measure_s must be at most 3600 s",
+            ));
         }
         if (h.settle_s + h.measure_s) * l.sample_hz > 1e9 {
-            return Err(SpecError::new("hit.measure_s", h.measure_s, "a trial may have at most 1e9 samples"));
+            return Err(SpecError::new(
+                "hit.measure_s",
+                h.measure_s,
+                "a trial may have at most 1e9 samples",
+            ));
         }
         let p = &self.probe;
         let pp = |e: SpecError| e.within("probe");
@@ -321,15 +355,29 @@ impl SceneSpec {
             ));
         }
         if p.f_max_hz / p.f_min_hz > 100_000.0 {
-            return Err(SpecError::new("probe.f_max_hz", p.f_max_hz, "at most 100 000 lines (f_max_hz / f_min_hz)"));
+            return Err(SpecError::new(
+                "probe.f_max_hz",
+                p.f_max_hz,
+                "at most 100 000 lines (f_max_hz / f_min_hz)",
+            ));
         }
         require_positive("amplitude", p.amplitude, "N").map_err(pp)?;
         if !(1..=1000).contains(&p.periods) {
-            return Err(SpecError::new("probe.periods", p.periods, "must be 1 to 1000"));
+            return Err(SpecError::new(
+                "probe.periods",
+                p.periods,
+                "must be 1 to 1000",
+            ));
         }
-        let step = if d.quantization > 0.0 { d.quantization } else { IDEAL_SENSOR_ESTIMATOR_STEP };
+        let step = if d.quantization > 0.0 {
+            d.quantization
+        } else {
+            IDEAL_SENSOR_ESTIMATOR_STEP
+        };
         let sampling = Sampling::new(l.sample_hz, step)?;
-        self.estimator.build(sampling).map_err(|e| e.within("estimator"))?;
+        self.estimator
+            .build(sampling)
+            .map_err(|e| e.within("estimator"))?;
         Ok(Scene {
             spec: self.clone(),
             ratio: ratio.round() as usize,
@@ -343,7 +391,10 @@ impl SceneSpec {
 impl Scene {
     /// A fresh estimator (validated at scene construction, so this cannot fail).
     pub fn estimator(&self) -> Estimator {
-        self.spec.estimator.build(self.sampling).expect("validated with the scene")
+        self.spec
+            .estimator
+            .build(self.sampling)
+            .expect("validated with the scene")
     }
 
     /// The same scene with another estimator (validated).
@@ -361,7 +412,10 @@ impl Scene {
         let d = &self.spec.device;
         let e = &self.spec.estimator;
         if self.ratio != 1 {
-            return Some(format!("multi-rate loop (sample_hz/render_hz = {})", self.ratio));
+            return Some(format!(
+                "multi-rate loop (sample_hz/render_hz = {})",
+                self.ratio
+            ));
         }
         if d.quantization > 0.0 {
             return Some("quantization".into());
@@ -376,7 +430,9 @@ impl Scene {
             return Some("median smoothing".into());
         }
         match e.kind {
-            EstimatorKind::Fdm {} | EstimatorKind::Butterworth { .. } | EstimatorKind::Kalman { .. } => None,
+            EstimatorKind::Fdm {}
+            | EstimatorKind::Butterworth { .. }
+            | EstimatorKind::Kalman { .. } => None,
             _ => Some("a nonlinear or adaptive estimator".into()),
         }
     }
@@ -389,10 +445,18 @@ impl Scene {
 /// Check a wall's stiffness K (N/m) and damping B (N·s/m).
 pub fn validate_wall(k: f64, b: f64) -> Result<(), SpecError> {
     if !(k.is_finite() && (0.0..=1e9).contains(&k)) {
-        return Err(SpecError::new("k", k, "wall stiffness must be 0 to 1e9 N/m"));
+        return Err(SpecError::new(
+            "k",
+            k,
+            "wall stiffness must be 0 to 1e9 N/m",
+        ));
     }
     if !(b.is_finite() && b.abs() <= 1e7) {
-        return Err(SpecError::new("b", b, "wall damping must be finite, |B| <= 1e7 N·s/m"));
+        return Err(SpecError::new(
+            "b",
+            b,
+            "wall damping must be finite, |B| <= 1e7 N·s/m",
+        ));
     }
     Ok(())
 }
@@ -425,14 +489,22 @@ mod tests {
     fn errors_name_the_field() {
         let bad = |j: &str| match SceneSpec::from_json(j) {
             Err(e) => e.to_string(),
-            Ok(s) => s.validate().err().map(|e| e.to_string()).unwrap_or_default(),
+            Ok(s) => s
+                .validate()
+                .err()
+                .map(|e| e.to_string())
+                .unwrap_or_default(),
         };
         assert!(bad(r#"{"device":{"mass":0}}"#).contains("device.mass = 0"));
         assert!(bad(r#"{"device":{"damping":-1}}"#).contains("device.damping = -1"));
-        assert!(bad(r#"{"loop":{"sample_hz":10000,"render_hz":3000}}"#).contains("loop.render_hz = 3000"));
+        assert!(bad(r#"{"loop":{"sample_hz":10000,"render_hz":3000}}"#)
+            .contains("loop.render_hz = 3000"));
         assert!(bad(r#"{"probe":{"f_max_hz":600}}"#).contains("probe.f_max_hz = 600"));
         assert!(bad(r#"{"probe":{"f_min_hz":3}}"#).contains("probe.f_min_hz = 3"));
-        assert!(bad(r#"{"estimator":{"kind":"butterworth","cutoff_hz":6000}}"#).contains("estimator.cutoff_hz = 6000"));
+        assert!(
+            bad(r#"{"estimator":{"kind":"butterworth","cutoff_hz":6000}}"#)
+                .contains("estimator.cutoff_hz = 6000")
+        );
         assert!(bad(r#"{"devise":{}}"#).contains("devise"));
         assert!(bad(r#"{"hit":{"threshold":0}}"#).contains("hit.threshold = 0"));
         assert!(validate_wall(-1.0, 0.0).is_err() && validate_wall(1.0, f64::NAN).is_err());

@@ -1,0 +1,463 @@
+//! Searches over (K, B) and the map result.
+//!
+//! - `trace`: the 2011 paper's §2.4 protocol. Start at B = 0, K = one step;
+//!   at each B, raise K by steps while the wall renders, or lower it until it
+//!   does; record the largest K that rendered; carry the first K that did
+//!   not to the next B (one step up); stop when K reaches 0 or B passes b_max.
+//! - `bisect`: for each B, bracket K by doubling/halving from one step, then
+//!   bisect to the relative tolerance `k_rel_tol`; B values run in parallel.
+//! - `grid`: every (K, B) on the step grid, in parallel.
+//!
+//! "Renders" is the criterion: stable, passive (impedance test) or strictly
+//! passive. Strict passivity on the analytic engine is solved directly.
+
+use rayon::prelude::*;
+use serde::Serialize;
+use std::time::Instant;
+
+use super::analytic::{ImpedanceCurve, LinearModel};
+use super::hit::{wall_hit, NoTrace};
+use super::probe::probe;
+use super::scene::{validate_wall, Scene};
+use super::settings::{Criterion, MapSpec, Method, Resolved, SearchKind};
+use crate::error::SpecError;
+
+/// One evaluated (K, B).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Point {
+    pub k: f64,
+    pub b: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stable: Option<bool>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub passive: Option<bool>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fidelity: Option<f64>,
+}
+
+impl Point {
+    pub fn ok(&self) -> bool {
+        self.stable.or(self.passive).unwrap_or(false)
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct BoundaryPoint {
+    /// Wall damping B (N·s/m).
+    pub b: f64,
+    /// Largest stiffness that renders at this B (N/m).
+    pub k_max: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct MapResult {
+    /// Which model produced the result, in words.
+    pub model: String,
+    pub method: Method,
+    pub criterion: Criterion,
+    pub search: SearchKind,
+    pub accuracy: Resolved,
+    /// Resolution of the boundary, in words.
+    pub resolution: String,
+    pub boundary: Vec<BoundaryPoint>,
+    /// Largest K on the boundary (N/m).
+    pub k_width: f64,
+    /// Largest B with a K that renders (N·s/m).
+    pub b_width: f64,
+    /// Largest fidelity error over the passive points (N·s/m); impedance criteria only.
+    pub max_fidelity_error: Option<f64>,
+    pub points: Vec<Point>,
+    pub trials: usize,
+    pub elapsed_s: f64,
+}
+
+/// The chosen engine for one scene and criterion.
+pub struct Evaluator {
+    pub scene: Scene,
+    pub method: Method,
+    pub criterion: Criterion,
+    pub res: Resolved,
+    model: Option<LinearModel>,
+}
+
+impl Evaluator {
+    /// Resolve `auto`, and check the engine can answer the criterion.
+    pub fn new(
+        scene: Scene,
+        method: Method,
+        criterion: Criterion,
+        res: Resolved,
+    ) -> Result<Self, SpecError> {
+        let method = match method {
+            Method::Auto if scene.is_linear() => Method::Analytic,
+            Method::Auto => match criterion {
+                Criterion::Stability => Method::Time,
+                Criterion::Impedance => Method::Frequency,
+                Criterion::StrictPassivity => {
+                    return Err(SpecError::new(
+                        "criterion",
+                        "strict_passivity",
+                        format!(
+                            "needs the analytic engine, and this scene is not linear ({})",
+                            scene.linear_reason().unwrap_or_default()
+                        ),
+                    ))
+                }
+            },
+            m => m,
+        };
+        let bad = |allowed: &str| {
+            Err(SpecError::new(
+                "criterion",
+                format!("{criterion:?}").to_lowercase(),
+                format!(
+                    "method {} answers {allowed} only",
+                    format!("{method:?}").to_lowercase()
+                ),
+            ))
+        };
+        match (method, criterion) {
+            (Method::Time, Criterion::Stability)
+            | (Method::Frequency, Criterion::Impedance)
+            | (Method::Analytic, _) => {}
+            (Method::Time, _) => return bad("stability"),
+            (Method::Frequency, _) => return bad("impedance"),
+            (Method::Auto, _) => unreachable!("resolved above"),
+        }
+        let model = if method == Method::Analytic {
+            Some(LinearModel::new(&scene)?)
+        } else {
+            None
+        };
+        Ok(Self {
+            scene,
+            method,
+            criterion,
+            res,
+            model,
+        })
+    }
+
+    pub fn model_description(&self) -> String {
+        let s = &self.scene.spec;
+        let est = s.estimator.label();
+        match self.method {
+            Method::Analytic => format!(
+                "analytic: linear single-rate loop at {} Hz, ZOH plant m = {} kg, b = {} N·s/m, estimator {est} (exact V(z)), delay {} samples",
+                s.control.sample_hz, s.device.mass, s.device.damping, s.control.delay_samples
+            ),
+            Method::Time | Method::Frequency => {
+                let mut parts = vec![format!("exact ZOH plant m = {} kg, b = {} N·s/m", s.device.mass, s.device.damping)];
+                if s.device.coulomb > 0.0 {
+                    parts.push(format!("Coulomb stick-slip f_c = {} N", s.device.coulomb));
+                }
+                if s.device.quantization > 0.0 {
+                    parts.push(format!("quantization {} m", s.device.quantization));
+                }
+                if let Some(f) = s.device.force_limit {
+                    parts.push(format!("saturation ±{f} N"));
+                }
+                parts.push(format!("encoder {} Hz, render {} Hz, delay {}", s.control.sample_hz, s.control.render_hz, s.control.delay_samples));
+                parts.push(format!("estimator {est}"));
+                let kind = if self.method == Method::Time {
+                    "time-domain wall-hit simulation"
+                } else {
+                    "frequency-domain multisine simulation (bilateral wall)"
+                };
+                format!("{kind}: {}", parts.join(", "))
+            }
+            Method::Auto => unreachable!(),
+        }
+    }
+
+    /// The impedance curve at (K, B) from whichever engine can give one.
+    pub fn impedance(&self, k: f64, b: f64) -> Option<ImpedanceCurve> {
+        match (&self.model, self.method) {
+            (Some(m), _) => Some(m.impedance(k, b)),
+            (None, Method::Frequency) => Some(probe(&self.scene, k, b, self.res.probe).impedance),
+            _ => None,
+        }
+    }
+
+    pub fn classify(&self, k: f64, b: f64) -> Point {
+        let mut p = Point {
+            k,
+            b,
+            stable: None,
+            passive: None,
+            fidelity: None,
+        };
+        match (self.criterion, &self.model) {
+            (Criterion::Stability, Some(m)) => p.stable = Some(m.spectral_radius(k, b) < 1.0),
+            (Criterion::Stability, None) => {
+                p.stable = Some(wall_hit(&self.scene, k, b, self.res.hit, &mut NoTrace).stable)
+            }
+            (Criterion::Impedance, Some(m)) => {
+                let c = m.impedance(k, b);
+                p.passive = Some(c.passive);
+                p.fidelity = Some(c.fidelity);
+            }
+            (Criterion::Impedance, None) => {
+                let o = probe(&self.scene, k, b, self.res.probe);
+                p.passive = Some(o.passive);
+                p.fidelity = Some(o.impedance.fidelity);
+            }
+            (Criterion::StrictPassivity, Some(m)) => {
+                p.passive = Some(
+                    m.strict_passivity_range(b)
+                        .is_some_and(|(lo, hi)| k >= lo && k <= hi),
+                );
+                p.fidelity = Some(m.impedance(k, b).fidelity);
+            }
+            (Criterion::StrictPassivity, None) => unreachable!("checked in new()"),
+        }
+        p
+    }
+
+    /// Largest K that renders at B: bracket from `k0`, then bisect.
+    fn bisect_k(&self, b: f64, k0: f64, k_cap: f64, points: &mut Vec<Point>) -> Option<f64> {
+        let mut eval = |k: f64| {
+            let p = self.classify(k, b);
+            let ok = p.ok();
+            points.push(p);
+            ok
+        };
+        let (mut lo, mut hi);
+        if eval(k0) {
+            lo = k0;
+            loop {
+                let k = (lo * 2.0).min(k_cap);
+                if k <= lo {
+                    return Some(lo);
+                }
+                if eval(k) {
+                    lo = k;
+                } else {
+                    hi = k;
+                    break;
+                }
+            }
+        } else {
+            hi = k0;
+            loop {
+                let k = hi / 2.0;
+                if k < k0 / 1024.0 {
+                    return None;
+                }
+                if eval(k) {
+                    lo = k;
+                    break;
+                }
+                hi = k;
+            }
+        }
+        while (hi - lo) > self.res.k_rel_tol * hi {
+            let mid = 0.5 * (lo + hi);
+            if eval(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        Some(lo)
+    }
+}
+
+/// Run a map.
+pub fn map(spec: &MapSpec) -> Result<MapResult, SpecError> {
+    let start = Instant::now();
+    let scene = spec.scene.validate().map_err(|e| e.within("scene"))?;
+    let res = spec.accuracy.resolve(&scene)?;
+    if !(spec.b_max.is_finite() && spec.b_max > 0.0) {
+        return Err(SpecError::new(
+            "b_max",
+            spec.b_max,
+            "must be a finite damping > 0 (N·s/m)",
+        ));
+    }
+    if !(spec.k_max.is_finite() && spec.k_max > 0.0 && spec.k_max <= 1e9) {
+        return Err(SpecError::new(
+            "k_max",
+            spec.k_max,
+            "must be > 0 and at most 1e9 N/m",
+        ));
+    }
+    if let Some(bs) = &spec.b {
+        if bs.is_empty() {
+            return Err(SpecError::new(
+                "b",
+                "[]",
+                "give at least one damping value, or leave b out",
+            ));
+        }
+        for &b in bs {
+            validate_wall(0.0, b)?;
+        }
+    }
+    let ev = Evaluator::new(scene, spec.method, spec.criterion, res)?;
+    let b_auto: Vec<f64> = (0..)
+        .map(|i| i as f64 * res.b_step)
+        .take_while(|&b| b <= spec.b_max + 1e-9)
+        .collect();
+    let (boundary, points) = match (spec.search, ev.criterion, &ev.model) {
+        (_, Criterion::StrictPassivity, Some(m)) => {
+            // Exact per B: no search needed.
+            let mut boundary = Vec::new();
+            let mut points = Vec::new();
+            for &b in spec.b.as_ref().unwrap_or(&b_auto) {
+                match m.strict_passivity_range(b) {
+                    Some((_, hi)) => {
+                        let k = hi.min(spec.k_max);
+                        boundary.push(BoundaryPoint { b, k_max: k });
+                        points.push(ev.classify(k, b));
+                    }
+                    None if spec.b.is_none() => break,
+                    None => boundary.push(BoundaryPoint { b, k_max: 0.0 }),
+                }
+            }
+            (boundary, points)
+        }
+        (SearchKind::Bisect, _, _) => bisect_all(&ev, spec, &b_auto),
+        (SearchKind::Trace, _, _) => trace(&ev, spec, &b_auto),
+        (SearchKind::Grid, _, _) => grid(&ev, spec, &b_auto),
+    };
+    let k_width = boundary.iter().map(|p| p.k_max).fold(0.0, f64::max);
+    let b_width = boundary
+        .iter()
+        .filter(|p| p.k_max > 0.0)
+        .map(|p| p.b)
+        .fold(0.0, f64::max);
+    let max_fidelity_error = points
+        .iter()
+        .filter(|p| p.passive == Some(true))
+        .filter_map(|p| p.fidelity)
+        .reduce(f64::max);
+    let resolution = match (spec.search, ev.criterion, ev.method) {
+        (_, Criterion::StrictPassivity, _) => {
+            "exact per B (θ grid of 8192 points, refined)".to_string()
+        }
+        (SearchKind::Bisect, _, _) => format!("K to {:.2} % (bisection)", 100.0 * res.k_rel_tol),
+        _ => format!("K step {} N/m, B step {} N·s/m", res.k_step, res.b_step),
+    };
+    Ok(MapResult {
+        model: ev.model_description(),
+        method: ev.method,
+        criterion: ev.criterion,
+        search: spec.search,
+        accuracy: res,
+        resolution,
+        boundary,
+        k_width,
+        b_width,
+        max_fidelity_error,
+        trials: points.len(),
+        points,
+        elapsed_s: start.elapsed().as_secs_f64(),
+    })
+}
+
+fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
+    let one = |b: f64| {
+        let mut pts = Vec::new();
+        let k = ev.bisect_k(b, ev.res.k_step, spec.k_max, &mut pts);
+        (
+            BoundaryPoint {
+                b,
+                k_max: k.unwrap_or(0.0),
+            },
+            pts,
+        )
+    };
+    if let Some(bs) = &spec.b {
+        let r: Vec<_> = bs.par_iter().map(|&b| one(b)).collect();
+        let points = r.iter().flat_map(|(_, p)| p.clone()).collect();
+        return (r.into_iter().map(|(b, _)| b).collect(), points);
+    }
+    // Batches of B in parallel; stop after two B values in a row render nothing.
+    let batch = rayon::current_num_threads().max(2);
+    let (mut boundary, mut points) = (Vec::new(), Vec::new());
+    for chunk in b_auto.chunks(batch) {
+        let r: Vec<_> = chunk.par_iter().map(|&b| one(b)).collect();
+        for (bp, pts) in r {
+            boundary.push(bp);
+            points.extend(pts);
+        }
+        let n = boundary.len();
+        if n >= 2 && boundary[n - 1].k_max == 0.0 && boundary[n - 2].k_max == 0.0 {
+            break;
+        }
+    }
+    // Drop the trailing B values that render nothing but the first.
+    while boundary.len() >= 2
+        && boundary[boundary.len() - 1].k_max == 0.0
+        && boundary[boundary.len() - 2].k_max == 0.0
+    {
+        boundary.pop();
+    }
+    (boundary, points)
+}
+
+fn trace(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
+    let step = ev.res.k_step;
+    let (mut boundary, mut points) = (Vec::new(), Vec::new());
+    let mut eval = |k: f64, b: f64| {
+        let p = ev.classify(k, b);
+        let ok = p.ok();
+        points.push(p);
+        ok
+    };
+    let mut k = step;
+    for &b in spec.b.as_deref().unwrap_or(b_auto) {
+        let k_max;
+        if eval(k, b) {
+            while k + step <= spec.k_max && eval(k + step, b) {
+                k += step;
+            }
+            k_max = k;
+        } else {
+            while k > step && !eval(k - step, b) {
+                k -= step;
+            }
+            k -= step;
+            if k < step * 0.5 {
+                boundary.push(BoundaryPoint { b, k_max: 0.0 });
+                if spec.b.is_none() {
+                    break; // K decreased to zero: the paper's termination
+                }
+                k = step;
+                continue;
+            }
+            k_max = k;
+        }
+        boundary.push(BoundaryPoint { b, k_max });
+        k = (k_max + step).min(spec.k_max);
+    }
+    (boundary, points)
+}
+
+fn grid(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
+    let step = ev.res.k_step;
+    let nk = ((spec.k_max / step).floor() as usize).clamp(1, 60);
+    let ks: Vec<f64> = (1..=nk).map(|i| i as f64 * step).collect();
+    let bs = spec
+        .b
+        .clone()
+        .unwrap_or_else(|| b_auto.iter().copied().take(60).collect());
+    let points: Vec<Point> = bs
+        .par_iter()
+        .flat_map_iter(|&b| ks.iter().map(move |&k| (k, b)))
+        .map(|(k, b)| ev.classify(k, b))
+        .collect();
+    let boundary = bs
+        .iter()
+        .map(|&b| BoundaryPoint {
+            b,
+            k_max: points
+                .iter()
+                .filter(|p| p.b == b && p.ok())
+                .map(|p| p.k)
+                .fold(0.0, f64::max),
+        })
+        .collect();
+    (boundary, points)
+}

@@ -1,0 +1,246 @@
+//! How a map is searched and how accurately: the knobs users trade speed
+//! for accuracy with, and the spec of a whole map request.
+
+use serde::{Deserialize, Serialize};
+
+use super::hit::HitKnobs;
+use super::probe::ProbeKnobs;
+use super::scene::{Scene, SceneSpec};
+use crate::error::SpecError;
+
+/// Which engine answers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// The cheapest engine exact for the scene: analytic when it is linear.
+    #[default]
+    Auto,
+    Analytic,
+    Time,
+    Frequency,
+}
+
+/// What "renders the wall" means.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Criterion {
+    /// Closed-loop stability (time domain: the wall-hit RMS test; analytic: eigenvalues).
+    Stability,
+    /// The 2018 paper's passivity test: Re Z(jω) ≥ 0 over the probe band.
+    #[default]
+    Impedance,
+    /// Colgate & Schenkel's strict passivity over the whole band (analytic only).
+    StrictPassivity,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SearchKind {
+    /// The 2011 paper's §2.4 boundary trace.
+    Trace,
+    /// Bisection on K for each B.
+    #[default]
+    Bisect,
+    /// A full K × B grid.
+    Grid,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Preset {
+    Draft,
+    #[default]
+    Standard,
+    Reference,
+}
+
+/// Explicit knobs; any left out come from `preset`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AccuracyKnobs {
+    #[serde(default)]
+    pub preset: Preset,
+    /// Wall hit: settle and measure times (s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settle_s: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measure_s: Option<f64>,
+    /// Probe: periods averaged, steady-state tolerance, period limit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub periods: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settle_tol: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_periods: Option<u32>,
+    /// Bisection: relative K resolution.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub k_rel_tol: Option<f64>,
+    /// Trace and grid: K step (N/m) and B step (N·s/m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub k_step: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub b_step: Option<f64>,
+}
+
+/// `"draft"` or `{"preset":"draft","k_rel_tol":0.02,…}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Accuracy {
+    Preset(Preset),
+    Knobs(AccuracyKnobs),
+}
+
+impl Default for Accuracy {
+    fn default() -> Self {
+        Accuracy::Preset(Preset::Standard)
+    }
+}
+
+/// Every knob resolved against the scene.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Resolved {
+    pub preset: Preset,
+    pub hit: HitKnobs,
+    pub probe: ProbeKnobs,
+    pub k_rel_tol: f64,
+    pub k_step: f64,
+    pub b_step: f64,
+}
+
+/// The 2011 paper's steps (§2.4).
+pub const PAPER_K_STEP: f64 = 1488.24;
+pub const PAPER_B_STEP: f64 = 14.88;
+
+impl Accuracy {
+    pub fn resolve(&self, scene: &Scene) -> Result<Resolved, SpecError> {
+        let knobs = match self {
+            Accuracy::Preset(p) => AccuracyKnobs {
+                preset: *p,
+                ..Default::default()
+            },
+            Accuracy::Knobs(k) => k.clone(),
+        };
+        let h = &scene.spec.hit;
+        let p = &scene.spec.probe;
+        // (time scale, periods ×, settle_tol, max_periods, k_rel_tol, step ÷)
+        let (scale, per, tol, maxp, krel, step_div) = match knobs.preset {
+            Preset::Draft => (0.25, 0.5, 1e-2, 40, 0.05, 0.5),
+            Preset::Standard => (1.0, 1.0, 1e-3, 150, 0.01, 1.0),
+            Preset::Reference => (2.0, 2.0, 1e-5, 600, 0.002, 2.0),
+        };
+        let r = Resolved {
+            preset: knobs.preset,
+            hit: HitKnobs {
+                settle_s: knobs.settle_s.unwrap_or(h.settle_s * scale),
+                measure_s: knobs.measure_s.unwrap_or(h.measure_s * scale),
+            },
+            probe: ProbeKnobs {
+                periods: knobs
+                    .periods
+                    .unwrap_or(((p.periods as f64 * per).round() as u32).max(1)),
+                settle_tol: knobs.settle_tol.unwrap_or(tol),
+                max_periods: knobs.max_periods.unwrap_or(maxp),
+            },
+            k_rel_tol: knobs.k_rel_tol.unwrap_or(krel),
+            k_step: knobs.k_step.unwrap_or(PAPER_K_STEP / step_div),
+            b_step: knobs.b_step.unwrap_or(PAPER_B_STEP / step_div),
+        };
+        let pos = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(SpecError::new(
+                    format!("accuracy.{name}"),
+                    v,
+                    "must be a finite number > 0",
+                ))
+            }
+        };
+        pos("settle_s", r.hit.settle_s)?;
+        pos("measure_s", r.hit.measure_s)?;
+        pos("settle_tol", r.probe.settle_tol)?;
+        pos("k_step", r.k_step)?;
+        pos("b_step", r.b_step)?;
+        if !(r.k_rel_tol > 0.0 && r.k_rel_tol < 0.5) {
+            return Err(SpecError::new(
+                "accuracy.k_rel_tol",
+                r.k_rel_tol,
+                "must be between 0 and 0.5",
+            ));
+        }
+        if !(1..=1000).contains(&r.probe.periods) {
+            return Err(SpecError::new(
+                "accuracy.periods",
+                r.probe.periods,
+                "must be 1 to 1000",
+            ));
+        }
+        if !(2..=100_000).contains(&r.probe.max_periods) {
+            return Err(SpecError::new(
+                "accuracy.max_periods",
+                r.probe.max_periods,
+                "must be 2 to 100000",
+            ));
+        }
+        if (r.hit.settle_s + r.hit.measure_s) * scene.spec.control.sample_hz > 1e9 {
+            return Err(SpecError::new(
+                "accuracy.settle_s",
+                r.hit.settle_s,
+                "a trial may have at most 1e9 samples",
+            ));
+        }
+        Ok(r)
+    }
+}
+
+/// A whole map request: the one spec the CLI reads and the service will store.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapSpec {
+    pub scene: SceneSpec,
+    #[serde(default)]
+    pub method: Method,
+    #[serde(default)]
+    pub criterion: Criterion,
+    #[serde(default)]
+    pub search: SearchKind,
+    #[serde(default)]
+    pub accuracy: Accuracy,
+    /// Restrict the boundary to these damping values (N·s/m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub b: Option<Vec<f64>>,
+    /// Largest damping searched (N·s/m) by trace and bisect when `b` is not given.
+    #[serde(default = "default_b_max")]
+    pub b_max: f64,
+    /// Largest stiffness considered (N/m).
+    #[serde(default = "default_k_max")]
+    pub k_max: f64,
+}
+
+fn default_b_max() -> f64 {
+    1000.0
+}
+
+fn default_k_max() -> f64 {
+    1e7
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn accuracy_forms() {
+        let a: Accuracy = serde_json::from_str(r#""draft""#).unwrap();
+        assert_eq!(a, Accuracy::Preset(Preset::Draft));
+        let a: Accuracy =
+            serde_json::from_str(r#"{"preset":"reference","k_rel_tol":0.03}"#).unwrap();
+        let sc = SceneSpec::default().validate().unwrap();
+        let r = a.resolve(&sc).unwrap();
+        assert_eq!(r.k_rel_tol, 0.03);
+        assert_eq!(r.hit.settle_s, 8.0);
+        let bad: Accuracy = serde_json::from_str(r#"{"k_rel_tol":0}"#).unwrap();
+        assert_eq!(bad.resolve(&sc).unwrap_err().field, "accuracy.k_rel_tol");
+        assert!(serde_json::from_str::<Accuracy>(r#""fast""#).is_err());
+    }
+}
