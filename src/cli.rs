@@ -11,6 +11,15 @@ use crate::error::SpecError;
 use crate::estimators::{EstimatorKind, EstimatorSpec, Sampling, VelocityEstimator};
 use crate::lipschitz;
 use crate::plot::{loglog_svg, Series};
+use crate::plot::{zwidth_map_svg, MapPlotPoint};
+use crate::zwidth::compare;
+use crate::zwidth::hit::{wall_hit, HitKnobs, NoTrace, TraceRow};
+use crate::zwidth::scene::{validate_wall, SceneSpec};
+use crate::zwidth::search::{map, Evaluator, MapResult};
+use crate::zwidth::settings::{
+    Accuracy, AccuracyKnobs, Criterion, MapSpec, Method, Preset, SearchKind,
+};
+use crate::zwidth::tradeoff;
 
 /// Default encoder step (m): the 1 µm encoder of the papers' device.
 pub const DEFAULT_QUANTIZATION: f64 = 1e-6;
@@ -66,11 +75,100 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// One wall hit (time domain, 2011 paper §2.4).
+    Trial {
+        /// Scene JSON file.
+        #[arg(long)]
+        scene: PathBuf,
+        /// Wall stiffness K (N/m).
+        #[arg(long)]
+        k: f64,
+        /// Wall damping B (N·s/m).
+        #[arg(long, allow_negative_numbers = true)]
+        b: f64,
+        #[arg(long)]
+        json: bool,
+        /// Write the trace here: t, true and measured position, estimated and true velocity, force.
+        #[arg(long)]
+        trace: Option<PathBuf>,
+    },
+    /// Impedance of the rendered wall over the probe band (analytic when the scene is linear, else simulated).
+    Impedance {
+        #[arg(long)]
+        scene: PathBuf,
+        #[arg(long)]
+        k: f64,
+        #[arg(long, allow_negative_numbers = true)]
+        b: f64,
+        /// auto | analytic | frequency
+        #[arg(long, default_value = "auto")]
+        method: String,
+        /// draft | standard | reference
+        #[arg(long, default_value = "standard")]
+        accuracy: String,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Z-width map: the (K, B) region the scene renders.
+    Map {
+        #[arg(long)]
+        scene: PathBuf,
+        /// auto | analytic | time | frequency
+        #[arg(long, default_value = "auto")]
+        method: String,
+        /// stability | impedance | strict_passivity
+        #[arg(long, default_value = "impedance")]
+        criterion: String,
+        /// trace | bisect | grid
+        #[arg(long, default_value = "bisect")]
+        search: String,
+        /// Only these damping values (N·s/m), comma-separated.
+        #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+        b: Option<Vec<f64>>,
+        /// Relative K resolution of the bisection (overrides the accuracy preset).
+        #[arg(long)]
+        k_rel_tol: Option<f64>,
+        /// draft | standard | reference
+        #[arg(long, default_value = "standard")]
+        accuracy: String,
+        #[arg(long)]
+        json: bool,
+        /// Write the Fig. 7-style plot here.
+        #[arg(long)]
+        svg: Option<PathBuf>,
+    },
+    /// Every estimator on one scene, as the 2018 paper's Table I.
+    Compare {
+        /// Scene JSON file (default: the 2018 paper's simulated device at 1 kHz).
+        scene: Option<PathBuf>,
+        /// draft | standard | reference
+        #[arg(long, default_value = "standard")]
+        accuracy: String,
+        #[arg(long)]
+        json: bool,
+        /// Write one map plot per estimator into this directory.
+        #[arg(long)]
+        svg_dir: Option<PathBuf>,
+    },
+    /// Measurements: `zwidth bench tradeoff`.
+    Bench {
+        #[command(subcommand)]
+        what: BenchCommand,
+    },
     /// Report which convergence conditions a Levant gain pair meets.
     Gains {
         /// A levant estimator spec, e.g. '{"kind":"levant","alpha":13,"lambda":1.58,"lipschitz":12}'.
         #[arg(long)]
         estimator: String,
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// Wall time and K/B-width error against `reference` for each accuracy preset, on the example scenes.
+    Tradeoff {
         #[arg(long)]
         json: bool,
     },
@@ -134,8 +232,283 @@ pub fn read_samples(input: impl BufRead) -> Result<Vec<f64>, CliError> {
     Ok(out)
 }
 
+fn read_scene(path: &std::path::Path) -> Result<SceneSpec, CliError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| CliError::Input(format!("--scene {} cannot be read: {e}", path.display())))?;
+    SceneSpec::from_json(&text).map_err(|e| CliError::Input(format!("{}: {e}", path.display())))
+}
+
+/// A snake_case enum value from a flag, with serde's message naming the choices.
+fn parse_choice<T: serde::de::DeserializeOwned>(flag: &str, value: &str) -> Result<T, CliError> {
+    serde_json::from_value(serde_json::Value::String(value.to_string()))
+        .map_err(|e| CliError::Input(format!("--{flag} = {value:?} is not allowed: {e}")))
+}
+
+fn write_json(out: &mut impl Write, v: &impl serde::Serialize) -> Result<(), CliError> {
+    serde_json::to_writer_pretty(&mut *out, v).map_err(|e| CliError::Failure(e.to_string()))?;
+    writeln!(out).map_err(io)
+}
+
+fn write_file(path: &std::path::Path, text: &str) -> Result<(), CliError> {
+    std::fs::write(path, text)
+        .map_err(|e| CliError::Failure(format!("cannot write {}: {e}", path.display())))
+}
+
+/// The Fig. 7-style plot of a map.
+pub fn map_svg(title: &str, r: &MapResult) -> Result<String, CliError> {
+    let points: Vec<MapPlotPoint> = r
+        .points
+        .iter()
+        .map(|p| MapPlotPoint {
+            b: p.b,
+            k: p.k,
+            ok: p.ok(),
+            fidelity: p.fidelity,
+        })
+        .collect();
+    let boundary: Vec<(f64, f64)> = r.boundary.iter().map(|p| (p.b, p.k_max)).collect();
+    let label = if r.criterion == Criterion::Stability {
+        "stable"
+    } else {
+        "passive"
+    };
+    zwidth_map_svg(title, &points, &boundary, label).map_err(CliError::Failure)
+}
+
+/// A text summary of a map.
+pub fn map_table(r: &MapResult) -> String {
+    let mut s = format!(
+        "model: {}
+criterion: {:?}, search: {:?}, resolution: {}
+{:>14} {:>14}
+",
+        r.model, r.criterion, r.search, r.resolution, "B (N·s/m)", "K_max (N/m)"
+    );
+    for p in &r.boundary {
+        s.push_str(&format!(
+            "{:>14.2} {:>14.1}
+",
+            p.b, p.k_max
+        ));
+    }
+    s.push_str(&format!(
+        "K-width {:.1} N/m, B-width {:.2} N·s/m",
+        r.k_width, r.b_width
+    ));
+    if let Some(f) = r.max_fidelity_error {
+        s.push_str(&format!(", max fidelity error {f:.2} N·s/m"));
+    }
+    s.push_str(&format!(
+        "
+{} trials in {:.3} s
+",
+        r.trials, r.elapsed_s
+    ));
+    s
+}
+
 pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(), CliError> {
     match cli.command {
+        Command::Trial {
+            scene,
+            k,
+            b,
+            json,
+            trace,
+        } => {
+            let sc = read_scene(&scene)?.validate()?;
+            validate_wall(k, b)?;
+            let knobs = HitKnobs {
+                settle_s: sc.spec.hit.settle_s,
+                measure_s: sc.spec.hit.measure_s,
+            };
+            let outcome = if let Some(path) = &trace {
+                let mut rows: Vec<TraceRow> = Vec::new();
+                let o = wall_hit(&sc, k, b, knobs, &mut rows);
+                let mut csv = String::from(
+                    "t_s,x_true_m,y_measured_m,v_est_m_per_s,v_true_m_per_s,force_n\n",
+                );
+                for r in rows {
+                    csv.push_str(&format!(
+                        "{},{},{},{},{},{}\n",
+                        r.t, r.x, r.y, r.v_est, r.v, r.force
+                    ));
+                }
+                write_file(path, &csv)?;
+                o
+            } else {
+                wall_hit(&sc, k, b, knobs, &mut NoTrace)
+            };
+            if json {
+                write_json(stdout, &outcome)
+            } else {
+                let rms = outcome
+                    .rms
+                    .map(|r| format!("{r:.3e} m"))
+                    .unwrap_or("- (diverged)".into());
+                writeln!(
+                    stdout,
+                    "{} (RMS {rms} about {:.6e} m, threshold {:.3e} m; {} samples)",
+                    if outcome.stable { "stable" } else { "unstable" },
+                    outcome.mean_position,
+                    sc.spec.hit.threshold,
+                    outcome.samples
+                )
+                .map_err(io)
+            }
+        }
+        Command::Impedance {
+            scene,
+            k,
+            b,
+            method,
+            accuracy,
+            json,
+        } => {
+            let sc = read_scene(&scene)?.validate()?;
+            validate_wall(k, b)?;
+            let method: Method = parse_choice("method", &method)?;
+            let acc = Accuracy::Preset(parse_choice("accuracy", &accuracy)?);
+            let res = acc.resolve(&sc)?;
+            let ev = Evaluator::new(sc, method, Criterion::Impedance, res)?;
+            let curve = ev.impedance(k, b).ok_or_else(|| {
+                CliError::Input("--method must be auto, analytic or frequency".into())
+            })?;
+            if json {
+                #[derive(serde::Serialize)]
+                struct Out<'a> {
+                    model: String,
+                    #[serde(flatten)]
+                    curve: &'a crate::zwidth::analytic::ImpedanceCurve,
+                }
+                write_json(
+                    stdout,
+                    &Out {
+                        model: ev.model_description(),
+                        curve: &curve,
+                    },
+                )
+            } else {
+                let mut s = format!(
+                    "model: {}
+{:>10} {:>14} {:>10}
+",
+                    ev.model_description(),
+                    "f (Hz)",
+                    "|Z| (N·s/m)",
+                    "phase (°)"
+                );
+                for i in 0..curve.freq_hz.len() {
+                    s.push_str(&format!(
+                        "{:>10.2} {:>14.4} {:>10.3}
+",
+                        curve.freq_hz[i], curve.magnitude[i], curve.phase_deg[i]
+                    ));
+                }
+                s.push_str(&format!(
+                    "{}; fidelity error {:.3} N·s/m
+",
+                    if curve.passive {
+                        "passive (phase within ±90° over the band)"
+                    } else {
+                        "NOT passive"
+                    },
+                    curve.fidelity
+                ));
+                write!(stdout, "{s}").map_err(io)
+            }
+        }
+        Command::Map {
+            scene,
+            method,
+            criterion,
+            search,
+            b,
+            k_rel_tol,
+            accuracy,
+            json,
+            svg,
+        } => {
+            let spec = MapSpec {
+                scene: read_scene(&scene)?,
+                method: parse_choice("method", &method)?,
+                criterion: parse_choice("criterion", &criterion)?,
+                search: parse_choice::<SearchKind>("search", &search)?,
+                accuracy: Accuracy::Knobs(AccuracyKnobs {
+                    preset: parse_choice::<Preset>("accuracy", &accuracy)?,
+                    k_rel_tol,
+                    ..Default::default()
+                }),
+                b,
+                b_max: 1000.0,
+                k_max: 1e7,
+            };
+            let r = map(&spec)?;
+            if let Some(path) = svg {
+                write_file(
+                    &path,
+                    &map_svg(&format!("Z-width: {}", spec.scene.estimator.label()), &r)?,
+                )?;
+            }
+            if json {
+                write_json(stdout, &r)
+            } else {
+                write!(stdout, "{}", map_table(&r)).map_err(io)
+            }
+        }
+        Command::Compare {
+            scene,
+            accuracy,
+            json,
+            svg_dir,
+        } => {
+            let spec = match &scene {
+                Some(p) => read_scene(p)?,
+                None => compare::seed_2018_scene(),
+            };
+            let acc = Accuracy::Preset(parse_choice("accuracy", &accuracy)?);
+            let r = compare::compare(&spec, &acc)?;
+            if let Some(dir) = svg_dir {
+                std::fs::create_dir_all(&dir).map_err(|e| {
+                    CliError::Failure(format!("cannot create {}: {e}", dir.display()))
+                })?;
+                for row in &r.rows {
+                    let name: String = row
+                        .name
+                        .chars()
+                        .map(|c| {
+                            if c.is_ascii_alphanumeric() {
+                                c.to_ascii_lowercase()
+                            } else {
+                                '_'
+                            }
+                        })
+                        .collect();
+                    write_file(
+                        &dir.join(format!("{name}.svg")),
+                        &map_svg(
+                            &format!("Z-width: {} ({})", row.name, row.parameters),
+                            &row.map,
+                        )?,
+                    )?;
+                }
+            }
+            if json {
+                write_json(stdout, &r)
+            } else {
+                write!(stdout, "{}", r.table()).map_err(io)
+            }
+        }
+        Command::Bench {
+            what: BenchCommand::Tradeoff { json },
+        } => {
+            let rows = tradeoff::run()?;
+            if json {
+                write_json(stdout, &rows)
+            } else {
+                write!(stdout, "{}", tradeoff::table(&rows)).map_err(io)
+            }
+        }
         Command::Estimate {
             rate,
             estimator,

@@ -112,3 +112,169 @@ mod tests {
         assert!(loglog_svg("t", "x", "y", &[]).is_err());
     }
 }
+
+/// One evaluated point of a Z-width map, for plotting.
+pub struct MapPlotPoint {
+    pub b: f64,
+    pub k: f64,
+    pub ok: bool,
+    pub fidelity: Option<f64>,
+}
+
+/// Viridis-like colour for t in [0, 1] (piecewise-linear through five stops).
+fn colour(t: f64) -> RGBColor {
+    const STOPS: [(f64, f64, f64); 5] = [
+        (68.0, 1.0, 84.0),
+        (59.0, 82.0, 139.0),
+        (33.0, 145.0, 140.0),
+        (94.0, 201.0, 98.0),
+        (253.0, 231.0, 37.0),
+    ];
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        0.0
+    } * 4.0;
+    let i = (t.floor() as usize).min(3);
+    let f = t - i as f64;
+    let (a, b) = (STOPS[i], STOPS[i + 1]);
+    let mix = |x: f64, y: f64| (x + (y - x) * f).round() as u8;
+    RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
+}
+
+/// The 2018 paper's Fig. 7 style: K against B, the points that render
+/// coloured by fidelity error (with a colour bar), the others as grey
+/// crosses, and the boundary as a line. Returns the SVG text.
+pub fn zwidth_map_svg(
+    title: &str,
+    points: &[MapPlotPoint],
+    boundary: &[(f64, f64)],
+    ok_label: &str,
+) -> Result<String, String> {
+    let bmax = points
+        .iter()
+        .map(|p| p.b)
+        .chain(boundary.iter().map(|b| b.0))
+        .fold(1.0, f64::max)
+        * 1.05;
+    let kmax = points
+        .iter()
+        .map(|p| p.k)
+        .chain(boundary.iter().map(|b| b.1))
+        .fold(1.0, f64::max)
+        * 1.08;
+    let fids: Vec<f64> = points
+        .iter()
+        .filter(|p| p.ok)
+        .filter_map(|p| p.fidelity)
+        .filter(|f| f.is_finite())
+        .collect();
+    let (fmin, fmax) = fids
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &f| (a.min(f), b.max(f)));
+    let has_fid = !fids.is_empty();
+    let span = if has_fid {
+        (fmax - fmin).max(1e-12)
+    } else {
+        1.0
+    };
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (900, 640)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let (left, right) = root.split_horizontally(780);
+        let mut chart = ChartBuilder::on(&left)
+            .caption(title, ("sans-serif", 18))
+            .margin(14)
+            .x_label_area_size(44)
+            .y_label_area_size(80)
+            .build_cartesian_2d(0.0..bmax, 0.0..kmax)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("wall damping B (N·s/m)")
+            .y_desc("wall stiffness K (N/m)")
+            .y_label_formatter(&|v| format!("{v:.0}"))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        chart
+            .draw_series(
+                points
+                    .iter()
+                    .filter(|p| !p.ok)
+                    .map(|p| Cross::new((p.b, p.k), 3, RGBColor(170, 170, 170).stroke_width(1))),
+            )
+            .map_err(|e| e.to_string())?
+            .label(format!("not {ok_label}"))
+            .legend(|(x, y)| Cross::new((x + 8, y), 3, RGBColor(170, 170, 170)));
+        chart
+            .draw_series(points.iter().filter(|p| p.ok).map(|p| {
+                let c = match p.fidelity {
+                    Some(f) if has_fid => colour((f - fmin) / span),
+                    _ => RGBColor(40, 120, 200),
+                };
+                Circle::new((p.b, p.k), 4, c.filled())
+            }))
+            .map_err(|e| e.to_string())?
+            .label(ok_label.to_string())
+            .legend(|(x, y)| Circle::new((x + 8, y), 4, colour(0.5).filled()));
+        let mut line: Vec<(f64, f64)> = boundary.to_vec();
+        line.sort_by(|a, b| a.0.total_cmp(&b.0));
+        chart
+            .draw_series(LineSeries::new(line, BLACK.stroke_width(2)))
+            .map_err(|e| e.to_string())?
+            .label("boundary (largest K)")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK.stroke_width(2)));
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| e.to_string())?;
+        // Colour bar: fidelity error (N·s/m).
+        if has_fid {
+            let (top, bottom, x0, x1) = (60i32, 560i32, 20i32, 44i32);
+            let n = 100;
+            for i in 0..n {
+                let y0 = bottom - (bottom - top) * i / n;
+                let y1 = bottom - (bottom - top) * (i + 1) / n;
+                right
+                    .draw(&Rectangle::new(
+                        [(x0, y1), (x1, y0)],
+                        colour(i as f64 / (n - 1) as f64).filled(),
+                    ))
+                    .map_err(|e| e.to_string())?;
+            }
+            right
+                .draw(&Rectangle::new(
+                    [(x0, top), (x1, bottom)],
+                    BLACK.stroke_width(1),
+                ))
+                .map_err(|e| e.to_string())?;
+            for i in 0..=4 {
+                let y = bottom - (bottom - top) * i / 4;
+                let v = fmin + span * i as f64 / 4.0;
+                right
+                    .draw(&Text::new(
+                        format!("{v:.1}"),
+                        (x1 + 6, y - 6),
+                        ("sans-serif", 13),
+                    ))
+                    .map_err(|e| e.to_string())?;
+            }
+            right
+                .draw(&Text::new(
+                    "fidelity error",
+                    (4, top - 40),
+                    ("sans-serif", 13),
+                ))
+                .map_err(|e| e.to_string())?;
+            right
+                .draw(&Text::new("(N·s/m)", (4, top - 24), ("sans-serif", 13)))
+                .map_err(|e| e.to_string())?;
+        }
+        root.present().map_err(|e| e.to_string())?;
+    }
+    Ok(svg)
+}

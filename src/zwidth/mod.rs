@@ -2,11 +2,13 @@
 //! impedance probe, the analytic model, and the (K, B) searches.
 
 pub mod analytic;
+pub mod compare;
 pub mod hit;
 pub mod poly;
 pub mod probe;
 pub mod scene;
 pub mod search;
 pub mod settings;
+pub mod tradeoff;
 
 pub use scene::{Scene, SceneSpec};

@@ -71,45 +71,97 @@ pub fn substeps(scene: &Scene) -> usize {
     (want / scene.spec.control.sample_hz).ceil().max(1.0) as usize
 }
 
+/// Everything about the excitation that does not depend on (K, B): built
+/// once per map (the multisine's peak search and force table cost more than
+/// a short probe).
+#[derive(Debug, Clone)]
+pub struct ProbeSetup {
+    nsub: usize,
+    h: f64,
+    lines: Vec<usize>,
+    omegas: Vec<f64>,
+    /// One period of the excitation staircase (N).
+    force: Vec<f64>,
+    /// The staircase's true Fourier coefficients on the lines.
+    f_lines: Vec<C>,
+    /// Undo the step-averaging of the velocity.
+    v_correction: Vec<C>,
+}
+
+impl ProbeSetup {
+    pub fn new(scene: &Scene) -> Self {
+        let s = &scene.spec;
+        let p = &s.probe;
+        let nsub = substeps(scene);
+        let h = scene.dt / nsub as f64;
+        let per_period = (s.control.sample_hz / p.f_min_hz).round() as usize * nsub;
+        let ms = Multisine::schroeder(p.f_min_hz, p.f_max_hz, p.amplitude);
+        let omegas = ms.omegas();
+        let force: Vec<f64> = (0..per_period).map(|i| ms.value(i as f64 * h)).collect();
+        let mut fa = LineAnalyzer::new(per_period);
+        let mut f_lines = vec![C::new(0.0, 0.0); ms.lines.len()];
+        fa.lines(&force, &ms.lines, &mut f_lines);
+        // The staircase's true coefficient: × (1 − e^{−jωh})/(jωh).
+        let j = C::new(0.0, 1.0);
+        for (f, &w) in f_lines.iter_mut().zip(&omegas) {
+            *f *= (C::new(1.0, 0.0) - C::from_polar(1.0, -w * h)) / (j * w * h);
+        }
+        // The mean over [t, t+h] of V·e^{jωt} is V·e^{jωt}·(e^{jωh} − 1)/(jωh): undo it.
+        let v_correction = omegas
+            .iter()
+            .map(|&w| (j * w * h) / (C::from_polar(1.0, w * h) - 1.0))
+            .collect();
+        Self {
+            nsub,
+            h,
+            lines: ms.lines,
+            omegas,
+            force,
+            f_lines,
+            v_correction,
+        }
+    }
+}
+
 /// Probe the wall (K N/m, B N·s/m), already validated.
 pub fn probe(scene: &Scene, k: f64, b: f64, knobs: ProbeKnobs) -> ProbeOutcome {
+    probe_with(&ProbeSetup::new(scene), scene, k, b, knobs)
+}
+
+/// The same with a prepared excitation.
+pub fn probe_with(
+    setup: &ProbeSetup,
+    scene: &Scene,
+    k: f64,
+    b: f64,
+    knobs: ProbeKnobs,
+) -> ProbeOutcome {
     let d = &scene.spec.device;
     match (d.coulomb > 0.0, d.quantization > 0.0) {
-        (true, true) => run::<true, true>(scene, k, b, knobs),
-        (true, false) => run::<true, false>(scene, k, b, knobs),
-        (false, true) => run::<false, true>(scene, k, b, knobs),
-        (false, false) => run::<false, false>(scene, k, b, knobs),
+        (true, true) => run::<true, true>(setup, scene, k, b, knobs),
+        (true, false) => run::<true, false>(setup, scene, k, b, knobs),
+        (false, true) => run::<false, true>(setup, scene, k, b, knobs),
+        (false, false) => run::<false, false>(setup, scene, k, b, knobs),
     }
 }
 
 fn run<const FRICTION: bool, const QUANT: bool>(
+    setup: &ProbeSetup,
     scene: &Scene,
     k: f64,
     b: f64,
     knobs: ProbeKnobs,
 ) -> ProbeOutcome {
     let s = &scene.spec;
-    let p = &s.probe;
-    let nsub = substeps(scene);
-    let h = scene.dt / nsub as f64;
-    let per_period = (s.control.sample_hz / p.f_min_hz).round() as usize * nsub;
-    let ms = Multisine::schroeder(p.f_min_hz, p.f_max_hz, p.amplitude);
-    let omegas = ms.omegas();
-    let force: Vec<f64> = (0..per_period).map(|i| ms.value(i as f64 * h)).collect();
+    let (nsub, h) = (setup.nsub, setup.h);
+    let (omegas, force, f_lines, v_correction) = (
+        &setup.omegas,
+        &setup.force,
+        &setup.f_lines,
+        &setup.v_correction,
+    );
+    let per_period = force.len();
     let mut fa = LineAnalyzer::new(per_period);
-    let mut f_lines = vec![C::new(0.0, 0.0); ms.lines.len()];
-    fa.lines(&force, &ms.lines, &mut f_lines);
-    // The staircase's true coefficient: × (1 − e^{−jωh})/(jωh).
-    let j = C::new(0.0, 1.0);
-    for (f, &w) in f_lines.iter_mut().zip(&omegas) {
-        *f *= (C::new(1.0, 0.0) - C::from_polar(1.0, -w * h)) / (j * w * h);
-    }
-
-    // The mean over [t, t+h] of V·e^{jωt} is V·e^{jωt}·(e^{jωh} − 1)/(jωh): undo it.
-    let v_correction: Vec<C> = omegas
-        .iter()
-        .map(|&w| (j * w * h) / (C::from_polar(1.0, w * h) - 1.0))
-        .collect();
     let plant = Plant::new(d_mass(scene), s.device.damping, s.device.coulomb, h);
     let mut est = scene.estimator();
     let q = s.device.quantization;
@@ -122,7 +174,7 @@ fn run<const FRICTION: bool, const QUANT: bool>(
     let mut wall_force = 0.0;
     let (mut sub, mut phase) = (0usize, 0usize);
     let mut vbuf = vec![0.0; per_period];
-    let mut v_lines = vec![C::new(0.0, 0.0); ms.lines.len()];
+    let mut v_lines = vec![C::new(0.0, 0.0); setup.lines.len()];
     let mut prev_z: Option<Vec<C>> = None;
     let mut prev_d: Option<Vec<C>> = None;
     let mut history: Vec<Vec<C>> = Vec::new();
@@ -131,7 +183,7 @@ fn run<const FRICTION: bool, const QUANT: bool>(
     // 20 000 N/m wall has |Z| ≈ 3 000 N·s/m against Re Z ≈ 1).
     let damping_scale = (s.device.damping + b.abs()).max(1e-3);
     let mut calm = 0u32;
-    let mut acc = vec![C::new(0.0, 0.0); ms.lines.len()];
+    let mut acc = vec![C::new(0.0, 0.0); setup.lines.len()];
     let (mut settled, mut averaged, mut periods_run) = (false, 0u32, 0u32);
     let mut last_change = f64::INFINITY;
     let z_of = |v: &[C]| -> Vec<C> { f_lines.iter().zip(v).map(|(f, v)| f / v).collect() };
@@ -141,7 +193,7 @@ fn run<const FRICTION: bool, const QUANT: bool>(
             .into_iter()
             .map(|z| if z.is_finite() { z } else { C::new(-1.0, 0.0) })
             .collect();
-        let mut imp = ImpedanceCurve::from_z(&omegas, &z, k, b);
+        let mut imp = ImpedanceCurve::from_z(omegas, &z, k, b);
         imp.passive &= settled && !diverged;
         ProbeOutcome {
             passive: imp.passive,
@@ -195,8 +247,8 @@ fn run<const FRICTION: bool, const QUANT: bool>(
                 last_change,
             );
         }
-        fa.lines(&vbuf, &ms.lines, &mut v_lines);
-        for (v, c) in v_lines.iter_mut().zip(&v_correction) {
+        fa.lines(&vbuf, &setup.lines, &mut v_lines);
+        for (v, c) in v_lines.iter_mut().zip(v_correction) {
             *v *= c;
         }
         if settled {
@@ -226,8 +278,18 @@ fn run<const FRICTION: bool, const QUANT: bool>(
         }
         history.push(z.clone());
         prev_z = Some(z);
+        // A loop that does not settle (noise) can still be clearly passive or
+        // clearly not: decide early on the last half of the periods.
+        if !settled && periods_run >= 8 && periods_run % 4 == 0 {
+            if let Some((mean, verdict)) = noisy_verdict(&history, false) {
+                let mut out = finish(mean, false, false, periods_run, last_change);
+                out.impedance.passive = verdict;
+                out.passive = verdict;
+                return out;
+            }
+        }
     }
-    match noisy_verdict(&history) {
+    match noisy_verdict(&history, true) {
         Some((mean, passive)) => {
             let mut out = finish(mean, false, false, periods_run, last_change);
             out.impedance.passive = passive;
@@ -246,9 +308,12 @@ fn run<const FRICTION: bool, const QUANT: bool>(
 
 /// For a loop whose Z never settles (quantization and friction keep every
 /// period a little different): the mean Z over the last half of the periods
-/// and whether every line's Re Z is positive beyond three standard errors.
-/// A growing oscillation has a large spread and fails.
-fn noisy_verdict(history: &[Vec<C>]) -> Option<(Vec<C>, bool)> {
+/// and a verdict. Passive iff every line's Re Z is positive beyond three
+/// standard errors; clearly not passive iff some line's Re Z is negative
+/// beyond three. In between, `final_call` decides "not passive" (unproven),
+/// otherwise there is no verdict yet. A growing oscillation has a large
+/// spread and never passes.
+fn noisy_verdict(history: &[Vec<C>], final_call: bool) -> Option<(Vec<C>, bool)> {
     let tail = &history[history.len() / 2..];
     if tail.len() < 2 {
         return None;
@@ -258,15 +323,25 @@ fn noisy_verdict(history: &[Vec<C>]) -> Option<(Vec<C>, bool)> {
     let mean: Vec<C> = (0..lines)
         .map(|i| tail.iter().map(|z| z[i]).sum::<C>() / n)
         .collect();
-    let passive = (0..lines).all(|i| {
-        let var = tail
-            .iter()
-            .map(|z| (z[i].re - mean[i].re).powi(2))
-            .sum::<f64>()
-            / (n - 1.0);
-        mean[i].is_finite() && mean[i].re - 3.0 * (var / n).sqrt() >= 0.0
-    });
-    Some((mean, passive))
+    let se: Vec<f64> = (0..lines)
+        .map(|i| {
+            (tail
+                .iter()
+                .map(|z| (z[i].re - mean[i].re).powi(2))
+                .sum::<f64>()
+                / (n - 1.0)
+                / n)
+                .sqrt()
+        })
+        .collect();
+    let finite = mean.iter().all(|z| z.is_finite());
+    let passive = finite && (0..lines).all(|i| mean[i].re - 3.0 * se[i] >= 0.0);
+    let clearly_not = !finite || (0..lines).any(|i| mean[i].re + 3.0 * se[i] < 0.0);
+    if passive || clearly_not || final_call {
+        Some((mean, passive))
+    } else {
+        None
+    }
 }
 
 /// Largest remaining transient (N·s/m) over the lines. A decaying

@@ -17,7 +17,7 @@ use std::time::Instant;
 
 use super::analytic::{ImpedanceCurve, LinearModel};
 use super::hit::{wall_hit, NoTrace};
-use super::probe::probe;
+use super::probe::{probe_with, ProbeSetup};
 use super::scene::{validate_wall, Scene};
 use super::settings::{Criterion, MapSpec, Method, Resolved, SearchKind};
 use crate::error::SpecError;
@@ -78,6 +78,7 @@ pub struct Evaluator {
     pub criterion: Criterion,
     pub res: Resolved,
     model: Option<LinearModel>,
+    probe_setup: Option<ProbeSetup>,
 }
 
 impl Evaluator {
@@ -129,12 +130,14 @@ impl Evaluator {
         } else {
             None
         };
+        let probe_setup = (method == Method::Frequency).then(|| ProbeSetup::new(&scene));
         Ok(Self {
             scene,
             method,
             criterion,
             res,
             model,
+            probe_setup,
         })
     }
 
@@ -170,11 +173,19 @@ impl Evaluator {
         }
     }
 
+    fn probe(&self, k: f64, b: f64) -> super::probe::ProbeOutcome {
+        let setup = self
+            .probe_setup
+            .as_ref()
+            .expect("frequency method has a probe setup");
+        probe_with(setup, &self.scene, k, b, self.res.probe)
+    }
+
     /// The impedance curve at (K, B) from whichever engine can give one.
     pub fn impedance(&self, k: f64, b: f64) -> Option<ImpedanceCurve> {
         match (&self.model, self.method) {
             (Some(m), _) => Some(m.impedance(k, b)),
-            (None, Method::Frequency) => Some(probe(&self.scene, k, b, self.res.probe).impedance),
+            (None, Method::Frequency) => Some(self.probe(k, b).impedance),
             _ => None,
         }
     }
@@ -198,7 +209,7 @@ impl Evaluator {
                 p.fidelity = Some(c.fidelity);
             }
             (Criterion::Impedance, None) => {
-                let o = probe(&self.scene, k, b, self.res.probe);
+                let o = self.probe(k, b);
                 p.passive = Some(o.passive);
                 p.fidelity = Some(o.impedance.fidelity);
             }

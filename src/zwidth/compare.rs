@@ -1,0 +1,228 @@
+//! Every estimator on one scene, as the 2018 paper's Table I: K-width,
+//! B-width, tunable parameters and maximum fidelity error.
+//!
+//! Default scene: the paper's simulated device (§V): m = 0.52 kg,
+//! b = 13.2 N·s/m, f_c = 0.19 N, 1 µm encoder, simulated at 1 kHz, with the
+//! paper's tuned parameters: Butterworth ωc = 499 Hz, AKF q = 2.5e4, Levant
+//! μ1 = 6.6, μ2 = 2.45. Levant's gains need C, which the papers estimated from
+//! a wall hit rendered with FDM + Butterworth; we do the same (`estimate_c`).
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::hit::{wall_hit, HitKnobs, TraceRow};
+use super::scene::SceneSpec;
+use super::search::{map, MapResult};
+use super::settings::{
+    Accuracy, Criterion, MapSpec, Method, SearchKind, PAPER_B_STEP, PAPER_K_STEP,
+};
+use crate::error::SpecError;
+use crate::estimators::{EstimatorKind, EstimatorSpec, FoawFit, FoawSpec, LevantSpec, QModel};
+use crate::lipschitz::{self, LipschitzEstimate};
+
+/// The 2018 paper's simulated device at 1 kHz.
+pub fn seed_2018_scene() -> SceneSpec {
+    SceneSpec::from_json(r#"{"loop":{"sample_hz":1000,"render_hz":1000}}"#).expect("static scene")
+}
+
+/// The wall the Lipschitz constant is estimated on: 5 K steps, 2 B steps of
+/// the 2011 paper's grid (a mid-range wall that renders with FDM + filter).
+pub const C_WALL_K: f64 = 5.0 * PAPER_K_STEP;
+pub const C_WALL_B: f64 = 2.0 * PAPER_B_STEP;
+
+#[derive(Debug, Clone, Serialize)]
+pub struct CEstimate {
+    pub wall_k: f64,
+    pub wall_b: f64,
+    pub estimator: EstimatorSpec,
+    pub estimate: LipschitzEstimate,
+}
+
+/// C as the papers measured it: a wall hit with FDM + Butterworth (499 Hz, or
+/// just below Nyquist), the encoder positions from first contact for 1 s, and
+/// the largest |ẍ| of a smooth fit (see `lipschitz`).
+pub fn estimate_c(scene: &SceneSpec) -> Result<CEstimate, SpecError> {
+    let fc = 499.0f64.min(0.499 * scene.control.sample_hz);
+    let estimator: EstimatorSpec = EstimatorKind::Butterworth {
+        cutoff_hz: fc,
+        order: 2,
+    }
+    .into();
+    let sc = SceneSpec {
+        estimator: estimator.clone(),
+        ..scene.clone()
+    }
+    .validate()?;
+    let mut trace: Vec<TraceRow> = Vec::new();
+    let knobs = HitKnobs {
+        settle_s: 1.0,
+        measure_s: 0.1,
+    };
+    wall_hit(&sc, C_WALL_K, C_WALL_B, knobs, &mut trace);
+    let wall = scene.wall.position;
+    let first = trace.iter().position(|r| r.y > wall).unwrap_or(0);
+    let n = (1.0 / sc.dt) as usize;
+    let ys: Vec<f64> = trace[first.saturating_sub(n / 10)..(first + n).min(trace.len())]
+        .iter()
+        .map(|r| r.y)
+        .collect();
+    let q = (scene.device.quantization > 0.0).then_some(scene.device.quantization);
+    let estimate = lipschitz::estimate(&ys, scene.control.sample_hz, q)?;
+    Ok(CEstimate {
+        wall_k: C_WALL_K,
+        wall_b: C_WALL_B,
+        estimator,
+        estimate,
+    })
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct CompareRow {
+    pub name: String,
+    pub parameters: String,
+    pub estimator: EstimatorSpec,
+    pub map: MapResult,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct CompareResult {
+    pub lipschitz: CEstimate,
+    pub rows: Vec<CompareRow>,
+    pub elapsed_s: f64,
+}
+
+/// The paper's four estimators with its tuned parameters.
+pub fn paper_estimators(scene: &SceneSpec, c: f64) -> Vec<(String, String, EstimatorSpec)> {
+    let fc = 499.0f64.min(0.499 * scene.control.sample_hz);
+    vec![
+        (
+            "FDM+filter".into(),
+            format!("ωc = {fc} Hz"),
+            EstimatorKind::Butterworth {
+                cutoff_hz: fc,
+                order: 2,
+            }
+            .into(),
+        ),
+        (
+            "FOAW".into(),
+            "none (best-fit, d = encoder step)".into(),
+            EstimatorKind::Foaw(FoawSpec {
+                fit: FoawFit::Best,
+                d: None,
+                max_window: 15,
+                outlier_tolerance: false,
+            })
+            .into(),
+        ),
+        (
+            "AKF".into(),
+            "q = 2.5e4".into(),
+            EstimatorKind::AdaptiveKalman {
+                q: 2.5e4,
+                q_model: QModel::WhiteJerk,
+                rho: crate::estimators::kalman::DEFAULT_RHO,
+            }
+            .into(),
+        ),
+        (
+            "Levant".into(),
+            format!(
+                "α = {:.2} m/s², λ = {:.3} m^½/s (μ1 = 6.6, μ2 = 2.45, C = {c:.3})",
+                6.6 * c,
+                2.45 * c.sqrt()
+            ),
+            EstimatorKind::Levant(LevantSpec {
+                mu1: Some(6.6),
+                mu2: Some(2.45),
+                lipschitz: Some(c),
+                ..Default::default()
+            })
+            .into(),
+        ),
+    ]
+}
+
+pub fn compare(scene: &SceneSpec, accuracy: &Accuracy) -> Result<CompareResult, SpecError> {
+    let start = std::time::Instant::now();
+    let c = estimate_c(scene)?;
+    let rows = paper_estimators(scene, c.estimate.lipschitz)
+        .into_par_iter()
+        .map(|(name, parameters, estimator)| {
+            let spec = MapSpec {
+                scene: SceneSpec {
+                    estimator: estimator.clone(),
+                    ..scene.clone()
+                },
+                method: Method::Auto,
+                criterion: Criterion::Impedance,
+                search: SearchKind::Bisect,
+                accuracy: accuracy.clone(),
+                b: None,
+                b_max: 1000.0,
+                k_max: 1e7,
+            };
+            Ok(CompareRow {
+                name,
+                parameters,
+                estimator,
+                map: map(&spec)?,
+            })
+        })
+        .collect::<Result<Vec<_>, SpecError>>()?;
+    Ok(CompareResult {
+        lipschitz: c,
+        rows,
+        elapsed_s: start.elapsed().as_secs_f64(),
+    })
+}
+
+impl CompareResult {
+    /// Shaped like the 2018 paper's Table I.
+    pub fn table(&self) -> String {
+        let w = 14;
+        let mut s = format!("{:<28}", "");
+        for r in &self.rows {
+            s.push_str(&format!("{:>w$}", r.name));
+        }
+        s.push('\n');
+        let mut row = |label: &str, f: &dyn Fn(&CompareRow) -> String| {
+            s.push_str(&format!("{label:<28}"));
+            for r in &self.rows {
+                s.push_str(&format!("{:>w$}", f(r)));
+            }
+            s.push('\n');
+        };
+        row("K-width (N/m)", &|r| format!("{:.3e}", r.map.k_width));
+        row("B-width (N·s/m)", &|r| format!("{:.1}", r.map.b_width));
+        row("Max. fidelity error (N·s/m)", &|r| {
+            r.map
+                .max_fidelity_error
+                .map(|f| format!("{f:.2}"))
+                .unwrap_or("-".into())
+        });
+        row("Trials", &|r| r.map.trials.to_string());
+        let mut s = s;
+        s.push_str("Tunable parameters:\n");
+        for r in &self.rows {
+            s.push_str(&format!("  {:<12} {}\n", r.name, r.parameters));
+        }
+        let e = &self.lipschitz;
+        s.push_str(&format!(
+            "C = {:.3} m/s² from a wall hit at K = {:.1} N/m, B = {:.2} N·s/m with {} (local quadratic fit over {} samples)\n",
+            e.estimate.lipschitz,
+            e.wall_k,
+            e.wall_b,
+            e.estimator.label(),
+            2 * e.estimate.half_window + 1
+        ));
+        if let Some(r) = self.rows.first() {
+            s.push_str(&format!(
+                "model: {}\ncriterion: impedance (Re Z ≥ 0 over the probe band), {}\n",
+                r.map.model, r.map.resolution
+            ));
+        }
+        s.push_str(&format!("elapsed: {:.2} s\n", self.elapsed_s));
+        s
+    }
+}

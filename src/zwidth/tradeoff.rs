@@ -1,0 +1,112 @@
+//! `zwidth bench tradeoff`: what each accuracy preset costs and how far its
+//! K-width and B-width land from `reference`, on the example scenes (the
+//! files in `examples/`, compiled in so the command runs anywhere).
+
+use serde::Serialize;
+use std::time::Instant;
+
+use super::scene::SceneSpec;
+use super::search::map;
+use super::settings::{Accuracy, Criterion, MapSpec, Method, Preset, SearchKind};
+use crate::error::SpecError;
+
+/// (name, scene JSON, criterion) of each example.
+pub const EXAMPLES: [(&str, &str, Criterion); 4] = [
+    (
+        "linear_1khz (analytic)",
+        include_str!("../../examples/linear_1khz.json"),
+        Criterion::Impedance,
+    ),
+    (
+        "seed_2018 (frequency)",
+        include_str!("../../examples/seed_2018.json"),
+        Criterion::Impedance,
+    ),
+    (
+        "seed_2011 (time)",
+        include_str!("../../examples/seed_2011.json"),
+        Criterion::Stability,
+    ),
+    (
+        "linear_1khz (time)",
+        include_str!("../../examples/linear_1khz.json"),
+        Criterion::Stability,
+    ),
+];
+
+#[derive(Debug, Clone, Serialize)]
+pub struct TradeoffRow {
+    pub scene: String,
+    pub preset: Preset,
+    pub wall_s: f64,
+    pub trials: usize,
+    pub k_width: f64,
+    pub b_width: f64,
+    /// Relative errors against the reference preset of the same scene.
+    pub k_width_error: f64,
+    pub b_width_error: f64,
+}
+
+pub fn run() -> Result<Vec<TradeoffRow>, SpecError> {
+    let mut rows = Vec::new();
+    for (name, json, criterion) in EXAMPLES {
+        let scene = SceneSpec::from_json(json)?;
+        let method = if name.ends_with("(time)") {
+            Method::Time
+        } else {
+            Method::Auto
+        };
+        let mut results = Vec::new();
+        for preset in [Preset::Reference, Preset::Standard, Preset::Draft] {
+            let spec = MapSpec {
+                scene: scene.clone(),
+                method,
+                criterion,
+                search: SearchKind::Bisect,
+                accuracy: Accuracy::Preset(preset),
+                b: None,
+                b_max: 1000.0,
+                k_max: 1e7,
+            };
+            let t = Instant::now();
+            let r = map(&spec)?;
+            results.push((preset, t.elapsed().as_secs_f64(), r));
+        }
+        let (kr, br) = (results[0].2.k_width, results[0].2.b_width);
+        let rel = |x: f64, r: f64| if r > 0.0 { (x - r) / r } else { 0.0 };
+        for (preset, wall_s, r) in results {
+            rows.push(TradeoffRow {
+                scene: name.to_string(),
+                preset,
+                wall_s,
+                trials: r.trials,
+                k_width: r.k_width,
+                b_width: r.b_width,
+                k_width_error: rel(r.k_width, kr),
+                b_width_error: rel(r.b_width, br),
+            });
+        }
+    }
+    Ok(rows)
+}
+
+pub fn table(rows: &[TradeoffRow]) -> String {
+    let mut s = format!(
+        "{:<24} {:<10} {:>9} {:>7} {:>12} {:>10} {:>9} {:>9}\n",
+        "scene", "preset", "wall (s)", "trials", "K-width", "B-width", "K err", "B err"
+    );
+    for r in rows {
+        s.push_str(&format!(
+            "{:<24} {:<10} {:>9.3} {:>7} {:>12.1} {:>10.2} {:>8.2}% {:>8.2}%\n",
+            r.scene,
+            format!("{:?}", r.preset).to_lowercase(),
+            r.wall_s,
+            r.trials,
+            r.k_width,
+            r.b_width,
+            100.0 * r.k_width_error,
+            100.0 * r.b_width_error
+        ));
+    }
+    s
+}
