@@ -88,31 +88,6 @@ pub fn loglog_svg(
     Ok(svg)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn writes_an_svg_with_legend_and_labels() {
-        let s = vec![
-            Series {
-                name: "fdm".into(),
-                points: vec![(1e3, 1e-3), (1e4, 1e-2)],
-            },
-            Series {
-                name: "levant".into(),
-                points: vec![(1e3, 2e-3), (1e4, 5e-4)],
-            },
-        ];
-        let svg = loglog_svg("t", "sample rate (Hz)", "RMS error (m/s)", &s).unwrap();
-        assert!(svg.starts_with("<svg"));
-        for text in ["fdm", "levant", "sample rate (Hz)", "RMS error (m/s)"] {
-            assert!(svg.contains(text), "missing {text}");
-        }
-        assert!(loglog_svg("t", "x", "y", &[]).is_err());
-    }
-}
-
 /// One evaluated point of a Z-width map, for plotting.
 pub struct MapPlotPoint {
     pub b: f64,
@@ -277,4 +252,29 @@ pub fn zwidth_map_svg(
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn writes_an_svg_with_legend_and_labels() {
+        let s = vec![
+            Series {
+                name: "fdm".into(),
+                points: vec![(1e3, 1e-3), (1e4, 1e-2)],
+            },
+            Series {
+                name: "levant".into(),
+                points: vec![(1e3, 2e-3), (1e4, 5e-4)],
+            },
+        ];
+        let svg = loglog_svg("t", "sample rate (Hz)", "RMS error (m/s)", &s).unwrap();
+        assert!(svg.starts_with("<svg"));
+        for text in ["fdm", "levant", "sample rate (Hz)", "RMS error (m/s)"] {
+            assert!(svg.contains(text), "missing {text}");
+        }
+        assert!(loglog_svg("t", "x", "y", &[]).is_err());
+    }
 }

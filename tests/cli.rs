@@ -257,3 +257,176 @@ fn lipschitz_and_gains_commands() {
     );
     rejects(&["gains", "--estimator", r#"{"kind":"fdm"}"#], "", "levant");
 }
+
+fn scene_file(name: &str, json: &str) -> String {
+    let p = std::env::temp_dir().join(format!("zwidth-{}-{name}.json", std::process::id()));
+    std::fs::write(&p, json).unwrap();
+    p.to_str().unwrap().to_string()
+}
+
+#[test]
+fn trial_impedance_map_commands() {
+    let lin = scene_file(
+        "lin",
+        r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+    );
+    // A soft, damped wall is stable; its trace has a header and one row per sample.
+    let csv = std::env::temp_dir().join(format!("zwidth-{}-trace.csv", std::process::id()));
+    let o = zwidth(
+        &[
+            "trial",
+            "--scene",
+            &lin,
+            "--k",
+            "2000",
+            "--b",
+            "20",
+            "--json",
+            "--trace",
+            csv.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let v: serde_json::Value = serde_json::from_str(&o.stdout).unwrap();
+    assert_eq!(v["stable"], true);
+    let trace = std::fs::read_to_string(&csv).unwrap();
+    assert!(trace.starts_with("t_s,x_true_m,y_measured_m,v_est_m_per_s,v_true_m_per_s,force_n"));
+    assert_eq!(
+        trace.lines().count() as u64,
+        v["samples"].as_u64().unwrap() + 1
+    );
+    // Impedance, analytic (linear scene): 100 lines, passive at a soft wall.
+    let o = zwidth(
+        &[
+            "impedance",
+            "--scene",
+            &lin,
+            "--k",
+            "2000",
+            "--b",
+            "5",
+            "--json",
+        ],
+        "",
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let v: serde_json::Value = serde_json::from_str(&o.stdout).unwrap();
+    assert_eq!(v["freq_hz"].as_array().unwrap().len(), 100);
+    assert_eq!(v["passive"], true);
+    assert!(v["model"].as_str().unwrap().starts_with("analytic"));
+    // Strict-passivity map: b > KT/2 + |B| gives 2(13.2 − 5)/1e-3 = 16 400 N/m at B = 5.
+    let svg = std::env::temp_dir().join(format!("zwidth-{}-map.svg", std::process::id()));
+    let o = zwidth(
+        &[
+            "map",
+            "--scene",
+            &lin,
+            "--criterion",
+            "strict_passivity",
+            "--b",
+            "0,5",
+            "--json",
+            "--svg",
+            svg.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let v: serde_json::Value = serde_json::from_str(&o.stdout).unwrap();
+    let k5 = v["boundary"][1]["k_max"].as_f64().unwrap();
+    assert!((k5 - 16_400.0).abs() < 1e-6, "{k5}");
+    for key in [
+        "model",
+        "method",
+        "criterion",
+        "boundary",
+        "k_width",
+        "b_width",
+        "max_fidelity_error",
+        "points",
+        "trials",
+        "elapsed_s",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key}");
+    }
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.contains("wall stiffness K (N/m)") && text.contains("fidelity error"));
+}
+
+#[test]
+fn zwidth_commands_reject_bad_input() {
+    let lin = scene_file(
+        "lin2",
+        r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+    );
+    let seed = scene_file("seed", "{}");
+    let bad = scene_file("bad", r#"{"device":{"mass":-1}}"#);
+    rejects(
+        &["trial", "--scene", &bad, "--k", "1", "--b", "1"],
+        "",
+        "device.mass = -1",
+    );
+    rejects(
+        &[
+            "trial",
+            "--scene",
+            "/nonexistent.json",
+            "--k",
+            "1",
+            "--b",
+            "1",
+        ],
+        "",
+        "cannot be read",
+    );
+    rejects(
+        &["trial", "--scene", &lin, "--k=-5", "--b", "1"],
+        "",
+        "k = -5",
+    );
+    rejects(
+        &["map", "--scene", &lin, "--method", "magic"],
+        "",
+        "--method = \"magic\"",
+    );
+    rejects(
+        &["map", "--scene", &seed, "--method", "analytic"],
+        "",
+        "analytic engine needs a linear single-rate scene",
+    );
+    rejects(
+        &["map", "--scene", &seed, "--criterion", "strict_passivity"],
+        "",
+        "strict_passivity",
+    );
+    rejects(
+        &[
+            "map",
+            "--scene",
+            &lin,
+            "--method",
+            "time",
+            "--criterion",
+            "impedance",
+        ],
+        "",
+        "answers stability only",
+    );
+    rejects(
+        &["map", "--scene", &lin, "--k-rel-tol", "0"],
+        "",
+        "accuracy.k_rel_tol = 0",
+    );
+    rejects(
+        &["map", "--scene", &lin, "--accuracy", "fast"],
+        "",
+        "--accuracy = \"fast\"",
+    );
+    let nyq = scene_file("nyq", r#"{"probe":{"f_max_hz":700}}"#);
+    rejects(
+        &["impedance", "--scene", &nyq, "--k", "1", "--b", "1"],
+        "",
+        "probe.f_max_hz = 700",
+    );
+}

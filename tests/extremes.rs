@@ -159,3 +159,65 @@ proptest! {
         }
     }
 }
+
+mod scenes {
+    use zwidth::zwidth::hit::{wall_hit, HitKnobs, NoTrace};
+    use zwidth::zwidth::probe::{probe, ProbeKnobs};
+    use zwidth::zwidth::scene::SceneSpec;
+
+    /// Scenes at the extremes the issue names: no NaN, no panic.
+    #[test]
+    fn extreme_scenes_give_finite_results() {
+        let knobs = HitKnobs {
+            settle_s: 0.05,
+            measure_s: 0.02,
+        };
+        let pk = ProbeKnobs {
+            periods: 1,
+            settle_tol: 1e-2,
+            max_periods: 4,
+        };
+        for json in [
+            // 1 MHz encoder, 1 kHz render, ideal sensor; short approach.
+            r#"{"loop":{"sample_hz":1000000,"render_hz":1000},"hit":{"home_distance":0.0001}}"#,
+            // 1 g and 100 kg handles, no damping at all.
+            r#"{"device":{"mass":0.001,"damping":0,"coulomb":0},"hit":{"home_distance":0.0001}}"#,
+            r#"{"device":{"mass":100,"damping":0,"coulomb":0.19,"quantization":1e-9},"hit":{"home_distance":0.0001}}"#,
+            r#"{"device":{"damping":0,"force_limit":4},"estimator":{"kind":"kalman","q":1e12},"hit":{"home_distance":0.0001}}"#,
+            r#"{"estimator":{"kind":"levant","rule":"hba_sc","lipschitz":1},"hit":{"home_distance":0.0001}}"#,
+        ] {
+            let sc = SceneSpec::from_json(json).unwrap().validate().unwrap();
+            for (k, b) in [(1e7, 0.0), (1e7, 1e3), (1.0, 0.0), (1e5, -50.0)] {
+                let o = wall_hit(&sc, k, b, knobs, &mut NoTrace);
+                assert!(
+                    o.mean_position.is_finite() && o.rms.is_none_or(|r| r.is_finite()),
+                    "{json} K={k} B={b}: {o:?}"
+                );
+            }
+            if sc.spec.control.sample_hz <= 10_000.0 {
+                let o = probe(&sc, 1e7, 10.0, pk);
+                assert!(
+                    o.impedance.magnitude.iter().all(|m| m.is_finite()),
+                    "{json}"
+                );
+                assert!(o.impedance.fidelity.is_finite());
+            }
+        }
+    }
+
+    #[test]
+    fn impossible_scenes_are_refused_with_the_field() {
+        for (json, field) in [
+            (r#"{"device":{"mass":0}}"#, "device.mass"),
+            (r#"{"device":{"mass":1e9}}"#, "device.mass"),
+            (r#"{"loop":{"sample_hz":1e9}}"#, "loop.sample_hz"),
+            (r#"{"loop":{"render_hz":20000}}"#, "loop.render_hz"),
+            (r#"{"loop":{"delay_samples":1000}}"#, "loop.delay_samples"),
+            (r#"{"hit":{"settle_s":-1}}"#, "hit.settle_s"),
+            (r#"{"probe":{"amplitude":0}}"#, "probe.amplitude"),
+        ] {
+            let e = SceneSpec::from_json(json).unwrap().validate().unwrap_err();
+            assert_eq!(e.field, field, "{json}: {e}");
+        }
+    }
+}

@@ -6,7 +6,8 @@ use super::VelocityEstimator;
 #[derive(Debug, Clone)]
 pub struct Fdm {
     inv_t: f64,
-    prev: Option<f64>,
+    prev: f64,
+    started: bool,
 }
 
 impl Fdm {
@@ -14,7 +15,8 @@ impl Fdm {
     pub fn new(t: f64) -> Self {
         Self {
             inv_t: 1.0 / t,
-            prev: None,
+            prev: 0.0,
+            started: false,
         }
     }
 }
@@ -22,16 +24,18 @@ impl Fdm {
 impl VelocityEstimator for Fdm {
     #[inline]
     fn update(&mut self, y: f64) -> f64 {
-        let v = match self.prev {
-            Some(p) => (y - p) * self.inv_t,
-            None => 0.0,
+        let v = if self.started {
+            (y - self.prev) * self.inv_t
+        } else {
+            0.0
         };
-        self.prev = Some(y);
+        self.prev = y;
+        self.started = true;
         v
     }
 
     fn reset(&mut self) {
-        self.prev = None;
+        self.started = false;
     }
 }
 

@@ -202,7 +202,6 @@ impl CompareResult {
                 .unwrap_or("-".into())
         });
         row("Trials", &|r| r.map.trials.to_string());
-        let mut s = s;
         s.push_str("Tunable parameters:\n");
         for r in &self.rows {
             s.push_str(&format!("  {:<12} {}\n", r.name, r.parameters));

@@ -13,6 +13,11 @@
 //! stable iff below `threshold`. A trial that diverges (|x| > 10 m, |v| > 1e3 m/s) stops
 //! at once and is unstable.
 //!
+//! With friction, a handle held stuck for 0.2 s with the wall force well
+//! inside the friction band and B·v̂ small stays stuck (its measured position
+//! cannot change, so neither can the spring force): the trial ends there and
+//! the rest of the window is counted as that constant position.
+//!
 //! Only what the scene has is simulated: without friction the plant step is
 //! the exact ZOH update with no event handling; without quantization there is
 //! no rounding (const-generic variants of one loop).
@@ -105,6 +110,7 @@ fn run<const FRICTION: bool, const QUANT: bool>(
     let wall = s.wall.position;
     let push = s.hit.push_force;
     let limit = s.device.force_limit.unwrap_or(f64::INFINITY);
+    let has_limit = s.device.force_limit.is_some();
     let settle = (knobs.settle_s / scene.dt).round() as usize;
     let measure = (knobs.measure_s / scene.dt).round().max(1.0) as usize;
     // Settling counts from the first contact. A push that cannot overcome
@@ -141,19 +147,23 @@ fn run<const FRICTION: bool, const QUANT: bool>(
     // Welford mean/variance of y over the measure window.
     let (mut n, mut mean, mut m2) = (0.0f64, 0.0f64, 0.0f64);
     let mut phase = 0usize;
+    let (mut stuck_for, mut last_y) = (0usize, f64::NAN);
+    let stuck_limit = (0.2 / scene.dt).ceil() as usize;
     let mut i = 0usize;
     while i < total {
         let y = if QUANT { (st.x / q).round() * q } else { st.x };
-        if !touched && y > wall {
-            touched = true;
-            if measure_from == usize::MAX {
+        if measure_from == usize::MAX {
+            // Not measuring yet: waiting for the first contact (or the cap).
+            if y > wall {
+                touched = true;
                 measure_from = i + settle;
                 total = measure_from + measure;
+            } else if i >= cap {
+                measure_from = i;
+                total = i + measure;
             }
-        }
-        if measure_from == usize::MAX && i >= cap {
-            measure_from = i;
-            total = i + measure;
+        } else if !touched && y > wall {
+            touched = true;
         }
         let v_est = est.update(y);
         if phase == 0 {
@@ -162,10 +172,18 @@ fn run<const FRICTION: bool, const QUANT: bool>(
             } else {
                 0.0
             };
-            line[head] = f_wall;
-            head = if head == delay { 0 } else { head + 1 };
-            // After the write, `head` points at the oldest entry: written `delay` renders ago.
-            applied = (push + line[head]).clamp(-limit, limit);
+            let delayed = if delay == 0 {
+                f_wall
+            } else {
+                line[head] = f_wall;
+                head = if head == delay { 0 } else { head + 1 };
+                // After the write, `head` points at the oldest entry: written `delay` renders ago.
+                line[head]
+            };
+            applied = push + delayed;
+            if has_limit {
+                applied = applied.clamp(-limit, limit);
+            }
         }
         phase = if phase + 1 == scene.ratio {
             0
@@ -188,6 +206,42 @@ fn run<const FRICTION: bool, const QUANT: bool>(
         }
         if FRICTION {
             plant.step_friction(&mut st, applied);
+            // Stuck: friction holds the handle, the measured position cannot
+            // change, so the wall force changes only through B·v̂, which
+            // decays. Held for 0.2 s with the force well inside the friction
+            // band, it stays stuck: the rest of the trial is y constant.
+            let held = st.v == 0.0
+                && applied.abs() <= 0.9 * s.device.coulomb
+                && (b * v_est).abs() <= 0.05 * s.device.coulomb;
+            stuck_for = if held && y == last_y {
+                stuck_for + 1
+            } else {
+                0
+            };
+            last_y = y;
+            if stuck_for >= stuck_limit && touched && total > i + 1 {
+                let rest = (total - i - 1) as f64;
+                // Append `rest` samples of constant y to the measure window
+                // (Welford merge); samples before the window do not count.
+                let start = measure_from.max(i + 1);
+                let counted = (total - start) as f64;
+                if counted > 0.0 && rest > 0.0 {
+                    let nb = counted;
+                    let dlt = y - mean;
+                    let nn = n + nb;
+                    mean += dlt * nb / nn;
+                    m2 += dlt * dlt * n * nb / nn;
+                    n = nn;
+                }
+                let rms = (m2 / n.max(1.0)).max(0.0).sqrt();
+                return HitOutcome {
+                    stable: rms < s.hit.threshold,
+                    rms: Some(rms),
+                    mean_position: mean,
+                    diverged: false,
+                    samples: i + 1,
+                };
+            }
         } else {
             plant.step_linear(&mut st, applied);
         }

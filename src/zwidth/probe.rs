@@ -280,7 +280,8 @@ fn run<const FRICTION: bool, const QUANT: bool>(
         prev_z = Some(z);
         // A loop that does not settle (noise) can still be clearly passive or
         // clearly not: decide early on the last half of the periods.
-        if !settled && periods_run >= 8 && periods_run % 4 == 0 {
+        // (Only where noise is modelled: a deterministic loop settles.)
+        if (QUANT || FRICTION) && !settled && periods_run >= 8 && periods_run % 4 == 0 {
             if let Some((mean, verdict)) = noisy_verdict(&history, false) {
                 let mut out = finish(mean, false, false, periods_run, last_change);
                 out.impedance.passive = verdict;
