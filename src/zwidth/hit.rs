@@ -24,9 +24,10 @@
 
 use serde::Serialize;
 
+use super::controller::Controller;
 use super::scene::Scene;
-use crate::estimators::VelocityEstimator;
 use crate::rig::{Plant, PlantState};
+use crate::signals::quantize;
 
 /// Time-domain knobs the accuracy setting may override.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -105,12 +106,11 @@ fn run<const FRICTION: bool, const QUANT: bool>(
 ) -> HitOutcome {
     let s = &scene.spec;
     let plant = Plant::new(s.device.mass, s.device.damping, s.device.coulomb, scene.dt);
-    let mut est = scene.estimator();
     let q = s.device.quantization;
     let wall = s.wall.position;
     let push = s.hit.push_force;
     let limit = s.device.force_limit.unwrap_or(f64::INFINITY);
-    let has_limit = s.device.force_limit.is_some();
+    let mut ctl = Controller::new(scene, k, b, push, true);
     let settle = (knobs.settle_s / scene.dt).round() as usize;
     let measure = (knobs.measure_s / scene.dt).round().max(1.0) as usize;
     // Settling counts from the first contact. A push that cannot overcome
@@ -135,23 +135,17 @@ fn run<const FRICTION: bool, const QUANT: bool>(
         settle + measure
     };
     let mut touched = false;
-    // Delay line of computed wall forces, `delay_samples` render periods deep.
-    let delay = s.control.delay_samples as usize;
-    let mut line = vec![0.0f64; delay + 1];
-    let mut head = 0usize;
     let mut st = PlantState {
         x: wall - s.hit.home_distance,
         v: 0.0,
     };
-    let mut applied = push.clamp(-limit, limit);
     // Welford mean/variance of y over the measure window.
     let (mut n, mut mean, mut m2) = (0.0f64, 0.0f64, 0.0f64);
-    let mut phase = 0usize;
     let (mut stuck_for, mut last_y) = (0usize, f64::NAN);
     let stuck_limit = (0.2 / scene.dt).ceil() as usize;
     let mut i = 0usize;
     while i < total {
-        let y = if QUANT { (st.x / q).round() * q } else { st.x };
+        let y = if QUANT { quantize(st.x, q) } else { st.x };
         if measure_from == usize::MAX {
             // Not measuring yet: waiting for the first contact (or the cap).
             if y > wall {
@@ -165,31 +159,8 @@ fn run<const FRICTION: bool, const QUANT: bool>(
         } else if !touched && y > wall {
             touched = true;
         }
-        let v_est = est.update(y);
-        if phase == 0 {
-            let f_wall = if y > wall {
-                -(k * (y - wall) + b * v_est)
-            } else {
-                0.0
-            };
-            let delayed = if delay == 0 {
-                f_wall
-            } else {
-                line[head] = f_wall;
-                head = if head == delay { 0 } else { head + 1 };
-                // After the write, `head` points at the oldest entry: written `delay` renders ago.
-                line[head]
-            };
-            applied = push + delayed;
-            if has_limit {
-                applied = applied.clamp(-limit, limit);
-            }
-        }
-        phase = if phase + 1 == scene.ratio {
-            0
-        } else {
-            phase + 1
-        };
+        let v_est = ctl.sample(y);
+        let applied = ctl.applied;
         rec.record(TraceRow {
             t: i as f64 * scene.dt,
             x: st.x,

@@ -3,6 +3,7 @@
 
 pub mod analytic;
 pub mod compare;
+pub mod controller;
 pub mod hit;
 pub mod poly;
 pub mod probe;

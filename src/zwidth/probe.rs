@@ -37,9 +37,10 @@ use num_complex::Complex64 as C;
 use serde::Serialize;
 
 use super::analytic::ImpedanceCurve;
+use super::controller::Controller;
 use super::scene::Scene;
-use crate::estimators::VelocityEstimator;
 use crate::rig::{Plant, PlantState};
+use crate::signals::quantize;
 use crate::spectral::{LineAnalyzer, Multisine};
 
 /// Frequency-domain knobs the accuracy setting sets.
@@ -162,17 +163,14 @@ fn run<const FRICTION: bool, const QUANT: bool>(
     );
     let per_period = force.len();
     let mut fa = LineAnalyzer::new(per_period);
-    let plant = Plant::new(d_mass(scene), s.device.damping, s.device.coulomb, h);
-    let mut est = scene.estimator();
+    let plant = Plant::new(s.device.mass, s.device.damping, s.device.coulomb, h);
     let q = s.device.quantization;
-    let wall = s.wall.position;
-    let limit = s.device.force_limit.unwrap_or(f64::INFINITY);
-    let delay = s.control.delay_samples as usize;
-    let mut line = vec![0.0f64; delay + 1];
-    let mut head = 0usize;
-    let mut st = PlantState { x: wall, v: 0.0 };
-    let mut wall_force = 0.0;
-    let (mut sub, mut phase) = (0usize, 0usize);
+    let mut ctl = Controller::new(scene, k, b, 0.0, false);
+    let mut st = PlantState {
+        x: s.wall.position,
+        v: 0.0,
+    };
+    let mut sub = 0usize;
     let mut vbuf = vec![0.0; per_period];
     let mut v_lines = vec![C::new(0.0, 0.0); setup.lines.len()];
     let mut prev_z: Option<Vec<C>> = None;
@@ -212,22 +210,11 @@ fn run<const FRICTION: bool, const QUANT: bool>(
     while periods_run < knobs.max_periods {
         for (i, vb) in vbuf.iter_mut().enumerate() {
             if sub == 0 {
-                let y = if QUANT { (st.x / q).round() * q } else { st.x };
-                let v_est = est.update(y);
-                if phase == 0 {
-                    line[head] = -(k * (y - wall) + b * v_est);
-                    head = if head == delay { 0 } else { head + 1 };
-                    wall_force = line[head].clamp(-limit, limit);
-                }
-                phase = if phase + 1 == scene.ratio {
-                    0
-                } else {
-                    phase + 1
-                };
+                ctl.sample(if QUANT { quantize(st.x, q) } else { st.x });
             }
             sub = if sub + 1 == nsub { 0 } else { sub + 1 };
             let x0 = st.x;
-            let f = wall_force + force[i];
+            let f = ctl.applied + force[i];
             if FRICTION {
                 plant.step_friction(&mut st, f);
             } else {
@@ -366,10 +353,6 @@ fn remaining_transient(z: &[C], d: &[C], prev_d: &[C]) -> f64 {
             (d * r / (r - 1.0)).norm()
         })
         .fold(0.0, f64::max)
-}
-
-fn d_mass(scene: &Scene) -> f64 {
-    scene.spec.device.mass
 }
 
 #[cfg(test)]
