@@ -206,6 +206,34 @@ mod scenes {
     }
 
     #[test]
+    fn analytic_engine_at_the_extremes() {
+        use zwidth::zwidth::analytic::LinearModel;
+        for json in [
+            r#"{"device":{"mass":0.001,"damping":0,"coulomb":0,"quantization":0},"loop":{"sample_hz":1000000,"render_hz":1000000},"probe":{"f_max_hz":1000}}"#,
+            r#"{"device":{"mass":100,"damping":0,"coulomb":0,"quantization":0},"loop":{"sample_hz":100,"render_hz":100},"probe":{"f_max_hz":40}}"#,
+            r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000,"delay_samples":3},"estimator":{"kind":"kalman","q":1e12}}"#,
+        ] {
+            let sc = SceneSpec::from_json(json).unwrap().validate().unwrap();
+            let m = LinearModel::new(&sc).unwrap();
+            for (k, b) in [(1e7, 0.0), (1.0, 1e3), (1e5, -5.0)] {
+                let c = m.impedance(k, b);
+                assert!(
+                    c.magnitude
+                        .iter()
+                        .chain(&c.phase_deg)
+                        .all(|v| v.is_finite())
+                        && c.fidelity.is_finite(),
+                    "{json} {k} {b}"
+                );
+                assert!(m.spectral_radius(k, b).is_finite(), "{json} {k} {b}");
+                if let Some((lo, hi)) = m.strict_passivity_range(b) {
+                    assert!(lo.is_finite() && hi.is_finite());
+                }
+            }
+        }
+    }
+
+    #[test]
     fn impossible_scenes_are_refused_with_the_field() {
         for (json, field) in [
             (r#"{"device":{"mass":0}}"#, "device.mass"),

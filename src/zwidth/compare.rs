@@ -205,6 +205,11 @@ impl CompareResult {
         s.push_str("Tunable parameters:\n");
         for r in &self.rows {
             s.push_str(&format!("  {:<12} {}\n", r.name, r.parameters));
+            if let EstimatorKind::Levant(l) = &r.estimator.kind {
+                if let Ok(g) = l.gains() {
+                    s.push_str(&format!("  {:<12} {}\n", "", g.report()));
+                }
+            }
         }
         let e = &self.lipschitz;
         s.push_str(&format!(
