@@ -150,6 +150,15 @@ pub enum Command {
         #[arg(long)]
         svg_dir: Option<PathBuf>,
     },
+    /// Run the HTTP service: queue experiments, run them, store every run in SQLite.
+    Serve {
+        /// SQLite database file (created and migrated on first start).
+        #[arg(long, env = "ZWIDTH_DB", default_value = "zwidth.db")]
+        db: PathBuf,
+        /// Address to listen on; port 0 picks a free one (printed on start).
+        #[arg(long, env = "ZWIDTH_BIND", default_value = "127.0.0.1:8080")]
+        bind: String,
+    },
     /// Measurements: `zwidth bench tradeoff`.
     Bench {
         #[command(subcommand)]
@@ -498,6 +507,21 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
             } else {
                 write!(stdout, "{}", r.table()).map_err(io)
             }
+        }
+        Command::Serve { db, bind } => {
+            let _ = tracing_subscriber::fmt()
+                .with_writer(std::io::stderr)
+                .with_env_filter(
+                    tracing_subscriber::EnvFilter::try_from_default_env()
+                        .unwrap_or_else(|_| "info".into()),
+                )
+                .try_init();
+            let rt = tokio::runtime::Builder::new_multi_thread()
+                .enable_all()
+                .build()
+                .map_err(|e| CliError::Failure(format!("cannot start the runtime: {e}")))?;
+            rt.block_on(crate::http::serve(&db, &bind))
+                .map_err(CliError::Failure)
         }
         Command::Bench {
             what: BenchCommand::Tradeoff { json },

@@ -8,11 +8,14 @@ pub mod accuracy;
 pub mod cli;
 pub mod error;
 pub mod estimators;
+pub mod http;
+pub mod jobs;
 pub mod lipschitz;
 pub mod plot;
 pub mod rig;
 pub mod signals;
 pub mod spectral;
+pub mod store;
 pub mod zwidth;
 
 pub use error::SpecError;

@@ -71,6 +71,20 @@ pub struct MapResult {
     pub elapsed_s: f64,
 }
 
+/// Shared with whoever runs a map: trials done so far, and a cancel flag the
+/// searches honour between trials (a cancelled map ends within one trial).
+#[derive(Debug, Default)]
+pub struct Observer {
+    pub trials: std::sync::atomic::AtomicUsize,
+    pub cancel: std::sync::atomic::AtomicBool,
+}
+
+impl Observer {
+    pub fn cancelled(&self) -> bool {
+        self.cancel.load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
+
 /// The chosen engine for one scene and criterion.
 pub struct Evaluator {
     pub scene: Scene,
@@ -79,6 +93,7 @@ pub struct Evaluator {
     pub res: Resolved,
     model: Option<LinearModel>,
     probe_setup: Option<ProbeSetup>,
+    observer: Option<std::sync::Arc<Observer>>,
 }
 
 impl Evaluator {
@@ -138,6 +153,7 @@ impl Evaluator {
             res,
             model,
             probe_setup,
+            observer: None,
         })
     }
 
@@ -198,6 +214,14 @@ impl Evaluator {
             passive: None,
             fidelity: None,
         };
+        if let Some(o) = &self.observer {
+            if o.cancelled() {
+                // Every search ends quickly once nothing renders.
+                p.passive = Some(false);
+                return p;
+            }
+            o.trials.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        }
         match (self.criterion, &self.model) {
             (Criterion::Stability, Some(m)) => p.stable = Some(m.spectral_radius(k, b) < 1.0),
             (Criterion::Stability, None) => {
@@ -276,7 +300,15 @@ impl Evaluator {
 
 /// Run a map.
 pub fn map(spec: &MapSpec) -> Result<MapResult, SpecError> {
-    let start = Instant::now();
+    map_observed(spec, None)
+}
+
+/// Validate a map request completely without running it.
+pub fn validate(spec: &MapSpec) -> Result<(), SpecError> {
+    prepare(spec).map(|_| ())
+}
+
+fn prepare(spec: &MapSpec) -> Result<Evaluator, SpecError> {
     let scene = spec.scene.validate().map_err(|e| e.within("scene"))?;
     let res = spec.accuracy.resolve(&scene)?;
     if !(spec.b_max.is_finite() && spec.b_max > 0.0) {
@@ -305,7 +337,18 @@ pub fn map(spec: &MapSpec) -> Result<MapResult, SpecError> {
             validate_wall(0.0, b)?;
         }
     }
-    let ev = Evaluator::new(scene, spec.method, spec.criterion, res)?;
+    Evaluator::new(scene, spec.method, spec.criterion, res)
+}
+
+/// Run a map, reporting trials to and honouring cancellation from `observer`.
+pub fn map_observed(
+    spec: &MapSpec,
+    observer: Option<std::sync::Arc<Observer>>,
+) -> Result<MapResult, SpecError> {
+    let start = Instant::now();
+    let mut ev = prepare(spec)?;
+    ev.observer = observer;
+    let res = ev.res;
     let b_auto: Vec<f64> = (0..)
         .map(|i| i as f64 * res.b_step)
         .take_while(|&b| b <= spec.b_max + 1e-9)

@@ -1,0 +1,4 @@
+// Re-embed the migrations (sqlx::migrate!) whenever they change.
+fn main() {
+    println!("cargo:rerun-if-changed=migrations");
+}

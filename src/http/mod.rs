@@ -1,0 +1,261 @@
+//! The HTTP API (axum): routes, handlers, and errors as RFC 9457
+//! `application/problem+json` naming the field. Bodies are parsed with the
+//! engines' own spec types and validated with the engines' own validation.
+
+use axum::body::Bytes;
+use axum::extract::{DefaultBodyLimit, Path, Query, State};
+use axum::http::{header, HeaderMap, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::{Json, Router};
+use serde::{Deserialize, Serialize};
+use serde_json::{json, Value};
+
+use crate::error::SpecError;
+use crate::jobs::ExperimentSpec;
+use crate::store::{ExperimentRow, Store};
+
+/// Largest request body accepted (bytes).
+pub const BODY_LIMIT: usize = 1 << 20;
+
+#[derive(Clone)]
+pub struct AppState {
+    pub store: Store,
+}
+
+pub fn router(state: AppState) -> Router {
+    Router::new()
+        .route("/healthz", get(|| async { "ok" }))
+        .route("/v1/experiments", post(submit).get(list))
+        .route("/v1/experiments/{id}", get(show))
+        .route("/v1/experiments/{id}/cancel", post(cancel))
+        .layer(DefaultBodyLimit::max(BODY_LIMIT))
+        .with_state(state)
+}
+
+/// An RFC 9457 problem.
+#[derive(Debug)]
+pub struct Problem {
+    status: StatusCode,
+    title: &'static str,
+    detail: String,
+    field: Option<String>,
+}
+
+impl Problem {
+    fn new(status: StatusCode, title: &'static str, detail: impl Into<String>) -> Self {
+        Self {
+            status,
+            title,
+            detail: detail.into(),
+            field: None,
+        }
+    }
+
+    fn internal(e: impl std::fmt::Display) -> Self {
+        tracing::error!(error = %e, "internal error");
+        Self::new(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "Internal error",
+            "the server could not complete the request",
+        )
+    }
+}
+
+impl From<SpecError> for Problem {
+    fn from(e: SpecError) -> Self {
+        Self {
+            status: StatusCode::UNPROCESSABLE_ENTITY,
+            title: "Invalid experiment",
+            detail: e.to_string(),
+            field: Some(e.field),
+        }
+    }
+}
+
+impl IntoResponse for Problem {
+    fn into_response(self) -> Response {
+        let mut body = json!({
+            "type": "about:blank",
+            "title": self.title,
+            "status": self.status.as_u16(),
+            "detail": self.detail,
+        });
+        if let Some(f) = self.field {
+            body["field"] = Value::String(f);
+        }
+        (
+            self.status,
+            [(header::CONTENT_TYPE, "application/problem+json")],
+            body.to_string(),
+        )
+            .into_response()
+    }
+}
+
+/// What the API shows of an experiment.
+#[derive(Debug, Serialize)]
+pub struct ExperimentView {
+    pub id: String,
+    pub kind: String,
+    pub state: String,
+    pub priority: i64,
+    pub created_ms: i64,
+    pub started_ms: Option<i64>,
+    pub finished_ms: Option<i64>,
+    pub progress: Value,
+    pub spec: Value,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub result: Option<Value>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+impl From<ExperimentRow> for ExperimentView {
+    fn from(r: ExperimentRow) -> Self {
+        Self {
+            progress: json!({ "trials_done": r.trials_done }),
+            spec: serde_json::from_str(&r.spec).unwrap_or(Value::Null),
+            result: r
+                .result
+                .as_deref()
+                .and_then(|s| serde_json::from_str(s).ok()),
+            id: r.id,
+            kind: r.kind,
+            state: r.state,
+            priority: r.priority,
+            created_ms: r.created_ms,
+            started_ms: r.started_ms,
+            finished_ms: r.finished_ms,
+            error: r.error,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+pub struct SubmitQuery {
+    #[serde(default)]
+    priority: i64,
+}
+
+#[tracing::instrument(skip(st, headers, body))]
+async fn submit(
+    State(st): State<AppState>,
+    Query(q): Query<SubmitQuery>,
+    headers: HeaderMap,
+    body: Bytes,
+) -> Result<Response, Problem> {
+    let spec: ExperimentSpec = serde_json::from_slice(&body).map_err(|e| {
+        Problem::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "Invalid experiment",
+            format!("the body is not a valid experiment: {e}"),
+        )
+    })?;
+    spec.validate()?;
+    if !(-1000..=1000).contains(&q.priority) {
+        let mut p = Problem::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "Invalid experiment",
+            format!(
+                "priority = {} is not allowed: must be -1000 to 1000",
+                q.priority
+            ),
+        );
+        p.field = Some("priority".into());
+        return Err(p);
+    }
+    let key = headers
+        .get("idempotency-key")
+        .and_then(|v| v.to_str().ok())
+        .map(str::to_owned);
+    let id = uuid::Uuid::now_v7().to_string();
+    let text = serde_json::to_string(&spec).map_err(Problem::internal)?;
+    let (row, created) = st
+        .store
+        .insert(&id, spec.kind(), &text, q.priority, key.as_deref())
+        .await
+        .map_err(Problem::internal)?;
+    let status = if created {
+        StatusCode::ACCEPTED
+    } else {
+        StatusCode::OK
+    };
+    Ok((
+        status,
+        [(header::LOCATION, format!("/v1/experiments/{}", row.id))],
+        Json(ExperimentView::from(row)),
+    )
+        .into_response())
+}
+
+async fn list(State(st): State<AppState>) -> Result<Json<Vec<ExperimentView>>, Problem> {
+    let rows = st.store.list(200).await.map_err(Problem::internal)?;
+    Ok(Json(rows.into_iter().map(ExperimentView::from).collect()))
+}
+
+async fn show(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<ExperimentView>, Problem> {
+    match st.store.get(&id).await.map_err(Problem::internal)? {
+        Some(row) => Ok(Json(row.into())),
+        None => Err(Problem::new(
+            StatusCode::NOT_FOUND,
+            "Not found",
+            format!("no experiment {id}"),
+        )),
+    }
+}
+
+async fn cancel(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<ExperimentView>, Problem> {
+    let changed = st.store.cancel(&id).await.map_err(Problem::internal)?;
+    match st.store.get(&id).await.map_err(Problem::internal)? {
+        None => Err(Problem::new(
+            StatusCode::NOT_FOUND,
+            "Not found",
+            format!("no experiment {id}"),
+        )),
+        Some(row) if !changed => Err(Problem::new(
+            StatusCode::CONFLICT,
+            "Not cancellable",
+            format!("experiment {id} is already {}", row.state),
+        )),
+        Some(row) => Ok(Json(row.into())),
+    }
+}
+
+/// Open the store, requeue interrupted work, bind, and serve until Ctrl-C.
+/// Returns after shutdown. Prints the bound address on stdout first.
+pub async fn serve(db: &std::path::Path, bind: &str) -> Result<(), String> {
+    let store = Store::open(db)
+        .await
+        .map_err(|e| format!("cannot open database {}: {e}", db.display()))?;
+    let requeued = store
+        .requeue_interrupted()
+        .await
+        .map_err(|e| e.to_string())?;
+    if requeued > 0 {
+        tracing::info!(
+            requeued,
+            "requeued experiments interrupted by the last shutdown"
+        );
+    }
+    let listener = tokio::net::TcpListener::bind(bind)
+        .await
+        .map_err(|e| format!("cannot bind {bind}: {e}"))?;
+    let addr = listener.local_addr().map_err(|e| e.to_string())?;
+    println!("zwidth serving on http://{addr}");
+    use std::io::Write;
+    let _ = std::io::stdout().flush();
+    tokio::spawn(crate::jobs::runner(store.clone()));
+    axum::serve(listener, router(AppState { store }))
+        .with_graceful_shutdown(async {
+            let _ = tokio::signal::ctrl_c().await;
+        })
+        .await
+        .map_err(|e| e.to_string())
+}

@@ -1,0 +1,155 @@
+//! The experiment queue: what an experiment is (one spec type, stored as
+//! submitted), and the runner that claims queued experiments one at a time,
+//! runs them off the async workers (`spawn_blocking`), writes progress, and
+//! honours cancellation between trials.
+
+use serde::{Deserialize, Serialize};
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::Duration;
+
+use crate::error::SpecError;
+use crate::store::Store;
+use crate::zwidth::compare;
+use crate::zwidth::scene::SceneSpec;
+use crate::zwidth::search::{self, map_observed, Observer};
+use crate::zwidth::settings::{Accuracy, MapSpec};
+
+/// An experiment as submitted: `{"kind":"map", …MapSpec}` or
+/// `{"kind":"compare","scene":{…},"accuracy":"draft"}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum ExperimentSpec {
+    Map(MapSpec),
+    Compare(CompareSpec),
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CompareSpec {
+    /// The scene (its estimator is ignored); default the 2018 paper's simulated device.
+    #[serde(default)]
+    pub scene: Option<SceneSpec>,
+    #[serde(default)]
+    pub accuracy: Accuracy,
+}
+
+impl ExperimentSpec {
+    pub fn kind(&self) -> &'static str {
+        match self {
+            ExperimentSpec::Map(_) => "map",
+            ExperimentSpec::Compare(_) => "compare",
+        }
+    }
+
+    /// The engines' own validation, without running anything.
+    pub fn validate(&self) -> Result<(), SpecError> {
+        match self {
+            ExperimentSpec::Map(m) => search::validate(m),
+            ExperimentSpec::Compare(c) => {
+                let scene = c.scene.clone().unwrap_or_else(compare::seed_2018_scene);
+                let sc = scene.validate().map_err(|e| e.within("scene"))?;
+                c.accuracy.resolve(&sc).map(|_| ())
+            }
+        }
+    }
+
+    /// Run to completion (blocking; call off the async workers).
+    pub fn run(&self, observer: Arc<Observer>) -> Result<serde_json::Value, SpecError> {
+        // Results are plain data: serializing them cannot fail.
+        match self {
+            ExperimentSpec::Map(m) => {
+                map_observed(m, Some(observer)).map(|r| serde_json::to_value(r).unwrap_or_default())
+            }
+            ExperimentSpec::Compare(c) => {
+                let scene = c.scene.clone().unwrap_or_else(compare::seed_2018_scene);
+                compare::compare(&scene, &c.accuracy)
+                    .map(|r| serde_json::to_value(r).unwrap_or_default())
+            }
+        }
+    }
+}
+
+/// Claim and run experiments until the process ends.
+pub async fn runner(store: Store) {
+    loop {
+        match store.claim_next().await {
+            Ok(Some(row)) => run_one(&store, row.id, row.spec).await,
+            Ok(None) => tokio::time::sleep(Duration::from_millis(100)).await,
+            Err(e) => {
+                tracing::error!(error = %e, "claiming the next experiment failed");
+                tokio::time::sleep(Duration::from_secs(1)).await;
+            }
+        }
+    }
+}
+
+#[tracing::instrument(skip(store, spec))]
+async fn run_one(store: &Store, id: String, spec: String) {
+    let parsed: ExperimentSpec = match serde_json::from_str(&spec) {
+        Ok(s) => s,
+        Err(e) => {
+            let _ = store
+                .finish(
+                    &id,
+                    "failed",
+                    0,
+                    None,
+                    Some(&format!("stored spec unreadable: {e}")),
+                )
+                .await;
+            return;
+        }
+    };
+    let observer = Arc::new(Observer::default());
+    let obs = observer.clone();
+    let mut task = tokio::task::spawn_blocking(move || parsed.run(obs));
+    // Write progress and look for a cancel request every 100 ms.
+    let outcome = loop {
+        tokio::select! {
+            r = &mut task => break r,
+            _ = tokio::time::sleep(Duration::from_millis(100)) => {
+                let trials = observer.trials.load(Ordering::Relaxed) as i64;
+                if let Err(e) = store.set_progress(&id, trials).await {
+                    tracing::warn!(error = %e, "progress write failed");
+                }
+                if let Ok(Some(state)) = store.state(&id).await {
+                    if state == "cancelled" {
+                        observer.cancel.store(true, Ordering::Relaxed);
+                    }
+                }
+            }
+        }
+    };
+    let trials = observer.trials.load(Ordering::Relaxed) as i64;
+    let res = if observer.cancelled() {
+        store.finish(&id, "cancelled", trials, None, None).await
+    } else {
+        match outcome {
+            Ok(Ok(v)) => {
+                store
+                    .finish(&id, "succeeded", trials, Some(&v.to_string()), None)
+                    .await
+            }
+            Ok(Err(e)) => {
+                store
+                    .finish(&id, "failed", trials, None, Some(&e.to_string()))
+                    .await
+            }
+            Err(e) => {
+                store
+                    .finish(
+                        &id,
+                        "failed",
+                        trials,
+                        None,
+                        Some(&format!("the run panicked: {e}")),
+                    )
+                    .await
+            }
+        }
+    };
+    if let Err(e) = res {
+        tracing::error!(error = %e, "recording the end of a run failed");
+    }
+}

@@ -1,0 +1,176 @@
+//! The service as users run it: the real binary on 127.0.0.1:0 with a fresh
+//! database, driven over HTTP.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+struct Server {
+    child: Child,
+    base: String,
+    _dir: std::path::PathBuf,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn start() -> Server {
+    let dir =
+        std::env::temp_dir().join(format!("zwidth-svc-{}-{}", std::process::id(), uuid_like()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+        .args(["serve", "--bind", "127.0.0.1:0", "--db"])
+        .arg(dir.join("test.db"))
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let base = line.trim().rsplit(' ').next().unwrap().to_string();
+    assert!(base.starts_with("http://127.0.0.1:"), "{line}");
+    Server {
+        child,
+        base,
+        _dir: dir,
+    }
+}
+
+fn uuid_like() -> u128 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos()
+}
+
+fn post(url: &str, body: &str) -> (u16, serde_json::Value, String) {
+    match ureq::post(url)
+        .set("content-type", "application/json")
+        .send_string(body)
+    {
+        Ok(r) => {
+            let ct = r.content_type().to_string();
+            (r.status(), r.into_json().unwrap(), ct)
+        }
+        Err(ureq::Error::Status(code, r)) => {
+            let ct = r.content_type().to_string();
+            (code, r.into_json().unwrap(), ct)
+        }
+        Err(e) => panic!("{e}"),
+    }
+}
+
+fn get(url: &str) -> serde_json::Value {
+    ureq::get(url).call().unwrap().into_json().unwrap()
+}
+
+#[test]
+fn submit_progress_result() {
+    let s = start();
+    assert_eq!(
+        ureq::get(&format!("{}/healthz", s.base))
+            .call()
+            .unwrap()
+            .into_string()
+            .unwrap(),
+        "ok"
+    );
+    // An analytic strict-passivity map: b > KT/2 + |B| gives 16 400 N/m at B = 5.
+    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},
+                  "criterion":"strict_passivity","b":[0,5]}"#;
+    let (code, v, _) = post(&format!("{}/v1/experiments", s.base), body);
+    assert_eq!(code, 202, "{v}");
+    assert_eq!(v["state"], "queued");
+    let id = v["id"].as_str().unwrap().to_string();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let done = loop {
+        let v = get(&format!("{}/v1/experiments/{id}", s.base));
+        if v["state"] == "succeeded" || v["state"] == "failed" {
+            break v;
+        }
+        assert!(Instant::now() < deadline, "still {v}");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert_eq!(done["state"], "succeeded", "{done}");
+    let k5 = done["result"]["boundary"][1]["k_max"].as_f64().unwrap();
+    assert!((k5 - 16_400.0).abs() < 1e-6, "{k5}");
+    assert!(done["progress"]["trials_done"].as_i64().unwrap() >= 1);
+    let all = get(&format!("{}/v1/experiments", s.base));
+    assert_eq!(all.as_array().unwrap().len(), 1);
+}
+
+#[test]
+fn bad_inputs_are_problems_naming_the_field() {
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    for (body, needle) in [
+        (
+            r#"{"kind":"map","scene":{"device":{"mass":-1}}}"#,
+            "scene.device.mass",
+        ),
+        (r#"{"kind":"map","scene":{},"method":"analytic"}"#, "method"),
+        (
+            r#"{"kind":"map","scene":{"estimator":{"kind":"butterworth","cutoff_hz":99999}}}"#,
+            "scene.estimator.cutoff_hz",
+        ),
+        (r#"{"kind":"nope"}"#, "unknown variant"),
+        (r#"not json"#, "not a valid experiment"),
+        (
+            r#"{"kind":"compare","accuracy":"fast"}"#,
+            "not a valid experiment",
+        ),
+    ] {
+        let (code, v, ct) = post(&url, body);
+        assert_eq!(code, 422, "{body}: {v}");
+        assert_eq!(ct, "application/problem+json");
+        let text = v.to_string();
+        assert!(text.contains(needle), "{body}: {text} lacks {needle}");
+        assert_eq!(v["status"], 422);
+    }
+    // Nothing was stored by the bad requests.
+    assert_eq!(get(&url).as_array().unwrap().len(), 0);
+    let r = ureq::get(&format!("{}/v1/experiments/nope", s.base)).call();
+    assert!(matches!(r, Err(ureq::Error::Status(404, _))));
+}
+
+#[test]
+fn idempotency_key_and_cancel() {
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    // A long time-domain map, so it is still running when cancelled.
+    let body = r#"{"kind":"map","scene":{"loop":{"sample_hz":10000,"render_hz":1000}},"method":"time","criterion":"stability","search":"trace","accuracy":"reference"}"#;
+    let send = || {
+        ureq::post(&url)
+            .set("idempotency-key", "abc-1")
+            .send_string(body)
+            .unwrap()
+    };
+    let first = send();
+    assert_eq!(first.status(), 202);
+    let v1: serde_json::Value = first.into_json().unwrap();
+    let second = send();
+    assert_eq!(second.status(), 200);
+    let v2: serde_json::Value = second.into_json().unwrap();
+    assert_eq!(v1["id"], v2["id"]);
+    let id = v1["id"].as_str().unwrap();
+    // Wait for it to run, cancel, and see it stop.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while get(&format!("{url}/{id}"))["state"] != "running" {
+        assert!(Instant::now() < deadline);
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let (code, v, _) = post(&format!("{url}/{id}/cancel"), "");
+    assert_eq!(code, 200, "{v}");
+    std::thread::sleep(Duration::from_millis(500));
+    let v = get(&format!("{url}/{id}"));
+    assert_eq!(v["state"], "cancelled", "{v}");
+    let (code, _, _) = post(&format!("{url}/{id}/cancel"), "");
+    assert_eq!(code, 409);
+}
