@@ -22,6 +22,10 @@ fn start() -> Server {
     let dir =
         std::env::temp_dir().join(format!("zwidth-svc-{}-{}", std::process::id(), uuid_like()));
     std::fs::create_dir_all(&dir).unwrap();
+    start_in(dir)
+}
+
+fn start_in(dir: std::path::PathBuf) -> Server {
     let mut child = Command::new(env!("CARGO_BIN_EXE_zwidth"))
         .args(["serve", "--bind", "127.0.0.1:0", "--db"])
         .arg(dir.join("test.db"))
@@ -173,4 +177,67 @@ fn idempotency_key_and_cancel() {
     assert_eq!(v["state"], "cancelled", "{v}");
     let (code, _, _) = post(&format!("{url}/{id}/cancel"), "");
     assert_eq!(code, 409);
+}
+
+#[test]
+fn killed_mid_run_resumes_from_stored_trials_with_the_same_result() {
+    // The 2011 boundary trace of the seed device (time domain, ~540 trials).
+    let spec = r#"{"kind":"map","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},
+                   "estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","search":"trace"}"#;
+    let s = start();
+    let dir = s._dir.clone();
+    let url = format!("{}/v1/experiments", s.base);
+    let (code, v, _) = post(&url, spec);
+    assert_eq!(code, 202);
+    let id = v["id"].as_str().unwrap().to_string();
+    // Let it get well into the run, then SIGKILL the server.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let v = get(&format!("{url}/{id}"));
+        assert!(
+            v["state"] == "running" || v["state"] == "queued",
+            "finished before it could be killed: {v}"
+        );
+        if v["state"] == "running" && v["progress"]["trials_done"].as_i64().unwrap() >= 60 {
+            break;
+        }
+        assert!(Instant::now() < deadline);
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    std::thread::sleep(Duration::from_millis(250)); // a trial batch reaches the store
+    let mut s = s;
+    s.child.kill().unwrap(); // SIGKILL
+    s.child.wait().unwrap();
+    std::mem::forget(s);
+    // Restart on the same database: the run is requeued and resumes.
+    let s2 = start_in(dir);
+    let url = format!("{}/v1/experiments", s2.base);
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let done = loop {
+        let v = get(&format!("{url}/{id}"));
+        if v["state"] == "succeeded" || v["state"] == "failed" {
+            break v;
+        }
+        assert!(Instant::now() < deadline, "{v}");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert_eq!(done["state"], "succeeded", "{done}");
+    // The same result as an uninterrupted run (the library, in this process).
+    let spec: zwidth::jobs::ExperimentSpec = serde_json::from_str(spec).unwrap();
+    let zwidth::jobs::ExperimentSpec::Map(m) = spec else {
+        unreachable!()
+    };
+    let want = zwidth::zwidth::search::map(&m).unwrap();
+    let got = &done["result"];
+    assert_eq!(got["trials"].as_u64().unwrap() as usize, want.trials);
+    assert_eq!(got["k_width"].as_f64().unwrap(), want.k_width);
+    assert_eq!(got["b_width"].as_f64().unwrap(), want.b_width);
+    let boundary: Vec<(f64, f64)> = got["boundary"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| (p["b"].as_f64().unwrap(), p["k_max"].as_f64().unwrap()))
+        .collect();
+    let want_b: Vec<(f64, f64)> = want.boundary.iter().map(|p| (p.b, p.k_max)).collect();
+    assert_eq!(boundary, want_b);
 }

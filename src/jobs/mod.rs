@@ -58,12 +58,11 @@ impl ExperimentSpec {
     pub fn run(&self, observer: Arc<Observer>) -> Result<serde_json::Value, SpecError> {
         // Results are plain data: serializing them cannot fail.
         match self {
-            ExperimentSpec::Map(m) => {
-                map_observed(m, Some(observer)).map(|r| serde_json::to_value(r).unwrap_or_default())
-            }
+            ExperimentSpec::Map(m) => map_observed(m, Some(observer), 0)
+                .map(|r| serde_json::to_value(r).unwrap_or_default()),
             ExperimentSpec::Compare(c) => {
                 let scene = c.scene.clone().unwrap_or_else(compare::seed_2018_scene);
-                compare::compare(&scene, &c.accuracy)
+                compare::compare_observed(&scene, &c.accuracy, Some(observer))
                     .map(|r| serde_json::to_value(r).unwrap_or_default())
             }
         }
@@ -101,14 +100,29 @@ async fn run_one(store: &Store, id: String, spec: String) {
             return;
         }
     };
-    let observer = Arc::new(Observer::default());
+    // Resume: trials stored by an interrupted run are replayed, not redone.
+    let done = match store.trials(&id).await {
+        Ok(t) => t,
+        Err(e) => {
+            tracing::error!(error = %e, "reading stored trials failed");
+            Vec::new()
+        }
+    };
+    if !done.is_empty() {
+        tracing::info!(stored = done.len(), "resuming from stored trials");
+    }
+    let observer = Arc::new(Observer::resuming(done));
     let obs = observer.clone();
     let mut task = tokio::task::spawn_blocking(move || parsed.run(obs));
-    // Write progress and look for a cancel request every 100 ms.
+    // Every 100 ms: store the trials finished since (one transaction), write
+    // progress, and look for a cancel request.
     let outcome = loop {
         tokio::select! {
             r = &mut task => break r,
             _ = tokio::time::sleep(Duration::from_millis(100)) => {
+                if let Err(e) = store.add_trials(&id, &observer.take_new()).await {
+                    tracing::warn!(error = %e, "storing trials failed");
+                }
                 let trials = observer.trials.load(Ordering::Relaxed) as i64;
                 if let Err(e) = store.set_progress(&id, trials).await {
                     tracing::warn!(error = %e, "progress write failed");
@@ -121,6 +135,9 @@ async fn run_one(store: &Store, id: String, spec: String) {
             }
         }
     };
+    if let Err(e) = store.add_trials(&id, &observer.take_new()).await {
+        tracing::warn!(error = %e, "storing trials failed");
+    }
     let trials = observer.trials.load(Ordering::Relaxed) as i64;
     let res = if observer.cancelled() {
         store.finish(&id, "cancelled", trials, None, None).await

@@ -8,6 +8,8 @@ use sqlx::{FromRow, SqlitePool};
 use std::path::Path;
 use std::time::Duration;
 
+use crate::zwidth::search::StoredTrial;
+
 static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
 
 #[derive(Debug, Clone)]
@@ -175,6 +177,51 @@ impl Store {
         sqlx::query_scalar::<_, String>("SELECT state FROM experiments WHERE id = ?")
             .bind(id)
             .fetch_optional(&self.pool)
+            .await
+    }
+
+    /// Store finished trials in one transaction (already stored ones are kept).
+    pub async fn add_trials(&self, id: &str, trials: &[StoredTrial]) -> Result<(), sqlx::Error> {
+        if trials.is_empty() {
+            return Ok(());
+        }
+        let mut tx = self.pool.begin().await?;
+        for t in trials {
+            let point = serde_json::to_string(&t.point).unwrap_or_default();
+            sqlx::query("INSERT OR IGNORE INTO trials (experiment_id, scope, k, b, point) VALUES (?, ?, ?, ?, ?)")
+                .bind(id)
+                .bind(t.scope as i64)
+                .bind(t.point.k)
+                .bind(t.point.b)
+                .bind(point)
+                .execute(&mut *tx)
+                .await?;
+        }
+        tx.commit().await
+    }
+
+    /// Every stored trial of an experiment.
+    pub async fn trials(&self, id: &str) -> Result<Vec<StoredTrial>, sqlx::Error> {
+        let rows: Vec<(i64, String)> =
+            sqlx::query_as("SELECT scope, point FROM trials WHERE experiment_id = ?")
+                .bind(id)
+                .fetch_all(&self.pool)
+                .await?;
+        Ok(rows
+            .into_iter()
+            .filter_map(|(scope, p)| {
+                serde_json::from_str(&p).ok().map(|point| StoredTrial {
+                    scope: scope as u32,
+                    point,
+                })
+            })
+            .collect())
+    }
+
+    pub async fn trial_count(&self, id: &str) -> Result<i64, sqlx::Error> {
+        sqlx::query_scalar("SELECT COUNT(*) FROM trials WHERE experiment_id = ?")
+            .bind(id)
+            .fetch_one(&self.pool)
             .await
     }
 }

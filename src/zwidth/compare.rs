@@ -12,7 +12,7 @@ use serde::Serialize;
 
 use super::hit::{wall_hit, HitKnobs, TraceRow};
 use super::scene::SceneSpec;
-use super::search::{map, MapResult};
+use super::search::{map_observed, MapResult, Observer};
 use super::settings::{
     Accuracy, Criterion, MapSpec, Method, SearchKind, PAPER_B_STEP, PAPER_K_STEP,
 };
@@ -144,11 +144,21 @@ pub fn paper_estimators(scene: &SceneSpec, c: f64) -> Vec<(String, String, Estim
 }
 
 pub fn compare(scene: &SceneSpec, accuracy: &Accuracy) -> Result<CompareResult, SpecError> {
+    compare_observed(scene, accuracy, None)
+}
+
+/// The same, each estimator's map reporting to `observer` as scope 0, 1, …
+pub fn compare_observed(
+    scene: &SceneSpec,
+    accuracy: &Accuracy,
+    observer: Option<std::sync::Arc<Observer>>,
+) -> Result<CompareResult, SpecError> {
     let start = std::time::Instant::now();
     let c = estimate_c(scene)?;
     let rows = paper_estimators(scene, c.estimate.lipschitz)
         .into_par_iter()
-        .map(|(name, parameters, estimator)| {
+        .enumerate()
+        .map(|(scope, (name, parameters, estimator))| {
             let spec = MapSpec {
                 scene: SceneSpec {
                     estimator: estimator.clone(),
@@ -166,7 +176,7 @@ pub fn compare(scene: &SceneSpec, accuracy: &Accuracy) -> Result<CompareResult, 
                 name,
                 parameters,
                 estimator,
-                map: map(&spec)?,
+                map: map_observed(&spec, observer.clone(), scope as u32)?,
             })
         })
         .collect::<Result<Vec<_>, SpecError>>()?;

@@ -23,7 +23,7 @@ use super::settings::{Criterion, MapSpec, Method, Resolved, SearchKind};
 use crate::error::SpecError;
 
 /// One evaluated (K, B).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct Point {
     pub k: f64,
     pub b: f64,
@@ -71,17 +71,58 @@ pub struct MapResult {
     pub elapsed_s: f64,
 }
 
-/// Shared with whoever runs a map: trials done so far, and a cancel flag the
-/// searches honour between trials (a cancelled map ends within one trial).
+/// A finished trial of map `scope` within one experiment.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+pub struct StoredTrial {
+    pub scope: u32,
+    pub point: Point,
+}
+
+/// Shared with whoever runs a map: trials done so far, a cancel flag the
+/// searches honour between trials (a cancelled map ends within one trial),
+/// trials already done by an earlier, interrupted run (replayed, not
+/// redone: the searches are deterministic), and the new ones to store.
 #[derive(Debug, Default)]
 pub struct Observer {
     pub trials: std::sync::atomic::AtomicUsize,
     pub cancel: std::sync::atomic::AtomicBool,
+    done: std::collections::HashMap<(u32, u64, u64), Point>,
+    new: std::sync::Mutex<Vec<StoredTrial>>,
 }
 
 impl Observer {
+    /// An observer that replays `done` instead of recomputing those trials.
+    pub fn resuming(done: Vec<StoredTrial>) -> Self {
+        Self {
+            done: done
+                .into_iter()
+                .map(|t| ((t.scope, t.point.k.to_bits(), t.point.b.to_bits()), t.point))
+                .collect(),
+            ..Self::default()
+        }
+    }
+
     pub fn cancelled(&self) -> bool {
         self.cancel.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// The trials finished since the last call.
+    pub fn take_new(&self) -> Vec<StoredTrial> {
+        std::mem::take(&mut *self.new.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    fn replay(&self, scope: u32, k: f64, b: f64) -> Option<Point> {
+        self.done.get(&(scope, k.to_bits(), b.to_bits())).cloned()
+    }
+
+    fn record(&self, scope: u32, p: &Point) {
+        self.new
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(StoredTrial {
+                scope,
+                point: p.clone(),
+            });
     }
 }
 
@@ -94,6 +135,7 @@ pub struct Evaluator {
     model: Option<LinearModel>,
     probe_setup: Option<ProbeSetup>,
     observer: Option<std::sync::Arc<Observer>>,
+    scope: u32,
 }
 
 impl Evaluator {
@@ -154,6 +196,7 @@ impl Evaluator {
             model,
             probe_setup,
             observer: None,
+            scope: 0,
         })
     }
 
@@ -221,7 +264,18 @@ impl Evaluator {
                 return p;
             }
             o.trials.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            if let Some(done) = o.replay(self.scope, k, b) {
+                return done;
+            }
+            let p = self.evaluate(p);
+            o.record(self.scope, &p);
+            return p;
         }
+        self.evaluate(p)
+    }
+
+    fn evaluate(&self, mut p: Point) -> Point {
+        let (k, b) = (p.k, p.b);
         match (self.criterion, &self.model) {
             (Criterion::Stability, Some(m)) => p.stable = Some(m.spectral_radius(k, b) < 1.0),
             (Criterion::Stability, None) => {
@@ -300,7 +354,7 @@ impl Evaluator {
 
 /// Run a map.
 pub fn map(spec: &MapSpec) -> Result<MapResult, SpecError> {
-    map_observed(spec, None)
+    map_observed(spec, None, 0)
 }
 
 /// Validate a map request completely without running it.
@@ -340,14 +394,17 @@ fn prepare(spec: &MapSpec) -> Result<Evaluator, SpecError> {
     Evaluator::new(scene, spec.method, spec.criterion, res)
 }
 
-/// Run a map, reporting trials to and honouring cancellation from `observer`.
+/// Run a map, reporting trials to and honouring cancellation from
+/// `observer`; `scope` names this map within its experiment.
 pub fn map_observed(
     spec: &MapSpec,
     observer: Option<std::sync::Arc<Observer>>,
+    scope: u32,
 ) -> Result<MapResult, SpecError> {
     let start = Instant::now();
     let mut ev = prepare(spec)?;
     ev.observer = observer;
+    ev.scope = scope;
     let res = ev.res;
     let b_auto: Vec<f64> = (0..)
         .map(|i| i as f64 * res.b_step)
