@@ -158,6 +158,14 @@ pub enum Command {
         /// Address to listen on; port 0 picks a free one (printed on start).
         #[arg(long, env = "ZWIDTH_BIND", default_value = "127.0.0.1:8080")]
         bind: String,
+        /// Bearer tokens that may submit and cancel (comma-separated); required beyond loopback.
+        #[arg(
+            long = "token",
+            env = "ZWIDTH_TOKENS",
+            value_delimiter = ',',
+            hide_env_values = true
+        )]
+        tokens: Vec<String>,
     },
     /// Measurements: `zwidth bench tradeoff`.
     Bench {
@@ -508,7 +516,7 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 write!(stdout, "{}", r.table()).map_err(io)
             }
         }
-        Command::Serve { db, bind } => {
+        Command::Serve { db, bind, tokens } => {
             let _ = tracing_subscriber::fmt()
                 .with_writer(std::io::stderr)
                 .with_env_filter(
@@ -520,8 +528,19 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 .enable_all()
                 .build()
                 .map_err(|e| CliError::Failure(format!("cannot start the runtime: {e}")))?;
-            rt.block_on(crate::http::serve(&db, &bind))
-                .map_err(CliError::Failure)
+            let tokens: Vec<String> = tokens
+                .into_iter()
+                .map(|t| t.trim().to_string())
+                .filter(|t| !t.is_empty())
+                .collect();
+            rt.block_on(crate::http::serve(&db, &bind, tokens))
+                .map_err(|e| {
+                    if e.starts_with("refusing") {
+                        CliError::Input(e)
+                    } else {
+                        CliError::Failure(e)
+                    }
+                })
         }
         Command::Bench {
             what: BenchCommand::Tradeoff { json },

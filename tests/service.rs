@@ -26,10 +26,16 @@ fn start() -> Server {
 }
 
 fn start_in(dir: std::path::PathBuf) -> Server {
+    start_with(dir, &[])
+}
+
+fn start_with(dir: std::path::PathBuf, extra: &[&str]) -> Server {
     let mut child = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+        .args(extra)
         .args(["serve", "--bind", "127.0.0.1:0", "--db"])
         .arg(dir.join("test.db"))
         .env("RUST_LOG", "warn")
+        .env_remove("ZWIDTH_TOKENS")
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
@@ -240,4 +246,72 @@ fn killed_mid_run_resumes_from_stored_trials_with_the_same_result() {
         .collect();
     let want_b: Vec<(f64, f64)> = want.boundary.iter().map(|p| (p.b, p.k_max)).collect();
     assert_eq!(boundary, want_b);
+}
+
+#[test]
+fn tokens_guard_mutations() {
+    let dir = std::env::temp_dir().join(format!(
+        "zwidth-svc-auth-{}-{}",
+        std::process::id(),
+        uuid_like()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+        .args([
+            "serve",
+            "--bind",
+            "127.0.0.1:0",
+            "--token",
+            "s3cret,other",
+            "--db",
+        ])
+        .arg(dir.join("t.db"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let s = Server {
+        base: line.trim().rsplit(' ').next().unwrap().to_string(),
+        child,
+        _dir: dir,
+    };
+    let url = format!("{}/v1/experiments", s.base);
+    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"b":[0]}"#;
+    let status = |r: Result<ureq::Response, ureq::Error>| match r {
+        Ok(r) => r.status(),
+        Err(ureq::Error::Status(c, _)) => c,
+        Err(e) => panic!("{e}"),
+    };
+    assert_eq!(status(ureq::post(&url).send_string(body)), 401);
+    assert_eq!(
+        status(
+            ureq::post(&url)
+                .set("authorization", "Bearer nope")
+                .send_string(body)
+        ),
+        403
+    );
+    assert_eq!(
+        status(
+            ureq::post(&url)
+                .set("authorization", "Bearer other")
+                .send_string(body)
+        ),
+        202
+    );
+    // Reading needs no token.
+    assert_eq!(status(ureq::get(&url).call()), 200);
+    // Beyond loopback without a token: refused, exit 2.
+    let o = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+        .args(["serve", "--bind", "0.0.0.0:0", "--db"])
+        .arg(s._dir.join("u.db"))
+        .env_remove("ZWIDTH_TOKENS")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("ZWIDTH_TOKENS"));
 }

@@ -21,6 +21,34 @@ pub const BODY_LIMIT: usize = 1 << 20;
 #[derive(Clone)]
 pub struct AppState {
     pub store: Store,
+    /// Bearer tokens accepted on mutating endpoints; empty: none required
+    /// (only allowed when bound to loopback).
+    pub tokens: std::sync::Arc<Vec<String>>,
+}
+
+/// Mutating endpoints need `Authorization: Bearer <token>` when tokens are
+/// configured: 401 without one, 403 with a wrong one.
+fn authorize(st: &AppState, headers: &HeaderMap) -> Result<(), Problem> {
+    if st.tokens.is_empty() {
+        return Ok(());
+    }
+    let given = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "));
+    match given {
+        None => Err(Problem::new(
+            StatusCode::UNAUTHORIZED,
+            "Unauthorized",
+            "this endpoint needs Authorization: Bearer <token>",
+        )),
+        Some(t) if st.tokens.iter().any(|k| k == t) => Ok(()),
+        Some(_) => Err(Problem::new(
+            StatusCode::FORBIDDEN,
+            "Forbidden",
+            "the bearer token is not accepted",
+        )),
+    }
 }
 
 pub fn router(state: AppState) -> Router {
@@ -145,6 +173,7 @@ async fn submit(
     headers: HeaderMap,
     body: Bytes,
 ) -> Result<Response, Problem> {
+    authorize(&st, &headers)?;
     let spec: ExperimentSpec = serde_json::from_slice(&body).map_err(|e| {
         Problem::new(
             StatusCode::UNPROCESSABLE_ENTITY,
@@ -210,8 +239,10 @@ async fn show(
 
 async fn cancel(
     State(st): State<AppState>,
+    headers: HeaderMap,
     Path(id): Path<String>,
 ) -> Result<Json<ExperimentView>, Problem> {
+    authorize(&st, &headers)?;
     let changed = st.store.cancel(&id).await.map_err(Problem::internal)?;
     match st.store.get(&id).await.map_err(Problem::internal)? {
         None => Err(Problem::new(
@@ -230,7 +261,7 @@ async fn cancel(
 
 /// Open the store, requeue interrupted work, bind, and serve until Ctrl-C.
 /// Returns after shutdown. Prints the bound address on stdout first.
-pub async fn serve(db: &std::path::Path, bind: &str) -> Result<(), String> {
+pub async fn serve(db: &std::path::Path, bind: &str, tokens: Vec<String>) -> Result<(), String> {
     let store = Store::open(db)
         .await
         .map_err(|e| format!("cannot open database {}: {e}", db.display()))?;
@@ -248,11 +279,20 @@ pub async fn serve(db: &std::path::Path, bind: &str) -> Result<(), String> {
         .await
         .map_err(|e| format!("cannot bind {bind}: {e}"))?;
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
+    if tokens.is_empty() && !addr.ip().is_loopback() {
+        return Err(format!(
+            "refusing to serve on {addr} without a token: set ZWIDTH_TOKENS=<secret>[,<secret>…] (or --token), or bind to 127.0.0.1"
+        ));
+    }
+    if tokens.is_empty() {
+        tracing::warn!("no token set: anyone on this machine may submit; set ZWIDTH_TOKENS=<secret> to require Authorization: Bearer <secret>");
+    }
     println!("zwidth serving on http://{addr}");
     use std::io::Write;
     let _ = std::io::stdout().flush();
     tokio::spawn(crate::jobs::runner(store.clone()));
-    axum::serve(listener, router(AppState { store }))
+    let tokens = std::sync::Arc::new(tokens);
+    axum::serve(listener, router(AppState { store, tokens }))
         .with_graceful_shutdown(async {
             let _ = tokio::signal::ctrl_c().await;
         })
