@@ -167,6 +167,40 @@ pub enum Command {
         )]
         tokens: Vec<String>,
     },
+    /// Submit an experiment JSON file to a running service; prints its id.
+    Submit {
+        file: PathBuf,
+        #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
+        server: String,
+        #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+        priority: i64,
+        #[arg(long)]
+        idempotency_key: Option<String>,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Show an experiment's state and progress (JSON).
+    Status {
+        id: String,
+        #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
+        server: String,
+    },
+    /// Follow an experiment with a progress line until it ends (exit 1 unless it succeeded).
+    Watch {
+        id: String,
+        #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
+        server: String,
+    },
+    /// Fetch a finished experiment's result: JSON on stdout, or points as CSV, or the plot.
+    Results {
+        id: String,
+        #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
+        server: String,
+        #[arg(long)]
+        csv: Option<PathBuf>,
+        #[arg(long)]
+        svg: Option<PathBuf>,
+    },
     /// Measurements: `zwidth bench tradeoff`.
     Bench {
         #[command(subcommand)]
@@ -247,6 +281,13 @@ pub fn read_samples(input: impl BufRead) -> Result<Vec<f64>, CliError> {
         }
     }
     Ok(out)
+}
+
+fn client(server: String) -> crate::client::Client {
+    crate::client::Client {
+        server: server.trim_end_matches('/').to_string(),
+        token: std::env::var("ZWIDTH_TOKEN").ok().filter(|t| !t.is_empty()),
+    }
 }
 
 fn read_scene(path: &std::path::Path) -> Result<SceneSpec, CliError> {
@@ -541,6 +582,67 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                         CliError::Failure(e)
                     }
                 })
+        }
+        Command::Submit {
+            file,
+            server,
+            priority,
+            idempotency_key,
+            json,
+        } => {
+            let body = std::fs::read_to_string(&file)
+                .map_err(|e| CliError::Input(format!("{} cannot be read: {e}", file.display())))?;
+            let v = client(server).submit(&body, priority, idempotency_key.as_deref())?;
+            if json {
+                write_json(stdout, &v)
+            } else {
+                writeln!(
+                    stdout,
+                    "{} {}",
+                    v["id"].as_str().unwrap_or("?"),
+                    v["state"].as_str().unwrap_or("?")
+                )
+                .map_err(io)
+            }
+        }
+        Command::Status { id, server } => write_json(stdout, &client(server).status(&id)?),
+        Command::Watch { id, server } => {
+            let v = client(server).watch(&id)?;
+            let state = v["state"].as_str().unwrap_or("?").to_string();
+            writeln!(stdout, "{id} {state}").map_err(io)?;
+            if state == "succeeded" {
+                Ok(())
+            } else {
+                Err(CliError::Failure(format!(
+                    "experiment {id} ended {state}: {}",
+                    v["error"].as_str().unwrap_or("")
+                )))
+            }
+        }
+        Command::Results {
+            id,
+            server,
+            csv,
+            svg,
+        } => {
+            let v = client(server).status(&id)?;
+            if v["state"] != "succeeded" {
+                return Err(CliError::Input(format!(
+                    "experiment {id} is {}, not succeeded: no result yet",
+                    v["state"]
+                )));
+            }
+            let result = &v["result"];
+            if let Some(p) = &csv {
+                write_file(p, &crate::client::points_csv(result)?)?;
+            }
+            if let Some(p) = &svg {
+                write_file(p, &crate::client::result_svg(result)?)?;
+            }
+            if csv.is_none() && svg.is_none() {
+                write_json(stdout, result)?;
+            }
+            Ok(())
         }
         Command::Bench {
             what: BenchCommand::Tradeoff { json },

@@ -6,6 +6,7 @@
 
 pub mod accuracy;
 pub mod cli;
+pub mod client;
 pub mod error;
 pub mod estimators;
 pub mod http;

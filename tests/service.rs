@@ -315,3 +315,82 @@ fn tokens_guard_mutations() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("ZWIDTH_TOKENS"));
 }
+
+#[test]
+fn pause_schedule_metrics_and_the_cli_client() {
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    // Paused: nothing starts.
+    let (code, v, _) = post(&format!("{}/v1/queue/pause", s.base), "");
+    assert_eq!((code, v["paused"].as_bool()), (200, Some(true)));
+    let (_, v, _) = post(&url, body);
+    let id = v["id"].as_str().unwrap().to_string();
+    std::thread::sleep(Duration::from_millis(400));
+    assert_eq!(get(&format!("{url}/{id}"))["state"], "queued");
+    // Scheduled far in the future: stays scheduled after resuming.
+    let (code, v, _) = post(&format!("{url}?not_before_ms=99999999999999"), body);
+    assert_eq!(code, 202);
+    assert_eq!(v["state"], "scheduled");
+    let later = v["id"].as_str().unwrap().to_string();
+    post(&format!("{}/v1/queue/resume", s.base), "");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while get(&format!("{url}/{id}"))["state"] != "succeeded" {
+        assert!(Instant::now() < deadline);
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(get(&format!("{url}/{later}"))["state"], "scheduled");
+    // Metrics: Prometheus text with the queue depth (the scheduled one).
+    let m = ureq::get(&format!("{}/metrics", s.base))
+        .call()
+        .unwrap()
+        .into_string()
+        .unwrap();
+    assert!(m.contains("zwidth_queue_depth 1"), "{m}");
+    assert!(
+        m.contains("zwidth_experiments{state=\"succeeded\"} 1"),
+        "{m}"
+    );
+    assert!(m.contains("zwidth_trials_total"));
+    // The CLI client against the same server.
+    let file = s._dir.join("exp.json");
+    std::fs::write(&file, body).unwrap();
+    let run = |args: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+            .args(args)
+            .env("ZWIDTH_SERVER", &s.base)
+            .output()
+            .unwrap();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (code, out, err) = run(&["submit", file.to_str().unwrap()]);
+    assert_eq!(code, Some(0), "{err}");
+    let new_id = out.split_whitespace().next().unwrap().to_string();
+    let (code, out, err) = run(&["watch", &new_id]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(out.contains("succeeded"));
+    let csv = s._dir.join("points.csv");
+    let svg = s._dir.join("map.svg");
+    let (code, _, err) = run(&[
+        "results",
+        &new_id,
+        "--csv",
+        csv.to_str().unwrap(),
+        "--svg",
+        svg.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(std::fs::read_to_string(&csv)
+        .unwrap()
+        .starts_with("k_n_per_m,b_ns_per_m,renders,fidelity_ns_per_m"));
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
+    // A bad experiment through the client: exit 2 with the server's detail.
+    std::fs::write(&file, r#"{"kind":"map","scene":{"device":{"mass":0}}}"#).unwrap();
+    let (code, _, err) = run(&["submit", file.to_str().unwrap()]);
+    assert_eq!(code, Some(2));
+    assert!(err.contains("scene.device.mass"), "{err}");
+}

@@ -57,6 +57,10 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/experiments", post(submit).get(list))
         .route("/v1/experiments/{id}", get(show))
         .route("/v1/experiments/{id}/cancel", post(cancel))
+        .route("/v1/queue", get(queue))
+        .route("/v1/queue/pause", post(pause))
+        .route("/v1/queue/resume", post(resume))
+        .route("/metrics", get(metrics))
         .layer(DefaultBodyLimit::max(BODY_LIMIT))
         .with_state(state)
 }
@@ -131,6 +135,8 @@ pub struct ExperimentView {
     pub created_ms: i64,
     pub started_ms: Option<i64>,
     pub finished_ms: Option<i64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub not_before_ms: Option<i64>,
     pub progress: Value,
     pub spec: Value,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -155,6 +161,7 @@ impl From<ExperimentRow> for ExperimentView {
             created_ms: r.created_ms,
             started_ms: r.started_ms,
             finished_ms: r.finished_ms,
+            not_before_ms: r.not_before_ms,
             error: r.error,
         }
     }
@@ -164,6 +171,9 @@ impl From<ExperimentRow> for ExperimentView {
 pub struct SubmitQuery {
     #[serde(default)]
     priority: i64,
+    /// Do not start before this time (unix ms).
+    #[serde(default)]
+    not_before_ms: Option<i64>,
 }
 
 #[tracing::instrument(skip(st, headers, body))]
@@ -194,6 +204,17 @@ async fn submit(
         p.field = Some("priority".into());
         return Err(p);
     }
+    if let Some(t) = q.not_before_ms {
+        if !(0..=i64::MAX / 2).contains(&t) {
+            let mut p = Problem::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "Invalid experiment",
+                format!("not_before_ms = {t} is not allowed: must be a unix time in ms >= 0"),
+            );
+            p.field = Some("not_before_ms".into());
+            return Err(p);
+        }
+    }
     let key = headers
         .get("idempotency-key")
         .and_then(|v| v.to_str().ok())
@@ -202,7 +223,14 @@ async fn submit(
     let text = serde_json::to_string(&spec).map_err(Problem::internal)?;
     let (row, created) = st
         .store
-        .insert(&id, spec.kind(), &text, q.priority, key.as_deref())
+        .insert(
+            &id,
+            spec.kind(),
+            &text,
+            q.priority,
+            key.as_deref(),
+            q.not_before_ms,
+        )
         .await
         .map_err(Problem::internal)?;
     let status = if created {
@@ -257,6 +285,70 @@ async fn cancel(
         )),
         Some(row) => Ok(Json(row.into())),
     }
+}
+
+async fn queue(State(st): State<AppState>) -> Result<Json<Value>, Problem> {
+    let paused = st.store.paused().await.map_err(Problem::internal)?;
+    let (by_state, _) = st.store.counts().await.map_err(Problem::internal)?;
+    let counts: serde_json::Map<String, Value> =
+        by_state.into_iter().map(|(s, n)| (s, json!(n))).collect();
+    Ok(Json(json!({ "paused": paused, "experiments": counts })))
+}
+
+async fn pause(State(st): State<AppState>, headers: HeaderMap) -> Result<Json<Value>, Problem> {
+    authorize(&st, &headers)?;
+    st.store.set_paused(true).await.map_err(Problem::internal)?;
+    queue(State(st)).await
+}
+
+async fn resume(State(st): State<AppState>, headers: HeaderMap) -> Result<Json<Value>, Problem> {
+    authorize(&st, &headers)?;
+    st.store
+        .set_paused(false)
+        .await
+        .map_err(Problem::internal)?;
+    queue(State(st)).await
+}
+
+/// Prometheus text: queue depth, experiments by state, trials done and the
+/// runner's current trials per second.
+async fn metrics(State(st): State<AppState>) -> Result<Response, Problem> {
+    let (by_state, trials) = st.store.counts().await.map_err(Problem::internal)?;
+    let depth: i64 = by_state
+        .iter()
+        .filter(|(s, _)| s == "queued" || s == "scheduled")
+        .map(|(_, n)| n)
+        .sum();
+    let mut out = String::new();
+    out.push_str("# HELP zwidth_queue_depth Experiments waiting to run (queued or scheduled).\n# TYPE zwidth_queue_depth gauge\n");
+    out.push_str(&format!("zwidth_queue_depth {depth}\n"));
+    out.push_str(
+        "# HELP zwidth_experiments Experiments by state.\n# TYPE zwidth_experiments gauge\n",
+    );
+    for state in [
+        "queued",
+        "scheduled",
+        "running",
+        "succeeded",
+        "failed",
+        "cancelled",
+        "interrupted",
+    ] {
+        let n = by_state
+            .iter()
+            .find(|(s, _)| s == state)
+            .map(|(_, n)| *n)
+            .unwrap_or(0);
+        out.push_str(&format!("zwidth_experiments{{state=\"{state}\"}} {n}\n"));
+    }
+    out.push_str("# HELP zwidth_trials_total Trials done over all experiments.\n# TYPE zwidth_trials_total counter\n");
+    out.push_str(&format!("zwidth_trials_total {trials}\n"));
+    out.push_str("# HELP zwidth_trials_per_second Trials per second of the running experiment, last second.\n# TYPE zwidth_trials_per_second gauge\n");
+    out.push_str(&format!(
+        "zwidth_trials_per_second {}\n",
+        crate::jobs::TRIALS_PER_SECOND.load(std::sync::atomic::Ordering::Relaxed)
+    ));
+    Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out).into_response())
 }
 
 /// Open the store, requeue interrupted work, bind, and serve until Ctrl-C.

@@ -69,6 +69,9 @@ impl ExperimentSpec {
     }
 }
 
+/// Trials per second of the running experiment over the last second (for /metrics).
+pub static TRIALS_PER_SECOND: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
 /// Claim and run experiments until the process ends.
 pub async fn runner(store: Store) {
     loop {
@@ -116,6 +119,7 @@ async fn run_one(store: &Store, id: String, spec: String) {
     let mut task = tokio::task::spawn_blocking(move || parsed.run(obs));
     // Every 100 ms: store the trials finished since (one transaction), write
     // progress, and look for a cancel request.
+    let mut rate_mark = (std::time::Instant::now(), 0usize);
     let outcome = loop {
         tokio::select! {
             r = &mut task => break r,
@@ -124,6 +128,11 @@ async fn run_one(store: &Store, id: String, spec: String) {
                     tracing::warn!(error = %e, "storing trials failed");
                 }
                 let trials = observer.trials.load(Ordering::Relaxed) as i64;
+                let dt = rate_mark.0.elapsed().as_secs_f64();
+                if dt >= 1.0 {
+                    TRIALS_PER_SECOND.store(((trials as usize - rate_mark.1) as f64 / dt).round() as u64, Ordering::Relaxed);
+                    rate_mark = (std::time::Instant::now(), trials as usize);
+                }
                 if let Err(e) = store.set_progress(&id, trials).await {
                     tracing::warn!(error = %e, "progress write failed");
                 }
@@ -138,6 +147,7 @@ async fn run_one(store: &Store, id: String, spec: String) {
     if let Err(e) = store.add_trials(&id, &observer.take_new()).await {
         tracing::warn!(error = %e, "storing trials failed");
     }
+    TRIALS_PER_SECOND.store(0, Ordering::Relaxed);
     let trials = observer.trials.load(Ordering::Relaxed) as i64;
     let res = if observer.cancelled() {
         store.finish(&id, "cancelled", trials, None, None).await

@@ -32,6 +32,7 @@ pub struct ExperimentRow {
     pub result: Option<String>,
     pub error: Option<String>,
     pub idempotency_key: Option<String>,
+    pub not_before_ms: Option<i64>,
 }
 
 pub fn now_ms() -> i64 {
@@ -68,6 +69,7 @@ impl Store {
         spec: &str,
         priority: i64,
         key: Option<&str>,
+        not_before_ms: Option<i64>,
     ) -> Result<(ExperimentRow, bool), sqlx::Error> {
         if let Some(k) = key {
             if let Some(row) = sqlx::query_as::<_, ExperimentRow>(
@@ -81,15 +83,17 @@ impl Store {
             }
         }
         let row = sqlx::query_as::<_, ExperimentRow>(
-            "INSERT INTO experiments (id, kind, spec, state, priority, created_ms, idempotency_key)
-             VALUES (?, ?, ?, 'queued', ?, ?, ?) RETURNING *",
+            "INSERT INTO experiments (id, kind, spec, state, priority, created_ms, idempotency_key, not_before_ms)
+             VALUES (?, ?, ?, ?, ?, ?, ?, ?) RETURNING *",
         )
         .bind(id)
         .bind(kind)
         .bind(spec)
+        .bind(if not_before_ms.is_some_and(|t| t > now_ms()) { "scheduled" } else { "queued" })
         .bind(priority)
         .bind(now_ms())
         .bind(key)
+        .bind(not_before_ms)
         .fetch_one(&self.pool)
         .await?;
         Ok((row, true))
@@ -111,16 +115,50 @@ impl Store {
         .await
     }
 
-    /// Claim the next queued experiment (highest priority, oldest first).
+    /// Claim the next experiment that may start now (highest priority, oldest
+    /// first), unless the queue is paused. Scheduled experiments whose time
+    /// has come count as queued.
     pub async fn claim_next(&self) -> Result<Option<ExperimentRow>, sqlx::Error> {
+        let now = now_ms();
         sqlx::query_as::<_, ExperimentRow>(
-            "UPDATE experiments SET state = 'running', started_ms = ?
-             WHERE id = (SELECT id FROM experiments WHERE state = 'queued' ORDER BY priority DESC, created_ms, id LIMIT 1)
+            "UPDATE experiments SET state = 'running', started_ms = ?1
+             WHERE id = (SELECT id FROM experiments
+                         WHERE state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= ?1)
+                           AND (SELECT paused FROM queue_control WHERE id = 1) = 0
+                         ORDER BY priority DESC, created_ms, id LIMIT 1)
              RETURNING *",
         )
-        .bind(now_ms())
+        .bind(now)
         .fetch_optional(&self.pool)
         .await
+    }
+
+    pub async fn set_paused(&self, paused: bool) -> Result<(), sqlx::Error> {
+        sqlx::query("UPDATE queue_control SET paused = ? WHERE id = 1")
+            .bind(paused as i64)
+            .execute(&self.pool)
+            .await
+            .map(|_| ())
+    }
+
+    pub async fn paused(&self) -> Result<bool, sqlx::Error> {
+        sqlx::query_scalar::<_, i64>("SELECT paused FROM queue_control WHERE id = 1")
+            .fetch_one(&self.pool)
+            .await
+            .map(|p| p != 0)
+    }
+
+    /// Experiments per state, and the trials done over all of them.
+    pub async fn counts(&self) -> Result<(Vec<(String, i64)>, i64), sqlx::Error> {
+        let by_state: Vec<(String, i64)> =
+            sqlx::query_as("SELECT state, COUNT(*) FROM experiments GROUP BY state ORDER BY state")
+                .fetch_all(&self.pool)
+                .await?;
+        let trials: i64 =
+            sqlx::query_scalar("SELECT COALESCE(SUM(trials_done), 0) FROM experiments")
+                .fetch_one(&self.pool)
+                .await?;
+        Ok((by_state, trials))
     }
 
     pub async fn set_progress(&self, id: &str, trials: i64) -> Result<(), sqlx::Error> {

@@ -1,0 +1,150 @@
+//! The CLI client of a running service: submit, status, watch (a progress
+//! bar), results (JSON, CSV of the points, the map plot). Blocking HTTP
+//! (ureq); `--server` or `ZWIDTH_SERVER`, token from `ZWIDTH_TOKEN`.
+
+use serde_json::Value;
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+use crate::cli::CliError;
+use crate::plot::{zwidth_map_svg, MapPlotPoint};
+
+pub struct Client {
+    pub server: String,
+    pub token: Option<String>,
+}
+
+fn failure(e: impl std::fmt::Display) -> CliError {
+    CliError::Failure(e.to_string())
+}
+
+impl Client {
+    fn call(&self, req: ureq::Request, body: Option<&str>) -> Result<Value, CliError> {
+        let req = match &self.token {
+            Some(t) => req.set("authorization", &format!("Bearer {t}")),
+            None => req,
+        };
+        let resp = match body {
+            Some(b) => req.set("content-type", "application/json").send_string(b),
+            None => req.call(),
+        };
+        match resp {
+            Ok(r) => r.into_json().map_err(failure),
+            Err(ureq::Error::Status(code, r)) => {
+                let v: Value = r.into_json().unwrap_or_default();
+                let detail = v["detail"].as_str().unwrap_or("no detail").to_string();
+                // The server refused the input: exit 2, as for local bad input.
+                if (400..500).contains(&code) {
+                    Err(CliError::Input(format!("server said {code}: {detail}")))
+                } else {
+                    Err(CliError::Failure(format!("server said {code}: {detail}")))
+                }
+            }
+            Err(e) => Err(CliError::Failure(format!(
+                "cannot reach {}: {e}",
+                self.server
+            ))),
+        }
+    }
+
+    pub fn submit(&self, body: &str, priority: i64, key: Option<&str>) -> Result<Value, CliError> {
+        let mut req = ureq::post(&format!("{}/v1/experiments", self.server))
+            .query("priority", &priority.to_string());
+        if let Some(k) = key {
+            req = req.set("idempotency-key", k);
+        }
+        self.call(req, Some(body))
+    }
+
+    pub fn status(&self, id: &str) -> Result<Value, CliError> {
+        self.call(
+            ureq::get(&format!("{}/v1/experiments/{id}", self.server)),
+            None,
+        )
+    }
+
+    /// Poll until the experiment ends, drawing a progress line on stderr.
+    pub fn watch(&self, id: &str) -> Result<Value, CliError> {
+        let start = Instant::now();
+        let mut err = std::io::stderr();
+        let spin = ['|', '/', '-', '\\'];
+        let mut i = 0usize;
+        loop {
+            let v = self.status(id)?;
+            let state = v["state"].as_str().unwrap_or("?").to_string();
+            let trials = v["progress"]["trials_done"].as_i64().unwrap_or(0);
+            let t = start.elapsed().as_secs_f64();
+            let rate = if t > 0.0 { trials as f64 / t } else { 0.0 };
+            let _ = write!(
+                err,
+                "\r{} {state:<10} {trials:>7} trials  {t:>7.1} s  {rate:>7.1} trials/s ",
+                spin[i % 4]
+            );
+            let _ = err.flush();
+            i += 1;
+            if matches!(state.as_str(), "succeeded" | "failed" | "cancelled") {
+                let _ = writeln!(err);
+                return Ok(v);
+            }
+            std::thread::sleep(Duration::from_millis(250));
+        }
+    }
+}
+
+/// CSV of a map result's points: k, b, ok, fidelity.
+pub fn points_csv(result: &Value) -> Result<String, CliError> {
+    let pts = result["points"].as_array().ok_or_else(|| {
+        CliError::Input("this result has no points (a compare? use --json)".into())
+    })?;
+    let mut s = String::from("k_n_per_m,b_ns_per_m,renders,fidelity_ns_per_m\n");
+    for p in pts {
+        let ok = p["stable"]
+            .as_bool()
+            .or(p["passive"].as_bool())
+            .unwrap_or(false);
+        let fid = p["fidelity"]
+            .as_f64()
+            .map(|f| f.to_string())
+            .unwrap_or_default();
+        s.push_str(&format!("{},{},{ok},{fid}\n", p["k"], p["b"]));
+    }
+    Ok(s)
+}
+
+/// The Fig. 7-style plot of a stored map result.
+pub fn result_svg(result: &Value) -> Result<String, CliError> {
+    let pts = result["points"].as_array().ok_or_else(|| {
+        CliError::Input("this result has no points (a compare? use --json)".into())
+    })?;
+    let points: Vec<MapPlotPoint> = pts
+        .iter()
+        .map(|p| MapPlotPoint {
+            k: p["k"].as_f64().unwrap_or(0.0),
+            b: p["b"].as_f64().unwrap_or(0.0),
+            ok: p["stable"]
+                .as_bool()
+                .or(p["passive"].as_bool())
+                .unwrap_or(false),
+            fidelity: p["fidelity"].as_f64(),
+        })
+        .collect();
+    let boundary: Vec<(f64, f64)> = result["boundary"]
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .map(|p| {
+                    (
+                        p["b"].as_f64().unwrap_or(0.0),
+                        p["k_max"].as_f64().unwrap_or(0.0),
+                    )
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let label = if result["criterion"] == "stability" {
+        "stable"
+    } else {
+        "passive"
+    };
+    zwidth_map_svg("Z-width", &points, &boundary, label).map_err(CliError::Failure)
+}
