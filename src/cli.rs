@@ -218,6 +218,17 @@ pub enum Command {
 
 #[derive(Subcommand, Debug)]
 pub enum BenchCommand {
+    /// Against a running service: 1 000 submissions, then GET latency at 500 requests/s while a long experiment runs.
+    Service {
+        #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
+        server: String,
+        #[arg(long, default_value_t = 1000)]
+        submissions: usize,
+        #[arg(long, default_value_t = 500.0)]
+        rate: f64,
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+    },
     /// Wall time and K/B-width error against `reference` for each accuracy preset, on the example scenes.
     Tradeoff {
         #[arg(long)]
@@ -643,6 +654,29 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 write_json(stdout, result)?;
             }
             Ok(())
+        }
+        Command::Bench {
+            what:
+                BenchCommand::Service {
+                    server,
+                    submissions,
+                    rate,
+                    seconds,
+                },
+        } => {
+            if !(rate > 0.0
+                && rate <= 10_000.0
+                && seconds > 0.0
+                && seconds <= 600.0
+                && (1..=100_000).contains(&submissions))
+            {
+                return Err(CliError::Input(
+                    "bench service: rate must be 0–10000 /s, seconds 0–600, submissions 1–100000"
+                        .into(),
+                ));
+            }
+            let r = client(server).bench(submissions, rate, seconds)?;
+            write_json(stdout, &r)
         }
         Command::Bench {
             what: BenchCommand::Tradeoff { json },

@@ -148,3 +148,102 @@ pub fn result_svg(result: &Value) -> Result<String, CliError> {
     };
     zwidth_map_svg("Z-width", &points, &boundary, label).map_err(CliError::Failure)
 }
+
+/// What `zwidth bench service` measured.
+#[derive(Debug, serde::Serialize)]
+pub struct ServiceBench {
+    pub submissions: usize,
+    pub submit_s: f64,
+    pub gets: usize,
+    pub get_rate_target: f64,
+    pub get_rate_achieved: f64,
+    pub get_p50_ms: f64,
+    pub get_p99_ms: f64,
+    pub get_max_ms: f64,
+    pub busy_experiment: String,
+}
+
+impl Client {
+    /// Against a running service: submit `n` small experiments as fast as
+    /// possible; then, while a long experiment runs on the server, GET an
+    /// experiment at `rate` requests/s for `seconds` from two threads and
+    /// record the latencies.
+    pub fn bench(&self, n: usize, rate: f64, seconds: f64) -> Result<ServiceBench, CliError> {
+        let small = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+        let t = Instant::now();
+        let mut last = String::new();
+        for _ in 0..n {
+            last = self.submit(small, -1, None)?["id"]
+                .as_str()
+                .unwrap_or_default()
+                .to_string();
+        }
+        let submit_s = t.elapsed().as_secs_f64();
+        // A long experiment keeps the other core busy during the GETs.
+        let long = r#"{"kind":"map","scene":{"loop":{"sample_hz":10000,"render_hz":1000}},"method":"time","criterion":"stability","search":"trace","accuracy":"reference"}"#;
+        let busy = self.submit(long, 10, None)?["id"]
+            .as_str()
+            .unwrap_or_default()
+            .to_string();
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while self.status(&busy)?["state"] != "running" && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let url = format!("{}/v1/experiments/{last}", self.server);
+        let per_thread = rate / 2.0;
+        let total = (seconds * per_thread) as usize;
+        let lat: Vec<f64> = std::thread::scope(|s| {
+            let hs: Vec<_> = (0..2)
+                .map(|_| {
+                    let url = url.clone();
+                    s.spawn(move || {
+                        let agent = ureq::AgentBuilder::new().build();
+                        let start = Instant::now();
+                        let mut v = Vec::with_capacity(total);
+                        for i in 0..total {
+                            let due = start + Duration::from_secs_f64(i as f64 / per_thread);
+                            if let Some(w) = due.checked_duration_since(Instant::now()) {
+                                std::thread::sleep(w);
+                            }
+                            let t = Instant::now();
+                            if agent.get(&url).call().is_ok() {
+                                v.push(t.elapsed().as_secs_f64() * 1e3);
+                            }
+                        }
+                        (v, start.elapsed().as_secs_f64())
+                    })
+                })
+                .collect();
+            let mut all = Vec::new();
+            for h in hs {
+                if let Ok((v, _)) = h.join() {
+                    all.extend(v);
+                }
+            }
+            all
+        });
+        let _ = self.call(
+            ureq::post(&format!("{}/v1/experiments/{busy}/cancel", self.server)),
+            None,
+        );
+        let mut sorted = lat.clone();
+        sorted.sort_by(f64::total_cmp);
+        let pct = |p: f64| {
+            sorted
+                .get(((sorted.len() as f64 - 1.0) * p).round() as usize)
+                .copied()
+                .unwrap_or(f64::NAN)
+        };
+        Ok(ServiceBench {
+            submissions: n,
+            submit_s,
+            gets: sorted.len(),
+            get_rate_target: rate,
+            get_rate_achieved: sorted.len() as f64 / seconds,
+            get_p50_ms: pct(0.5),
+            get_p99_ms: pct(0.99),
+            get_max_ms: sorted.last().copied().unwrap_or(f64::NAN),
+            busy_experiment: busy,
+        })
+    }
+}
