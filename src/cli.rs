@@ -201,6 +201,8 @@ pub enum Command {
         #[arg(long)]
         svg: Option<PathBuf>,
     },
+    /// Print the service's OpenAPI 3.1 description (what api/openapi.json holds).
+    Openapi,
     /// Measurements: `zwidth bench tradeoff`.
     Bench {
         #[command(subcommand)]
@@ -616,6 +618,7 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 .map_err(io)
             }
         }
+        Command::Openapi => writeln!(stdout, "{}", crate::http::openapi_json()).map_err(io),
         Command::Status { id, server } => write_json(stdout, &client(server).status(&id)?),
         Command::Watch { id, server } => {
             let v = client(server).watch(&id)?;

@@ -43,7 +43,7 @@ pub const MAX_WINDOW_LIMIT: usize = 4096;
 /// `max_window` default: 15, the bound Janabi-Sharifi et al. used (§IV-C).
 pub const DEFAULT_MAX_WINDOW: usize = 15;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum FoawFit {
     End,
@@ -62,7 +62,7 @@ impl FoawFit {
 }
 
 /// JSON: `{"kind":"foaw","fit":"best","d":1e-6,"max_window":16,"outlier_tolerance":false}`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FoawSpec {
     pub fit: FoawFit,

@@ -40,7 +40,7 @@ use crate::error::{require_positive, SpecError};
 pub const DEFAULT_RHO: f64 = 0.95;
 
 /// Which process-noise covariance (see module doc).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum QModel {
     #[default]

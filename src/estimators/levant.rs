@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 use super::VelocityEstimator;
 use crate::error::{require_positive, SpecError};
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Discretization {
     #[default]
@@ -34,7 +34,7 @@ pub enum Discretization {
 }
 
 /// Gain rules of the 2018 paper §III, all proportional to the Lipschitz bound C.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum GainRule {
     /// Levant's "special case" α = 1.1C, λ = √C (2018 eq. 11). It does NOT meet
@@ -72,7 +72,7 @@ impl GainRule {
 /// `{"kind":"levant","rule":"hba_sc","lipschitz":C}`, or
 /// `{"kind":"levant","mu1":6.6,"mu2":2.45,"lipschitz":C}`; optional
 /// `"discretization":"explicit"|"implicit"`.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LevantSpec {
     #[serde(default, skip_serializing_if = "Option::is_none")]

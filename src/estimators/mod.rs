@@ -38,7 +38,7 @@ pub const MAX_MEDIAN_WINDOW: usize = 1001;
 /// (Janabi-Sharifi et al. 2000, §III-B).
 ///
 /// JSON: `{"kind":"butterworth","cutoff_hz":100,"order":2,"median_velocity":5}`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct EstimatorSpec {
     #[serde(flatten)]
     pub kind: EstimatorKind,
@@ -51,7 +51,7 @@ pub struct EstimatorSpec {
 }
 
 /// The estimator kinds, tagged by `"kind"`. The JSON forms are a contract.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum EstimatorKind {
     /// Backward difference `(y_k − y_{k−1})/T` (2011 paper eq. 2).

@@ -53,7 +53,7 @@ fn authorize(st: &AppState, headers: &HeaderMap) -> Result<(), Problem> {
 
 pub fn router(state: AppState) -> Router {
     Router::new()
-        .route("/healthz", get(|| async { "ok" }))
+        .route("/healthz", get(healthz))
         .route("/v1/experiments", post(submit).get(list))
         .route("/v1/experiments/{id}", get(show))
         .route("/v1/experiments/{id}/cancel", post(cancel))
@@ -63,6 +63,54 @@ pub fn router(state: AppState) -> Router {
         .route("/metrics", get(metrics))
         .layer(DefaultBodyLimit::max(BODY_LIMIT))
         .with_state(state)
+}
+
+#[utoipa::path(get, path = "/healthz", responses((status = 200, description = "ok", body = String, content_type = "text/plain")))]
+async fn healthz() -> &'static str {
+    "ok"
+}
+
+/// The body of every error response (RFC 9457 problem details).
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct ProblemBody {
+    #[serde(rename = "type")]
+    pub kind: String,
+    pub title: String,
+    pub status: u16,
+    pub detail: String,
+    /// The offending field, when one is to blame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+}
+
+/// The API description, generated from the code: `zwidth openapi` prints it;
+/// `api/openapi.json` is that output, and a test fails when they differ.
+#[derive(utoipa::OpenApi)]
+#[openapi(
+    info(title = "zwidth", description = "Z-width experiments: queue, run and store maps and estimator comparisons"),
+    paths(healthz, submit, list, show, cancel, queue, pause, resume, metrics),
+    components(schemas(ProblemBody, ExperimentView, ExperimentSpec)),
+    modifiers(&BearerAuth)
+)]
+pub struct ApiDoc;
+
+struct BearerAuth;
+
+impl utoipa::Modify for BearerAuth {
+    fn modify(&self, api: &mut utoipa::openapi::OpenApi) {
+        use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+        let components = api.components.get_or_insert_with(Default::default);
+        components.add_security_scheme(
+            "bearer",
+            SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
+        );
+    }
+}
+
+/// The OpenAPI document as pretty JSON.
+pub fn openapi_json() -> String {
+    use utoipa::OpenApi;
+    ApiDoc::openapi().to_pretty_json().unwrap_or_default()
 }
 
 /// An RFC 9457 problem.
@@ -126,7 +174,7 @@ impl IntoResponse for Problem {
 }
 
 /// What the API shows of an experiment.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct ExperimentView {
     pub id: String,
     pub kind: String,
@@ -176,6 +224,17 @@ pub struct SubmitQuery {
     not_before_ms: Option<i64>,
 }
 
+#[utoipa::path(post, path = "/v1/experiments", request_body = ExperimentSpec,
+    params(("priority" = Option<i64>, Query, description = "-1000 to 1000, higher first"),
+           ("not_before_ms" = Option<i64>, Query, description = "do not start before (unix ms)"),
+           ("Idempotency-Key" = Option<String>, Header, description = "repeat-safe submission")),
+    responses((status = 202, description = "queued", body = ExperimentView),
+              (status = 200, description = "an earlier submission with the same Idempotency-Key", body = ExperimentView),
+              (status = 401, description = "token required", body = ProblemBody, content_type = "application/problem+json"),
+              (status = 403, description = "token refused", body = ProblemBody, content_type = "application/problem+json"),
+              (status = 413, description = "body over 1 MiB"),
+              (status = 422, description = "invalid experiment", body = ProblemBody, content_type = "application/problem+json")),
+    security((), ("bearer" = [])))]
 #[tracing::instrument(skip(st, headers, body))]
 async fn submit(
     State(st): State<AppState>,
@@ -246,11 +305,14 @@ async fn submit(
         .into_response())
 }
 
+#[utoipa::path(get, path = "/v1/experiments", responses((status = 200, description = "the latest 200", body = Vec<ExperimentView>)))]
 async fn list(State(st): State<AppState>) -> Result<Json<Vec<ExperimentView>>, Problem> {
     let rows = st.store.list(200).await.map_err(Problem::internal)?;
     Ok(Json(rows.into_iter().map(ExperimentView::from).collect()))
 }
 
+#[utoipa::path(get, path = "/v1/experiments/{id}", params(("id" = String, Path, description = "experiment id")),
+    responses((status = 200, body = ExperimentView), (status = 404, body = ProblemBody, content_type = "application/problem+json")))]
 async fn show(
     State(st): State<AppState>,
     Path(id): Path<String>,
@@ -265,6 +327,13 @@ async fn show(
     }
 }
 
+#[utoipa::path(post, path = "/v1/experiments/{id}/cancel", params(("id" = String, Path, description = "experiment id")),
+    responses((status = 200, body = ExperimentView),
+              (status = 401, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 403, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 409, description = "already ended", body = ProblemBody, content_type = "application/problem+json")),
+    security((), ("bearer" = [])))]
 async fn cancel(
     State(st): State<AppState>,
     headers: HeaderMap,
@@ -287,6 +356,7 @@ async fn cancel(
     }
 }
 
+#[utoipa::path(get, path = "/v1/queue", responses((status = 200, description = "paused flag and experiments per state", body = Object)))]
 async fn queue(State(st): State<AppState>) -> Result<Json<Value>, Problem> {
     let paused = st.store.paused().await.map_err(Problem::internal)?;
     let (by_state, _) = st.store.counts().await.map_err(Problem::internal)?;
@@ -295,12 +365,14 @@ async fn queue(State(st): State<AppState>) -> Result<Json<Value>, Problem> {
     Ok(Json(json!({ "paused": paused, "experiments": counts })))
 }
 
+#[utoipa::path(post, path = "/v1/queue/pause", responses((status = 200, body = Object), (status = 401, body = ProblemBody, content_type = "application/problem+json"), (status = 403, body = ProblemBody, content_type = "application/problem+json")), security((), ("bearer" = [])))]
 async fn pause(State(st): State<AppState>, headers: HeaderMap) -> Result<Json<Value>, Problem> {
     authorize(&st, &headers)?;
     st.store.set_paused(true).await.map_err(Problem::internal)?;
     queue(State(st)).await
 }
 
+#[utoipa::path(post, path = "/v1/queue/resume", responses((status = 200, body = Object), (status = 401, body = ProblemBody, content_type = "application/problem+json"), (status = 403, body = ProblemBody, content_type = "application/problem+json")), security((), ("bearer" = [])))]
 async fn resume(State(st): State<AppState>, headers: HeaderMap) -> Result<Json<Value>, Problem> {
     authorize(&st, &headers)?;
     st.store
@@ -312,6 +384,7 @@ async fn resume(State(st): State<AppState>, headers: HeaderMap) -> Result<Json<V
 
 /// Prometheus text: queue depth, experiments by state, trials done and the
 /// runner's current trials per second.
+#[utoipa::path(get, path = "/metrics", responses((status = 200, description = "Prometheus text", body = String, content_type = "text/plain")))]
 async fn metrics(State(st): State<AppState>) -> Result<Response, Problem> {
     let (by_state, trials) = st.store.counts().await.map_err(Problem::internal)?;
     let depth: i64 = by_state
@@ -390,4 +463,29 @@ pub async fn serve(db: &std::path::Path, bind: &str, tokens: Vec<String>) -> Res
         })
         .await
         .map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn committed_openapi_matches_the_code() {
+        // Regenerate with: cargo run -- openapi > api/openapi.json
+        let committed = include_str!("../../api/openapi.json");
+        assert_eq!(
+            committed.trim_end(),
+            super::openapi_json().trim_end(),
+            "api/openapi.json drifted from the code"
+        );
+        let v: serde_json::Value = serde_json::from_str(committed).unwrap();
+        assert!(v["openapi"].as_str().unwrap().starts_with("3.1"));
+        for path in [
+            "/v1/experiments",
+            "/v1/experiments/{id}",
+            "/v1/experiments/{id}/cancel",
+            "/healthz",
+            "/metrics",
+        ] {
+            assert!(v["paths"].get(path).is_some(), "{path} missing");
+        }
+    }
 }

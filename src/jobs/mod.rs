@@ -17,14 +17,14 @@ use crate::zwidth::settings::{Accuracy, MapSpec};
 
 /// An experiment as submitted: `{"kind":"map", …MapSpec}` or
 /// `{"kind":"compare","scene":{…},"accuracy":"draft"}`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum ExperimentSpec {
     Map(MapSpec),
     Compare(CompareSpec),
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CompareSpec {
     /// The scene (its estimator is ignored); default the 2018 paper's simulated device.

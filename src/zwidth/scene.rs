@@ -15,7 +15,7 @@ pub const IDEAL_SENSOR_ESTIMATOR_STEP: f64 = 1e-9;
 
 /// The haptic device: `m ẍ + b ẋ = F − f_c·sign(ẋ)` (2018 paper §V: m = 0.52 kg,
 /// b = 13.2 N·s/m, f_c = 0.19 N, 1 µm encoder).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DeviceSpec {
     /// Moving mass (kg).
@@ -62,7 +62,7 @@ impl Default for DeviceSpec {
 
 /// The control loop (2011 paper §2.3: encoder and estimators at 10 kHz, wall
 /// rendered at 1 kHz).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LoopSpec {
     /// Rate the encoder is read and the estimator runs (Hz).
@@ -95,7 +95,7 @@ impl Default for LoopSpec {
 
 /// The virtual wall's location (m); it pushes back on the handle when the
 /// measured position is past it (2011 paper eq. 12).
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WallSpec {
     #[serde(default)]
@@ -103,7 +103,7 @@ pub struct WallSpec {
 }
 
 /// The wall-hit protocol (2011 paper §2.4).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct HitSpec {
     /// Start this far before the wall (m).
@@ -154,7 +154,7 @@ impl Default for HitSpec {
 /// The multisine impedance probe (2018 paper §V). Defaults are ours: the
 /// band 1–100 Hz covers the device's 30 Hz bandwidth and the paper's Fig. 6;
 /// 0.5 N peak stays well inside the 4 N motor; 4 averaged periods.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ProbeSpec {
     /// Lowest excited line and line spacing (Hz); one period is 1/f_min s.
@@ -200,7 +200,7 @@ fn d_estimator() -> EstimatorSpec {
 }
 
 /// The whole scene document.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SceneSpec {
     #[serde(default)]

@@ -9,7 +9,7 @@ use super::scene::{Scene, SceneSpec};
 use crate::error::SpecError;
 
 /// Which engine answers.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Method {
     /// The cheapest engine exact for the scene: analytic when it is linear.
@@ -21,7 +21,7 @@ pub enum Method {
 }
 
 /// What "renders the wall" means.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Criterion {
     /// Closed-loop stability (time domain: the wall-hit RMS test; analytic: eigenvalues).
@@ -33,7 +33,7 @@ pub enum Criterion {
     StrictPassivity,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum SearchKind {
     /// The 2011 paper's §2.4 boundary trace.
@@ -45,7 +45,7 @@ pub enum SearchKind {
     Grid,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Preset {
     Draft,
@@ -55,7 +55,7 @@ pub enum Preset {
 }
 
 /// Explicit knobs; any left out come from `preset`.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AccuracyKnobs {
     #[serde(default)]
@@ -83,7 +83,7 @@ pub struct AccuracyKnobs {
 }
 
 /// `"draft"` or `{"preset":"draft","k_rel_tol":0.02,…}`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(untagged)]
 pub enum Accuracy {
     Preset(Preset),
@@ -194,7 +194,7 @@ impl Accuracy {
 }
 
 /// A whole map request: the one spec the CLI reads and the service will store.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MapSpec {
     pub scene: SceneSpec,
