@@ -110,7 +110,18 @@ impl utoipa::Modify for BearerAuth {
 /// The OpenAPI document as pretty JSON.
 pub fn openapi_json() -> String {
     use utoipa::OpenApi;
-    ApiDoc::openapi().to_pretty_json().unwrap_or_default()
+    let mut v = serde_json::to_value(ApiDoc::openapi()).unwrap_or_default();
+    // The experiment kinds are `{"kind": …} + MapSpec/CompareSpec` (allOf).
+    // Their structs reject unknown fields, which utoipa writes as
+    // `additionalProperties: false`; inside allOf that forbids `kind` itself
+    // and makes the union unsatisfiable. The server still rejects unknown
+    // fields; the schema just leaves them open.
+    for name in ["MapSpec", "CompareSpec"] {
+        if let Some(o) = v["components"]["schemas"][name].as_object_mut() {
+            o.remove("additionalProperties");
+        }
+    }
+    serde_json::to_string_pretty(&v).unwrap_or_default()
 }
 
 /// An RFC 9457 problem.
