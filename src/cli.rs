@@ -394,6 +394,13 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 measure_s: sc.spec.hit.measure_s,
             };
             let outcome = if let Some(path) = &trace {
+                let worst = (sc.spec.hit.settle_s * 11.0 + sc.spec.hit.measure_s + 60.0)
+                    * sc.spec.control.sample_hz;
+                if worst > 1e7 {
+                    return Err(CliError::Input(format!(
+                        "--trace: this trial may run to {worst:.0} samples; traces are limited to 10 000 000 rows (shorten hit.settle_s/measure_s or lower loop.sample_hz)"
+                    )));
+                }
                 let mut rows: Vec<TraceRow> = Vec::new();
                 let o = wall_hit(&sc, k, b, knobs, &mut rows);
                 let mut csv = String::from(

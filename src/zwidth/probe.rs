@@ -98,7 +98,7 @@ impl ProbeSetup {
         let per_period = (s.control.sample_hz / p.f_min_hz).round() as usize * nsub;
         let ms = Multisine::schroeder(p.f_min_hz, p.f_max_hz, p.amplitude);
         let omegas = ms.omegas();
-        let force: Vec<f64> = (0..per_period).map(|i| ms.value(i as f64 * h)).collect();
+        let force = ms.period(per_period);
         let mut fa = LineAnalyzer::new(per_period);
         let mut f_lines = vec![C::new(0.0, 0.0); ms.lines.len()];
         fa.lines(&force, &ms.lines, &mut f_lines);

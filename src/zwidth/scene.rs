@@ -13,6 +13,11 @@ use crate::estimators::{Estimator, EstimatorKind, EstimatorSpec, Sampling};
 /// any encoder the papers consider.
 pub const IDEAL_SENSOR_ESTIMATOR_STEP: f64 = 1e-9;
 
+/// Most excited lines a probe may have.
+pub const MAX_PROBE_LINES: usize = 1000;
+/// Most simulation steps in one probe period (memory: one f64 per step, twice).
+pub const MAX_PROBE_PERIOD_STEPS: usize = 4_000_000;
+
 /// The haptic device: `m ẍ + b ẋ = F − f_c·sign(ẋ)` (2018 paper §V: m = 0.52 kg,
 /// b = 13.2 N·s/m, f_c = 0.19 N, 1 µm encoder).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -354,11 +359,22 @@ impl SceneSpec {
                 format!("one period (1/f_min_hz) must be a whole number of samples at loop.sample_hz = {} Hz", l.sample_hz),
             ));
         }
-        if p.f_max_hz / p.f_min_hz > 100_000.0 {
+        if p.f_max_hz / p.f_min_hz > MAX_PROBE_LINES as f64 {
             return Err(SpecError::new(
                 "probe.f_max_hz",
                 p.f_max_hz,
-                "at most 100 000 lines (f_max_hz / f_min_hz)",
+                format!("at most {MAX_PROBE_LINES} lines (f_max_hz / f_min_hz)"),
+            ));
+        }
+        let nsub = (40.0 * p.f_max_hz / l.sample_hz).ceil().max(1.0);
+        let per_period = l.sample_hz / p.f_min_hz * nsub;
+        if per_period > MAX_PROBE_PERIOD_STEPS as f64 {
+            return Err(SpecError::new(
+                "probe.f_min_hz",
+                p.f_min_hz,
+                format!(
+                    "one probe period would be {per_period:.0} simulation steps; at most {MAX_PROBE_PERIOD_STEPS} (raise f_min_hz or lower loop.sample_hz)"
+                ),
             ));
         }
         require_positive("amplitude", p.amplitude, "N").map_err(pp)?;
