@@ -31,8 +31,9 @@ fn start_in(dir: std::path::PathBuf) -> Server {
 
 fn start_with(dir: std::path::PathBuf, extra: &[&str]) -> Server {
     let mut child = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+        .args(["serve", "--bind", "127.0.0.1:0"])
         .args(extra)
-        .args(["serve", "--bind", "127.0.0.1:0", "--db"])
+        .arg("--db")
         .arg(dir.join("test.db"))
         .env("RUST_LOG", "warn")
         .env_remove("ZWIDTH_TOKENS")
@@ -256,29 +257,7 @@ fn tokens_guard_mutations() {
         uuid_like()
     ));
     std::fs::create_dir_all(&dir).unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_zwidth"))
-        .args([
-            "serve",
-            "--bind",
-            "127.0.0.1:0",
-            "--token",
-            "s3cret,other",
-            "--db",
-        ])
-        .arg(dir.join("t.db"))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let s = Server {
-        base: line.trim().rsplit(' ').next().unwrap().to_string(),
-        child,
-        _dir: dir,
-    };
+    let s = start_with(dir, &["--token", "s3cret,other"]);
     let url = format!("{}/v1/experiments", s.base);
     let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"b":[0]}"#;
     let status = |r: Result<ureq::Response, ureq::Error>| match r {
