@@ -86,6 +86,13 @@ fn estimate_every_kind_runs() {
     }
 }
 
+/// Exit 0 and JSON on stdout, parsed.
+fn json_ok(args: &[&str], stdin: &str) -> serde_json::Value {
+    let o = zwidth(args, stdin);
+    assert_eq!(o.code, 0, "{args:?}: {}", o.stderr);
+    serde_json::from_str(&o.stdout).unwrap()
+}
+
 /// Exit 2, nothing on stdout, one stderr line containing `needle`.
 fn rejects(args: &[&str], stdin: &str, needle: &str) {
     let o = zwidth(args, stdin);
@@ -186,7 +193,7 @@ fn estimate_bad_inputs_exit_2_with_one_clear_line() {
 #[test]
 fn accuracy_json_has_every_estimator_and_svg() {
     let svg = std::env::temp_dir().join(format!("zwidth-acc-{}.svg", std::process::id()));
-    let o = zwidth(
+    let v = json_ok(
         &[
             "accuracy",
             "--rates",
@@ -197,8 +204,6 @@ fn accuracy_json_has_every_estimator_and_svg() {
         ],
         "",
     );
-    assert_eq!(o.code, 0, "{}", o.stderr);
-    let v: serde_json::Value = serde_json::from_str(&o.stdout).unwrap();
     let rows = v["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 10);
     for r in rows {
@@ -221,7 +226,7 @@ fn lipschitz_and_gains_commands() {
     let input: String = (0..200)
         .map(|k| format!("{}\n", 2.0 * (k as f64 * 1e-3).powi(2)))
         .collect();
-    let o = zwidth(
+    let v = json_ok(
         &[
             "lipschitz",
             "--rate",
@@ -232,8 +237,6 @@ fn lipschitz_and_gains_commands() {
         ],
         &input,
     );
-    assert_eq!(o.code, 0, "{}", o.stderr);
-    let v: serde_json::Value = serde_json::from_str(&o.stdout).unwrap();
     assert!((v["lipschitz"].as_f64().unwrap() - 4.0).abs() < 1e-6, "{v}");
     rejects(
         &["lipschitz", "--rate", "1000"],
@@ -272,7 +275,7 @@ fn trial_impedance_map_commands() {
     );
     // A soft, damped wall is stable; its trace has a header and one row per sample.
     let csv = std::env::temp_dir().join(format!("zwidth-{}-trace.csv", std::process::id()));
-    let o = zwidth(
+    let v = json_ok(
         &[
             "trial",
             "--scene",
@@ -287,8 +290,6 @@ fn trial_impedance_map_commands() {
         ],
         "",
     );
-    assert_eq!(o.code, 0, "{}", o.stderr);
-    let v: serde_json::Value = serde_json::from_str(&o.stdout).unwrap();
     assert_eq!(v["stable"], true);
     let trace = std::fs::read_to_string(&csv).unwrap();
     assert!(trace.starts_with("t_s,x_true_m,y_measured_m,v_est_m_per_s,v_true_m_per_s,force_n"));
@@ -297,7 +298,7 @@ fn trial_impedance_map_commands() {
         v["samples"].as_u64().unwrap() + 1
     );
     // Impedance, analytic (linear scene): 100 lines, passive at a soft wall.
-    let o = zwidth(
+    let v = json_ok(
         &[
             "impedance",
             "--scene",
@@ -310,14 +311,12 @@ fn trial_impedance_map_commands() {
         ],
         "",
     );
-    assert_eq!(o.code, 0, "{}", o.stderr);
-    let v: serde_json::Value = serde_json::from_str(&o.stdout).unwrap();
     assert_eq!(v["freq_hz"].as_array().unwrap().len(), 100);
     assert_eq!(v["passive"], true);
     assert!(v["model"].as_str().unwrap().starts_with("analytic"));
     // Strict-passivity map: b > KT/2 + |B| gives 2(13.2 − 5)/1e-3 = 16 400 N/m at B = 5.
     let svg = std::env::temp_dir().join(format!("zwidth-{}-map.svg", std::process::id()));
-    let o = zwidth(
+    let v = json_ok(
         &[
             "map",
             "--scene",
@@ -332,8 +331,6 @@ fn trial_impedance_map_commands() {
         ],
         "",
     );
-    assert_eq!(o.code, 0, "{}", o.stderr);
-    let v: serde_json::Value = serde_json::from_str(&o.stdout).unwrap();
     let k5 = v["boundary"][1]["k_max"].as_f64().unwrap();
     assert!((k5 - 16_400.0).abs() < 1e-6, "{k5}");
     for key in [
