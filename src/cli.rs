@@ -166,6 +166,12 @@ pub enum Command {
             hide_env_values = true
         )]
         tokens: Vec<String>,
+        /// Simulated rigs, NAME[:THREADS] comma-separated (0 threads: one per core); the first is the default.
+        #[arg(long, env = "ZWIDTH_RIGS", default_value = "sim:0")]
+        rigs: String,
+        /// Longest a request may take before a 503 (s).
+        #[arg(long, env = "ZWIDTH_REQUEST_TIMEOUT_S", default_value_t = 30.0)]
+        request_timeout_s: f64,
     },
     /// Submit an experiment JSON file to a running service; prints its id.
     Submit {
@@ -176,6 +182,9 @@ pub enum Command {
         priority: i64,
         #[arg(long)]
         idempotency_key: Option<String>,
+        /// Rig to run on (see GET /v1/rigs); default the server's first.
+        #[arg(long)]
+        rig: Option<String>,
         #[arg(long)]
         json: bool,
     },
@@ -577,7 +586,19 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 write!(stdout, "{}", r.table()).map_err(io)
             }
         }
-        Command::Serve { db, bind, tokens } => {
+        Command::Serve {
+            db,
+            bind,
+            tokens,
+            rigs,
+            request_timeout_s,
+        } => {
+            let rigs: Vec<std::sync::Arc<dyn crate::rig::Rig>> =
+                crate::rig::SimulatedRig::parse_list(&rigs)
+                    .map_err(|e| CliError::Input(format!("--rigs: {e}")))?
+                    .into_iter()
+                    .map(|r| std::sync::Arc::new(r) as std::sync::Arc<dyn crate::rig::Rig>)
+                    .collect();
             let _ = tracing_subscriber::fmt()
                 .with_writer(std::io::stderr)
                 .with_env_filter(
@@ -594,7 +615,13 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 .map(|t| t.trim().to_string())
                 .filter(|t| !t.is_empty())
                 .collect();
-            rt.block_on(crate::http::serve(&db, &bind, tokens))
+            rt.block_on(crate::http::serve(crate::http::ServeConfig {
+                db,
+                bind,
+                tokens,
+                rigs,
+                request_timeout_s,
+            }))
                 .map_err(|e| {
                     if e.starts_with("refusing") {
                         CliError::Input(e)
@@ -608,11 +635,17 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
             server,
             priority,
             idempotency_key,
+            rig,
             json,
         } => {
             let body = std::fs::read_to_string(&file)
                 .map_err(|e| CliError::Input(format!("{} cannot be read: {e}", file.display())))?;
-            let v = client(server).submit(&body, priority, idempotency_key.as_deref())?;
+            let v = client(server).submit(
+                &body,
+                priority,
+                idempotency_key.as_deref(),
+                rig.as_deref(),
+            )?;
             if json {
                 write_json(stdout, &v)
             } else {
@@ -646,7 +679,8 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
             csv,
             svg,
         } => {
-            let v = client(server).status(&id)?;
+            let c = client(server);
+            let v = c.status(&id)?;
             if v["state"] != "succeeded" {
                 return Err(CliError::Input(format!(
                     "experiment {id} is {}, not succeeded: no result yet",
@@ -655,10 +689,10 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
             }
             let result = &v["result"];
             if let Some(p) = &csv {
-                write_file(p, &crate::client::points_csv(result)?)?;
+                write_file(p, &c.export(&id, "points.csv")?)?;
             }
             if let Some(p) = &svg {
-                write_file(p, &crate::client::result_svg(result)?)?;
+                write_file(p, &c.export(&id, "plot.svg")?)?;
             }
             if csv.is_none() && svg.is_none() {
                 write_json(stdout, result)?;

@@ -7,7 +7,6 @@ use std::io::Write;
 use std::time::{Duration, Instant};
 
 use crate::cli::CliError;
-use crate::plot::{zwidth_map_svg, MapPlotPoint};
 
 pub struct Client {
     pub server: String,
@@ -20,6 +19,13 @@ fn failure(e: impl std::fmt::Display) -> CliError {
 
 impl Client {
     fn call(&self, req: ureq::Request, body: Option<&str>) -> Result<Value, CliError> {
+        let text = self.call_text(req, body)?;
+        serde_json::from_str(&text).map_err(failure)
+    }
+
+    /// The response body as text; a 4xx is bad input (exit 2), anything
+    /// else that fails is a failure.
+    fn call_text(&self, req: ureq::Request, body: Option<&str>) -> Result<String, CliError> {
         let req = match &self.token {
             Some(t) => req.set("authorization", &format!("Bearer {t}")),
             None => req,
@@ -29,7 +35,7 @@ impl Client {
             None => req.call(),
         };
         match resp {
-            Ok(r) => r.into_json().map_err(failure),
+            Ok(r) => r.into_string().map_err(failure),
             Err(ureq::Error::Status(code, r)) => {
                 let v: Value = r.into_json().unwrap_or_default();
                 let detail = v["detail"].as_str().unwrap_or("no detail").to_string();
@@ -47,9 +53,18 @@ impl Client {
         }
     }
 
-    pub fn submit(&self, body: &str, priority: i64, key: Option<&str>) -> Result<Value, CliError> {
+    pub fn submit(
+        &self,
+        body: &str,
+        priority: i64,
+        key: Option<&str>,
+        rig: Option<&str>,
+    ) -> Result<Value, CliError> {
         let mut req = ureq::post(&format!("{}/v1/experiments", self.server))
             .query("priority", &priority.to_string());
+        if let Some(r) = rig {
+            req = req.query("rig", r);
+        }
         if let Some(k) = key {
             req = req.set("idempotency-key", k);
         }
@@ -63,7 +78,15 @@ impl Client {
         )
     }
 
-    /// Poll until the experiment ends, drawing a progress line on stderr.
+    /// A succeeded experiment's `plot.svg` or `points.csv`, made by the server.
+    pub fn export(&self, id: &str, file: &str) -> Result<String, CliError> {
+        self.call_text(
+            ureq::get(&format!("{}/v1/experiments/{id}/{file}", self.server)),
+            None,
+        )
+    }
+
+    /// Poll until the experiment ends, drawing a progress bar on stderr.
     pub fn watch(&self, id: &str) -> Result<Value, CliError> {
         let start = Instant::now();
         let mut err = std::io::stderr();
@@ -73,80 +96,29 @@ impl Client {
             let v = self.status(id)?;
             let state = v["state"].as_str().unwrap_or("?").to_string();
             let trials = v["progress"]["trials_done"].as_i64().unwrap_or(0);
+            let fraction = v["progress"]["fraction"].as_f64().unwrap_or(0.0).clamp(0.0, 1.0);
+            let eta = v["progress"]["eta_s"]
+                .as_f64()
+                .map_or("     ".to_string(), |e| format!("ETA {e:>5.0} s"));
             let t = start.elapsed().as_secs_f64();
-            let rate = if t > 0.0 { trials as f64 / t } else { 0.0 };
+            let filled = (fraction * 30.0).round() as usize;
             let _ = write!(
                 err,
-                "\r{} {state:<10} {trials:>7} trials  {t:>7.1} s  {rate:>7.1} trials/s ",
-                spin[i % 4]
+                "\r{} {state:<10} [{}{}] {:>3.0} % {trials:>7} trials {t:>7.1} s {eta} ",
+                spin[i % 4],
+                "#".repeat(filled),
+                ".".repeat(30 - filled),
+                100.0 * fraction
             );
             let _ = err.flush();
             i += 1;
-            if matches!(state.as_str(), "succeeded" | "failed" | "cancelled") {
+            if matches!(state.as_str(), "succeeded" | "failed" | "cancelled" | "interrupted") {
                 let _ = writeln!(err);
                 return Ok(v);
             }
             std::thread::sleep(Duration::from_millis(250));
         }
     }
-}
-
-/// CSV of a map result's points: k, b, ok, fidelity.
-pub fn points_csv(result: &Value) -> Result<String, CliError> {
-    let pts = result["points"].as_array().ok_or_else(|| {
-        CliError::Input("this result has no points (a compare? use --json)".into())
-    })?;
-    let mut s = String::from("k_n_per_m,b_ns_per_m,renders,fidelity_ns_per_m\n");
-    for p in pts {
-        let ok = p["stable"]
-            .as_bool()
-            .or(p["passive"].as_bool())
-            .unwrap_or(false);
-        let fid = p["fidelity"]
-            .as_f64()
-            .map(|f| f.to_string())
-            .unwrap_or_default();
-        s.push_str(&format!("{},{},{ok},{fid}\n", p["k"], p["b"]));
-    }
-    Ok(s)
-}
-
-/// The Fig. 7-style plot of a stored map result.
-pub fn result_svg(result: &Value) -> Result<String, CliError> {
-    let pts = result["points"].as_array().ok_or_else(|| {
-        CliError::Input("this result has no points (a compare? use --json)".into())
-    })?;
-    let points: Vec<MapPlotPoint> = pts
-        .iter()
-        .map(|p| MapPlotPoint {
-            k: p["k"].as_f64().unwrap_or(0.0),
-            b: p["b"].as_f64().unwrap_or(0.0),
-            ok: p["stable"]
-                .as_bool()
-                .or(p["passive"].as_bool())
-                .unwrap_or(false),
-            fidelity: p["fidelity"].as_f64(),
-        })
-        .collect();
-    let boundary: Vec<(f64, f64)> = result["boundary"]
-        .as_array()
-        .map(|a| {
-            a.iter()
-                .map(|p| {
-                    (
-                        p["b"].as_f64().unwrap_or(0.0),
-                        p["k_max"].as_f64().unwrap_or(0.0),
-                    )
-                })
-                .collect()
-        })
-        .unwrap_or_default();
-    let label = if result["criterion"] == "stability" {
-        "stable"
-    } else {
-        "passive"
-    };
-    zwidth_map_svg("Z-width", &points, &boundary, label).map_err(CliError::Failure)
 }
 
 /// What `zwidth bench service` measured.
@@ -173,7 +145,7 @@ impl Client {
         let t = Instant::now();
         let mut last = String::new();
         for _ in 0..n {
-            last = self.submit(small, -1, None)?["id"]
+            last = self.submit(small, -1, None, None)?["id"]
                 .as_str()
                 .unwrap_or_default()
                 .to_string();
@@ -181,7 +153,7 @@ impl Client {
         let submit_s = t.elapsed().as_secs_f64();
         // A long experiment keeps the other core busy during the GETs.
         let long = r#"{"kind":"map","scene":{"loop":{"sample_hz":10000,"render_hz":1000}},"method":"time","criterion":"stability","search":"trace","accuracy":"reference"}"#;
-        let busy = self.submit(long, 10, None)?["id"]
+        let busy = self.submit(long, 10, None, None)?["id"]
             .as_str()
             .unwrap_or_default()
             .to_string();

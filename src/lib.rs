@@ -13,6 +13,7 @@ pub mod http;
 pub mod jobs;
 pub mod lipschitz;
 pub mod plot;
+pub mod report;
 pub mod rig;
 pub mod signals;
 pub mod spectral;

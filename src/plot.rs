@@ -57,32 +57,83 @@ pub fn loglog_svg(
             .y_label_formatter(&|v| format!("{v:.1e}"))
             .draw()
             .map_err(|e| e.to_string())?;
-        for (i, s) in series.iter().enumerate() {
-            let colour = Palette99::pick(i).to_rgba();
-            let data: Vec<(f64, f64)> = s
-                .points
-                .iter()
-                .copied()
-                .filter(|(x, y)| *x > 0.0 && *y > 0.0)
-                .collect();
-            chart
-                .draw_series(LineSeries::new(data.clone(), colour.stroke_width(2)))
-                .map_err(|e| e.to_string())?
-                .label(s.name.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
-                });
-            chart
-                .draw_series(data.into_iter().map(|p| Circle::new(p, 3, colour.filled())))
-                .map_err(|e| e.to_string())?;
-        }
+        draw_lines(&mut chart, series, |x, y| x > 0.0 && y > 0.0, SeriesLabelPosition::UpperLeft)?;
+        root.present().map_err(|e| e.to_string())?;
+    }
+    Ok(svg)
+}
+
+/// Each series as a coloured line with markers (points passing `keep`), and
+/// the legend at `legend`.
+fn draw_lines<'a, DB: DrawingBackend + 'a, X: Ranged<ValueType = f64>, Y: Ranged<ValueType = f64>>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    series: &[Series],
+    keep: impl Fn(f64, f64) -> bool,
+    legend: SeriesLabelPosition,
+) -> Result<(), String> {
+    for (i, s) in series.iter().enumerate() {
+        let colour = Palette99::pick(i).to_rgba();
+        let data: Vec<(f64, f64)> = s.points.iter().copied().filter(|&(x, y)| keep(x, y)).collect();
         chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
+            .draw_series(LineSeries::new(data.clone(), colour.stroke_width(2)))
+            .map_err(|e| e.to_string())?
+            .label(s.name.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
+        chart
+            .draw_series(data.into_iter().map(|p| Circle::new(p, 3, colour.filled())))
+            .map_err(|e| e.to_string())?;
+    }
+    chart
+        .configure_series_labels()
+        .position(legend)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| e.to_string())
+}
+
+/// A linear-axes line chart (from 0 on both axes), one coloured line with
+/// markers per series and a legend: boundaries K(B) of several maps, or a
+/// quantity against a swept parameter. Returns the SVG text.
+pub fn lines_svg(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+) -> Result<String, String> {
+    let finite = || {
+        series
+            .iter()
+            .flat_map(|s| s.points.iter())
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+    };
+    if finite().next().is_none() {
+        return Err("nothing to plot: no finite points".into());
+    }
+    let x1 = finite().map(|p| p.0).fold(f64::MIN, f64::max).max(1e-12) * 1.05;
+    let x0 = finite().map(|p| p.0).fold(0.0, f64::min);
+    let y1 = finite().map(|p| p.1).fold(f64::MIN, f64::max).max(1e-12)
+        * (1.1 + 0.08 * series.len() as f64);
+    let y0 = finite().map(|p| p.1).fold(0.0, f64::min);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (960, 640)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(16)
+            .x_label_area_size(48)
+            .y_label_area_size(80)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .y_label_formatter(&|v| format!("{v:.2e}"))
             .draw()
             .map_err(|e| e.to_string())?;
+        draw_lines(&mut chart, series, |x, y| x.is_finite() && y.is_finite(), SeriesLabelPosition::UpperRight)?;
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)

@@ -6,14 +6,21 @@ use axum::body::Bytes;
 use axum::extract::{DefaultBodyLimit, Path, Query, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
-use axum::routing::{get, post};
+use axum::routing::{get, post, put};
 use axum::{Json, Router};
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
+use std::sync::Arc;
+use std::time::Duration;
+
 use crate::error::SpecError;
+use crate::jobs::window::Window;
 use crate::jobs::ExperimentSpec;
-use crate::store::{ExperimentRow, Store};
+use crate::report::{self, Comparison, MapSummary};
+use crate::rig::{Rig, RigInfo};
+use crate::store::{now_ms, ExperimentRow, Store};
+use crate::zwidth::search::StoredTrial;
 
 /// Largest request body accepted (bytes).
 pub const BODY_LIMIT: usize = 1 << 20;
@@ -23,7 +30,25 @@ pub struct AppState {
     pub store: Store,
     /// Bearer tokens accepted on mutating endpoints; empty: none required
     /// (only allowed when bound to loopback).
-    pub tokens: std::sync::Arc<Vec<String>>,
+    pub tokens: Arc<Vec<String>>,
+    /// The rigs experiments run on; the first is the default.
+    pub rigs: Arc<Vec<Arc<dyn Rig>>>,
+}
+
+impl AppState {
+    fn rig(&self, id: &str) -> Option<&Arc<dyn Rig>> {
+        self.rigs.iter().find(|r| r.info().id == id)
+    }
+}
+
+/// How `serve` runs.
+pub struct ServeConfig {
+    pub db: std::path::PathBuf,
+    pub bind: String,
+    pub tokens: Vec<String>,
+    pub rigs: Vec<Arc<dyn Rig>>,
+    /// Longest a request may take before a 503 (s).
+    pub request_timeout_s: f64,
 }
 
 /// Mutating endpoints need `Authorization: Bearer <token>` when tokens are
@@ -51,17 +76,44 @@ fn authorize(st: &AppState, headers: &HeaderMap) -> Result<(), Problem> {
     }
 }
 
-pub fn router(state: AppState) -> Router {
+/// The routes, with a body-size limit, a per-request timeout (503), and a
+/// request id (`x-request-id`, taken from the request or made) that is
+/// logged with the request and returned on the response.
+pub fn router(state: AppState, timeout: Duration) -> Router {
+    use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+    let trace = tower_http::trace::TraceLayer::new_for_http().make_span_with(
+        |req: &axum::http::Request<axum::body::Body>| {
+            let id = req
+                .headers()
+                .get("x-request-id")
+                .and_then(|v| v.to_str().ok())
+                .unwrap_or("");
+            tracing::info_span!("request", method = %req.method(), uri = %req.uri(), request_id = %id)
+        },
+    );
     Router::new()
         .route("/healthz", get(healthz))
+        .route("/v1/rigs", get(rigs))
+        .route("/v1/rigs/{id}/window", put(set_window).delete(clear_window))
         .route("/v1/experiments", post(submit).get(list))
         .route("/v1/experiments/{id}", get(show))
         .route("/v1/experiments/{id}/cancel", post(cancel))
+        .route("/v1/experiments/{id}/trials", get(trials))
+        .route("/v1/experiments/{id}/plot.svg", get(plot))
+        .route("/v1/experiments/{id}/points.csv", get(points))
+        .route("/v1/compare", get(compare_runs))
         .route("/v1/queue", get(queue))
         .route("/v1/queue/pause", post(pause))
         .route("/v1/queue/resume", post(resume))
         .route("/metrics", get(metrics))
         .layer(DefaultBodyLimit::max(BODY_LIMIT))
+        .layer(tower_http::timeout::TimeoutLayer::with_status_code(
+            StatusCode::SERVICE_UNAVAILABLE,
+            timeout,
+        ))
+        .layer(PropagateRequestIdLayer::x_request_id())
+        .layer(trace)
+        .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
         .with_state(state)
 }
 
@@ -88,8 +140,8 @@ pub struct ProblemBody {
 #[derive(utoipa::OpenApi)]
 #[openapi(
     info(title = "zwidth", description = "Z-width experiments: queue, run and store maps and estimator comparisons"),
-    paths(healthz, submit, list, show, cancel, queue, pause, resume, metrics),
-    components(schemas(ProblemBody, ExperimentView, ExperimentSpec)),
+    paths(healthz, rigs, set_window, clear_window, submit, list, show, cancel, trials, plot, points, compare_runs, queue, pause, resume, metrics),
+    components(schemas(ProblemBody, ExperimentView, ExperimentSpec, RigView, Window, Comparison, StoredTrial)),
     modifiers(&BearerAuth)
 )]
 pub struct ApiDoc;
@@ -116,7 +168,7 @@ pub fn openapi_json() -> String {
     // `additionalProperties: false`; inside allOf that forbids `kind` itself
     // and makes the union unsatisfiable. The server still rejects unknown
     // fields; the schema just leaves them open.
-    for name in ["MapSpec", "CompareSpec"] {
+    for name in ["MapSpec", "CompareSpec", "SweepSpec"] {
         if let Some(o) = v["components"]["schemas"][name].as_object_mut() {
             o.remove("additionalProperties");
         }
@@ -196,6 +248,9 @@ pub struct ExperimentView {
     pub finished_ms: Option<i64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub not_before_ms: Option<i64>,
+    /// The rig it runs on.
+    pub rig: String,
+    /// `trials_done`, `fraction` (0 to 1) and, while running, `elapsed_s` and `eta_s`.
     pub progress: Value,
     pub spec: Value,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -204,10 +259,27 @@ pub struct ExperimentView {
     pub error: Option<String>,
 }
 
+/// Trials done, the fraction of the work done, and while running the time
+/// elapsed and the estimated time left (s), extrapolated from the fraction.
+fn progress(r: &ExperimentRow) -> Value {
+    let mut p = json!({ "trials_done": r.trials_done, "fraction": r.progress });
+    if r.state == "running" {
+        if let Some(t0) = r.started_ms {
+            let elapsed = ((now_ms() - t0) as f64 / 1000.0).max(0.0);
+            p["elapsed_s"] = json!(elapsed);
+            if r.progress >= 0.01 && r.progress < 1.0 {
+                p["eta_s"] = json!(elapsed * (1.0 - r.progress) / r.progress);
+            }
+        }
+    }
+    p
+}
+
 impl From<ExperimentRow> for ExperimentView {
     fn from(r: ExperimentRow) -> Self {
         Self {
-            progress: json!({ "trials_done": r.trials_done }),
+            progress: progress(&r),
+            rig: r.rig.clone(),
             spec: serde_json::from_str(&r.spec).unwrap_or(Value::Null),
             result: r
                 .result
@@ -233,11 +305,15 @@ pub struct SubmitQuery {
     /// Do not start before this time (unix ms).
     #[serde(default)]
     not_before_ms: Option<i64>,
+    /// The rig to run on; default the first.
+    #[serde(default)]
+    rig: Option<String>,
 }
 
 #[utoipa::path(post, path = "/v1/experiments", request_body = ExperimentSpec,
     params(("priority" = Option<i64>, Query, description = "-1000 to 1000, higher first"),
            ("not_before_ms" = Option<i64>, Query, description = "do not start before (unix ms)"),
+           ("rig" = Option<String>, Query, description = "rig id (GET /v1/rigs); default the first"),
            ("Idempotency-Key" = Option<String>, Header, description = "repeat-safe submission")),
     responses((status = 202, description = "queued", body = ExperimentView),
               (status = 200, description = "an earlier submission with the same Idempotency-Key", body = ExperimentView),
@@ -262,6 +338,17 @@ async fn submit(
         )
     })?;
     spec.validate()?;
+    let rig = match &q.rig {
+        None => st.rigs[0].clone(),
+        Some(id) => st.rig(id).cloned().ok_or_else(|| {
+            Problem::from(SpecError::new(
+                "rig",
+                format!("{id:?}"),
+                format!("must be one of the rigs: {}", rig_ids(&st)),
+            ))
+        })?,
+    };
+    rig.check(&spec)?;
     if !(-1000..=1000).contains(&q.priority) {
         let mut p = Problem::new(
             StatusCode::UNPROCESSABLE_ENTITY,
@@ -300,6 +387,7 @@ async fn submit(
             q.priority,
             key.as_deref(),
             q.not_before_ms,
+            &rig.info().id,
         )
         .await
         .map_err(Problem::internal)?;
@@ -435,9 +523,245 @@ async fn metrics(State(st): State<AppState>) -> Result<Response, Problem> {
     Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out).into_response())
 }
 
-/// Open the store, requeue interrupted work, bind, and serve until Ctrl-C.
-/// Returns after shutdown. Prints the bound address on stdout first.
-pub async fn serve(db: &std::path::Path, bind: &str, tokens: Vec<String>) -> Result<(), String> {
+fn rig_ids(st: &AppState) -> String {
+    st.rigs.iter().map(|r| r.info().id.clone()).collect::<Vec<_>>().join(", ")
+}
+
+fn not_found(what: &str, id: &str) -> Problem {
+    Problem::new(StatusCode::NOT_FOUND, "Not found", format!("no {what} {id}"))
+}
+
+/// A rig: what it can do, its window, and its load.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct RigView {
+    #[serde(flatten)]
+    pub info: RigInfo,
+    /// Recurring window outside which it starts nothing new; null: any time.
+    pub window: Option<Window>,
+    /// Whether it may start an experiment now.
+    pub open_now: bool,
+    /// When it may next start one (unix ms; now when open).
+    pub next_start_ms: i64,
+    /// Experiments waiting for it (queued or scheduled).
+    pub waiting: i64,
+    /// The experiment it is running, if any.
+    pub running: Option<String>,
+}
+
+async fn rig_view(st: &AppState, rig: &Arc<dyn Rig>) -> Result<RigView, Problem> {
+    let id = &rig.info().id;
+    let window = st.store.rig_window(id).await.map_err(Problem::internal)?;
+    let now = jiff::Timestamp::now();
+    let next = match window.as_ref().and_then(|w| w.validate().ok()) {
+        Some(h) => h.next_open(now),
+        None => now,
+    };
+    let (waiting, running) = st.store.rig_load(id).await.map_err(Problem::internal)?;
+    Ok(RigView {
+        info: rig.info().clone(),
+        open_now: next == now,
+        next_start_ms: next.as_millisecond(),
+        window,
+        waiting,
+        running,
+    })
+}
+
+#[utoipa::path(get, path = "/v1/rigs", responses((status = 200, description = "the rigs, the first is the default", body = Vec<RigView>)))]
+async fn rigs(State(st): State<AppState>) -> Result<Json<Vec<RigView>>, Problem> {
+    let mut out = Vec::new();
+    for r in st.rigs.iter() {
+        out.push(rig_view(&st, r).await?);
+    }
+    Ok(Json(out))
+}
+
+#[utoipa::path(put, path = "/v1/rigs/{id}/window", request_body = Window, params(("id" = String, Path, description = "rig id")),
+    responses((status = 200, body = RigView),
+              (status = 401, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 403, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 422, description = "invalid window", body = ProblemBody, content_type = "application/problem+json")),
+    security((), ("bearer" = [])))]
+async fn set_window(
+    State(st): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+    body: Bytes,
+) -> Result<Json<RigView>, Problem> {
+    authorize(&st, &headers)?;
+    let rig = st.rig(&id).cloned().ok_or_else(|| not_found("rig", &id))?;
+    let w: Window = serde_json::from_slice(&body).map_err(|e| {
+        Problem::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "Invalid window",
+            format!("the body is not a window {{\"start\":\"HH:MM\",\"end\":\"HH:MM\",\"tz\":\"Europe/Berlin\"}}: {e}"),
+        )
+    })?;
+    w.validate()?;
+    st.store.set_rig_window(&id, Some(&w)).await.map_err(Problem::internal)?;
+    Ok(Json(rig_view(&st, &rig).await?))
+}
+
+#[utoipa::path(delete, path = "/v1/rigs/{id}/window", params(("id" = String, Path, description = "rig id")),
+    responses((status = 200, body = RigView),
+              (status = 401, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 403, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json")),
+    security((), ("bearer" = [])))]
+async fn clear_window(
+    State(st): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> Result<Json<RigView>, Problem> {
+    authorize(&st, &headers)?;
+    let rig = st.rig(&id).cloned().ok_or_else(|| not_found("rig", &id))?;
+    st.store.set_rig_window(&id, None).await.map_err(Problem::internal)?;
+    Ok(Json(rig_view(&st, &rig).await?))
+}
+
+#[derive(Debug, Deserialize)]
+pub struct TrialsQuery {
+    #[serde(default)]
+    scope: Option<u32>,
+    #[serde(default)]
+    offset: Option<i64>,
+    #[serde(default)]
+    limit: Option<i64>,
+}
+
+/// Most trials one page returns.
+pub const TRIALS_PAGE_MAX: i64 = 10_000;
+
+#[utoipa::path(get, path = "/v1/experiments/{id}/trials",
+    params(("id" = String, Path, description = "experiment id"),
+           ("scope" = Option<u32>, Query, description = "only this map of the experiment (0, 1, …)"),
+           ("offset" = Option<i64>, Query, description = "skip this many (default 0)"),
+           ("limit" = Option<i64>, Query, description = "at most this many, 1 to 10000 (default 1000)")),
+    responses((status = 200, description = "stored trials in the order they finished", body = Vec<StoredTrial>),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 422, body = ProblemBody, content_type = "application/problem+json")))]
+async fn trials(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+    Query(q): Query<TrialsQuery>,
+) -> Result<Json<Vec<StoredTrial>>, Problem> {
+    let limit = q.limit.unwrap_or(1000);
+    if !(1..=TRIALS_PAGE_MAX).contains(&limit) {
+        return Err(SpecError::new("limit", limit, format!("must be 1 to {TRIALS_PAGE_MAX}")).into());
+    }
+    let offset = q.offset.unwrap_or(0);
+    if offset < 0 {
+        return Err(SpecError::new("offset", offset, "must be >= 0").into());
+    }
+    if st.store.state(&id).await.map_err(Problem::internal)?.is_none() {
+        return Err(not_found("experiment", &id));
+    }
+    let t = st.store.trials_page(&id, q.scope, offset, limit).await.map_err(Problem::internal)?;
+    Ok(Json(t))
+}
+
+/// The maps of a succeeded experiment (409 while it is not).
+async fn finished_maps(st: &AppState, id: &str) -> Result<(ExperimentSpec, Value, Vec<MapSummary>), Problem> {
+    let row = st.store.get(id).await.map_err(Problem::internal)?.ok_or_else(|| not_found("experiment", id))?;
+    let (Some(result), "succeeded") = (row.result.as_deref(), row.state.as_str()) else {
+        return Err(Problem::new(
+            StatusCode::CONFLICT,
+            "No result yet",
+            format!("experiment {id} is {}: results exist once it has succeeded", row.state),
+        ));
+    };
+    let spec: ExperimentSpec = serde_json::from_str(&row.spec).map_err(Problem::internal)?;
+    let result: Value = serde_json::from_str(result).map_err(Problem::internal)?;
+    let maps = report::maps(id, &spec, &result);
+    Ok((spec, result, maps))
+}
+
+#[utoipa::path(get, path = "/v1/experiments/{id}/plot.svg", params(("id" = String, Path, description = "experiment id")),
+    responses((status = 200, description = "one map: Fig. 7 style; a parameter sweep: K-width against the parameter; else every boundary", body = String, content_type = "image/svg+xml"),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 409, description = "not succeeded (yet)", body = ProblemBody, content_type = "application/problem+json")))]
+async fn plot(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, Problem> {
+    let (spec, result, maps) = finished_maps(&st, &id).await?;
+    let svg = report::svg(&spec, &maps, &result).map_err(Problem::internal)?;
+    Ok(([(header::CONTENT_TYPE, "image/svg+xml")], svg).into_response())
+}
+
+#[utoipa::path(get, path = "/v1/experiments/{id}/points.csv", params(("id" = String, Path, description = "experiment id")),
+    responses((status = 200, description = "map,k_n_per_m,b_ns_per_m,renders,fidelity_ns_per_m", body = String, content_type = "text/csv"),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 409, description = "not succeeded (yet)", body = ProblemBody, content_type = "application/problem+json")))]
+async fn points(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, Problem> {
+    let (_, _, maps) = finished_maps(&st, &id).await?;
+    Ok(([(header::CONTENT_TYPE, "text/csv")], report::points_csv(&maps)).into_response())
+}
+
+#[derive(Debug, Deserialize)]
+pub struct CompareQuery {
+    #[serde(default)]
+    runs: Option<String>,
+    #[serde(default)]
+    format: Option<String>,
+}
+
+/// Most runs one comparison takes.
+pub const COMPARE_MAX_RUNS: usize = 50;
+
+#[utoipa::path(get, path = "/v1/compare",
+    params(("runs" = String, Query, description = "comma-separated ids of succeeded experiments on one scene"),
+           ("format" = Option<String>, Query, description = "json (default), svg (every boundary on one chart) or text (a table)")),
+    responses((status = 200, description = "K-width, B-width, max fidelity error and area per map, with differences from the first", body = Comparison),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 409, description = "a run has not succeeded", body = ProblemBody, content_type = "application/problem+json"),
+              (status = 422, description = "bad runs or format, or different scenes", body = ProblemBody, content_type = "application/problem+json")))]
+async fn compare_runs(State(st): State<AppState>, Query(q): Query<CompareQuery>) -> Result<Response, Problem> {
+    let format = q.format.as_deref().unwrap_or("json");
+    if !["json", "svg", "text"].contains(&format) {
+        return Err(SpecError::new("format", format!("{format:?}"), "must be json, svg or text").into());
+    }
+    let ids: Vec<String> = q
+        .runs
+        .as_deref()
+        .unwrap_or("")
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(str::to_owned)
+        .collect();
+    if ids.is_empty() || ids.len() > COMPARE_MAX_RUNS {
+        return Err(SpecError::new(
+            "runs",
+            q.runs.as_deref().unwrap_or(""),
+            format!("give 1 to {COMPARE_MAX_RUNS} experiment ids, comma-separated"),
+        )
+        .into());
+    }
+    let mut all = Vec::new();
+    for id in &ids {
+        all.extend(finished_maps(&st, id).await?.2);
+    }
+    let c = report::compare(ids, all)?;
+    Ok(match format {
+        "svg" => ([(header::CONTENT_TYPE, "image/svg+xml")], c.svg().map_err(Problem::internal)?).into_response(),
+        "text" => ([(header::CONTENT_TYPE, "text/plain; charset=utf-8")], c.table()).into_response(),
+        _ => Json(c).into_response(),
+    })
+}
+
+/// Open the store, requeue interrupted work, bind, start one runner per
+/// rig, and serve until Ctrl-C or SIGTERM. On shutdown the server stops
+/// accepting, a running experiment stops within one trial with its trials
+/// stored (state `interrupted`, resumed at the next start), then it returns.
+/// Prints the bound address on stdout first.
+pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
+    let ServeConfig { db, bind, tokens, rigs, request_timeout_s } = cfg;
+    let db = db.as_path();
+    if rigs.is_empty() {
+        return Err("refusing to serve without a rig".into());
+    }
+    if !(request_timeout_s.is_finite() && (0.1..=3600.0).contains(&request_timeout_s)) {
+        return Err(format!("refusing: --request-timeout-s = {request_timeout_s} must be 0.1 to 3600 s"));
+    }
     let store = Store::open(db)
         .await
         .map_err(|e| format!("cannot open database {}: {e}", db.display()))?;
@@ -451,7 +775,7 @@ pub async fn serve(db: &std::path::Path, bind: &str, tokens: Vec<String>) -> Res
             "requeued experiments interrupted by the last shutdown"
         );
     }
-    let listener = tokio::net::TcpListener::bind(bind)
+    let listener = tokio::net::TcpListener::bind(&bind)
         .await
         .map_err(|e| format!("cannot bind {bind}: {e}"))?;
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
@@ -466,14 +790,51 @@ pub async fn serve(db: &std::path::Path, bind: &str, tokens: Vec<String>) -> Res
     println!("zwidth serving on http://{addr}");
     use std::io::Write;
     let _ = std::io::stdout().flush();
-    tokio::spawn(crate::jobs::runner(store.clone()));
-    let tokens = std::sync::Arc::new(tokens);
-    axum::serve(listener, router(AppState { store, tokens }))
-        .with_graceful_shutdown(async {
-            let _ = tokio::signal::ctrl_c().await;
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let runners: Vec<_> = rigs
+        .iter()
+        .map(|r| {
+            tracing::info!(rig = %r.info().id, parallelism = r.info().parallelism, "rig ready");
+            tokio::spawn(crate::jobs::runner(store.clone(), r.clone(), stop_rx.clone()))
         })
+        .collect();
+    let state = AppState {
+        store,
+        tokens: Arc::new(tokens),
+        rigs: Arc::new(rigs),
+    };
+    let served = axum::serve(listener, router(state, Duration::from_secs_f64(request_timeout_s)))
+        .with_graceful_shutdown(shutdown_signal())
         .await
-        .map_err(|e| e.to_string())
+        .map_err(|e| e.to_string());
+    tracing::info!("shutting down: letting the runners stop");
+    let _ = stop_tx.send(true);
+    for r in runners {
+        let _ = r.await;
+    }
+    served
+}
+
+/// Ctrl-C or SIGTERM (what `docker stop` sends).
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = term => {},
+    }
 }
 
 #[cfg(test)]
@@ -495,6 +856,12 @@ mod tests {
             "/v1/experiments/{id}/cancel",
             "/healthz",
             "/metrics",
+            "/v1/rigs",
+            "/v1/rigs/{id}/window",
+            "/v1/compare",
+            "/v1/experiments/{id}/trials",
+            "/v1/experiments/{id}/plot.svg",
+            "/v1/experiments/{id}/points.csv",
         ] {
             assert!(v["paths"].get(path).is_some(), "{path} missing");
         }

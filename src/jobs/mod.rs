@@ -1,7 +1,10 @@
 //! The experiment queue: what an experiment is (one spec type, stored as
-//! submitted), and the runner that claims queued experiments one at a time,
-//! runs them off the async workers (`spawn_blocking`), writes progress, and
-//! honours cancellation between trials.
+//! submitted), and the runners — one per rig — that claim queued
+//! experiments one at a time (inside the rig's window, if it has one), run
+//! them off the async workers (`spawn_blocking`), write progress, and honour
+//! cancellation and shutdown between trials.
+
+pub mod window;
 
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::Ordering;
@@ -12,16 +15,20 @@ use crate::error::SpecError;
 use crate::store::Store;
 use crate::zwidth::compare;
 use crate::zwidth::scene::SceneSpec;
+use crate::rig::Rig;
 use crate::zwidth::search::{self, map_observed, Observer};
 use crate::zwidth::settings::{Accuracy, MapSpec};
+use crate::zwidth::sweep::{sweep_observed, SweepSpec};
 
-/// An experiment as submitted: `{"kind":"map", …MapSpec}` or
-/// `{"kind":"compare","scene":{…},"accuracy":"draft"}`.
+/// An experiment as submitted: `{"kind":"map", …MapSpec}`,
+/// `{"kind":"compare","scene":{…},"accuracy":"draft"}` or
+/// `{"kind":"sweep","map":{…},"parameter":{…}}`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum ExperimentSpec {
     Map(MapSpec),
     Compare(CompareSpec),
+    Sweep(SweepSpec),
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -39,6 +46,26 @@ impl ExperimentSpec {
         match self {
             ExperimentSpec::Map(_) => "map",
             ExperimentSpec::Compare(_) => "compare",
+            ExperimentSpec::Sweep(_) => "sweep",
+        }
+    }
+
+    /// Every scene the experiment runs, with the request field it came from.
+    pub fn scenes(&self) -> Vec<(String, SceneSpec)> {
+        match self {
+            ExperimentSpec::Map(m) => vec![("scene".into(), m.scene.clone())],
+            ExperimentSpec::Compare(c) => vec![(
+                "scene".into(),
+                c.scene.clone().unwrap_or_else(compare::seed_2018_scene),
+            )],
+            ExperimentSpec::Sweep(s) => match &s.scenes {
+                Some(list) => list
+                    .iter()
+                    .enumerate()
+                    .map(|(i, sc)| (format!("scenes[{i}]"), sc.clone()))
+                    .collect(),
+                None => vec![("map.scene".into(), s.map.scene.clone())],
+            },
         }
     }
 
@@ -51,6 +78,7 @@ impl ExperimentSpec {
                 let sc = scene.validate().map_err(|e| e.within("scene"))?;
                 c.accuracy.resolve(&sc).map(|_| ())
             }
+            ExperimentSpec::Sweep(s) => s.variants().map(|_| ()),
         }
     }
 
@@ -65,6 +93,8 @@ impl ExperimentSpec {
                 compare::compare_observed(&scene, &c.accuracy, Some(observer))
                     .map(|r| serde_json::to_value(r).unwrap_or_default())
             }
+            ExperimentSpec::Sweep(s) => sweep_observed(s, Some(observer))
+                .map(|r| serde_json::to_value(r).unwrap_or_default()),
         }
     }
 }
@@ -72,11 +102,27 @@ impl ExperimentSpec {
 /// Trials per second of the running experiment over the last second (for /metrics).
 pub static TRIALS_PER_SECOND: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
-/// Claim and run experiments until the process ends.
-pub async fn runner(store: Store) {
-    loop {
-        match store.claim_next().await {
-            Ok(Some(row)) => run_one(&store, row.id, row.spec).await,
+/// Claim and run `rig`'s experiments until `shutdown` turns true. Outside
+/// the rig's window (if it has one) nothing new starts. On shutdown a
+/// running experiment stops within one trial, its finished trials stored,
+/// and is marked `interrupted` (it resumes at the next start).
+pub async fn runner(store: Store, rig: Arc<dyn Rig>, shutdown: tokio::sync::watch::Receiver<bool>) {
+    let id = rig.info().id.clone();
+    while !*shutdown.borrow() {
+        match store.rig_window(&id).await {
+            Ok(Some(w)) => {
+                if let Ok(hours) = w.validate() {
+                    if !hours.is_open(jiff::Timestamp::now()) {
+                        tokio::time::sleep(Duration::from_millis(500)).await;
+                        continue;
+                    }
+                }
+            }
+            Ok(None) => {}
+            Err(e) => tracing::warn!(error = %e, rig = %id, "reading the rig window failed"),
+        }
+        match store.claim_next(&id).await {
+            Ok(Some(row)) => run_one(&store, rig.clone(), row.id, row.spec, shutdown.clone()).await,
             Ok(None) => tokio::time::sleep(Duration::from_millis(100)).await,
             Err(e) => {
                 tracing::error!(error = %e, "claiming the next experiment failed");
@@ -86,8 +132,14 @@ pub async fn runner(store: Store) {
     }
 }
 
-#[tracing::instrument(skip(store, spec))]
-async fn run_one(store: &Store, id: String, spec: String) {
+#[tracing::instrument(skip(store, rig, spec, shutdown), fields(rig = %rig.info().id))]
+async fn run_one(
+    store: &Store,
+    rig: Arc<dyn Rig>,
+    id: String,
+    spec: String,
+    shutdown: tokio::sync::watch::Receiver<bool>,
+) {
     let parsed: ExperimentSpec = match serde_json::from_str(&spec) {
         Ok(s) => s,
         Err(e) => {
@@ -116,10 +168,11 @@ async fn run_one(store: &Store, id: String, spec: String) {
     }
     let observer = Arc::new(Observer::resuming(done));
     let obs = observer.clone();
-    let mut task = tokio::task::spawn_blocking(move || parsed.run(obs));
+    let mut task = tokio::task::spawn_blocking(move || rig.run(&parsed, obs));
     // Every 100 ms: store the trials finished since (one transaction), write
-    // progress, and look for a cancel request.
+    // progress, and look for a cancel request or shutdown.
     let mut rate_mark = (std::time::Instant::now(), 0usize);
+    let mut interrupted = false;
     let outcome = loop {
         tokio::select! {
             r = &mut task => break r,
@@ -130,16 +183,21 @@ async fn run_one(store: &Store, id: String, spec: String) {
                 let trials = observer.trials.load(Ordering::Relaxed) as i64;
                 let dt = rate_mark.0.elapsed().as_secs_f64();
                 if dt >= 1.0 {
-                    TRIALS_PER_SECOND.store(((trials as usize - rate_mark.1) as f64 / dt).round() as u64, Ordering::Relaxed);
+                    TRIALS_PER_SECOND.store(((trials as usize).saturating_sub(rate_mark.1) as f64 / dt).round() as u64, Ordering::Relaxed);
                     rate_mark = (std::time::Instant::now(), trials as usize);
                 }
-                if let Err(e) = store.set_progress(&id, trials).await {
+                if let Err(e) = store.set_progress(&id, trials, observer.fraction()).await {
                     tracing::warn!(error = %e, "progress write failed");
                 }
                 if let Ok(Some(state)) = store.state(&id).await {
                     if state == "cancelled" {
                         observer.cancel.store(true, Ordering::Relaxed);
                     }
+                }
+                if *shutdown.borrow() && !interrupted {
+                    tracing::info!("shutting down: stopping the running experiment");
+                    interrupted = true;
+                    observer.cancel.store(true, Ordering::Relaxed);
                 }
             }
         }
@@ -149,7 +207,9 @@ async fn run_one(store: &Store, id: String, spec: String) {
     }
     TRIALS_PER_SECOND.store(0, Ordering::Relaxed);
     let trials = observer.trials.load(Ordering::Relaxed) as i64;
-    let res = if observer.cancelled() {
+    let res = if interrupted {
+        store.interrupt(&id, trials).await
+    } else if observer.cancelled() {
         store.finish(&id, "cancelled", trials, None, None).await
     } else {
         match outcome {

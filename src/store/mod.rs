@@ -8,6 +8,7 @@ use sqlx::{FromRow, SqlitePool};
 use std::path::Path;
 use std::time::Duration;
 
+use crate::jobs::window::Window;
 use crate::zwidth::search::StoredTrial;
 
 static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
@@ -33,6 +34,9 @@ pub struct ExperimentRow {
     pub error: Option<String>,
     pub idempotency_key: Option<String>,
     pub not_before_ms: Option<i64>,
+    pub rig: String,
+    /// Fraction of the work done, 0 to 1.
+    pub progress: f64,
 }
 
 pub fn now_ms() -> i64 {
@@ -70,6 +74,7 @@ impl Store {
         priority: i64,
         key: Option<&str>,
         not_before_ms: Option<i64>,
+        rig: &str,
     ) -> Result<(ExperimentRow, bool), sqlx::Error> {
         if let Some(k) = key {
             if let Some(row) = sqlx::query_as::<_, ExperimentRow>(
@@ -83,8 +88,8 @@ impl Store {
             }
         }
         let row = sqlx::query_as::<_, ExperimentRow>(
-            "INSERT INTO experiments (id, kind, spec, state, priority, created_ms, idempotency_key, not_before_ms)
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?) RETURNING *",
+            "INSERT INTO experiments (id, kind, spec, state, priority, created_ms, idempotency_key, not_before_ms, rig)
+             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING *",
         )
         .bind(id)
         .bind(kind)
@@ -94,6 +99,7 @@ impl Store {
         .bind(now_ms())
         .bind(key)
         .bind(not_before_ms)
+        .bind(rig)
         .fetch_one(&self.pool)
         .await?;
         Ok((row, true))
@@ -115,22 +121,66 @@ impl Store {
         .await
     }
 
-    /// Claim the next experiment that may start now (highest priority, oldest
-    /// first), unless the queue is paused. Scheduled experiments whose time
-    /// has come count as queued.
-    pub async fn claim_next(&self) -> Result<Option<ExperimentRow>, sqlx::Error> {
+    /// Claim `rig`'s next experiment that may start now (highest priority,
+    /// oldest first), unless the queue is paused. Scheduled experiments whose
+    /// time has come count as queued.
+    pub async fn claim_next(&self, rig: &str) -> Result<Option<ExperimentRow>, sqlx::Error> {
         let now = now_ms();
         sqlx::query_as::<_, ExperimentRow>(
             "UPDATE experiments SET state = 'running', started_ms = ?1
              WHERE id = (SELECT id FROM experiments
-                         WHERE state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= ?1)
+                         WHERE rig = ?2 AND state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= ?1)
                            AND (SELECT paused FROM queue_control WHERE id = 1) = 0
                          ORDER BY priority DESC, created_ms, id LIMIT 1)
              RETURNING *",
         )
         .bind(now)
+        .bind(rig)
         .fetch_optional(&self.pool)
         .await
+    }
+
+    /// The rig's window, if it has one.
+    pub async fn rig_window(&self, rig: &str) -> Result<Option<Window>, sqlx::Error> {
+        let w: Option<String> = sqlx::query_scalar("SELECT window FROM rig_windows WHERE rig = ?")
+            .bind(rig)
+            .fetch_optional(&self.pool)
+            .await?;
+        Ok(w.and_then(|w| serde_json::from_str(&w).ok()))
+    }
+
+    /// Set (Some) or clear (None) the rig's window.
+    pub async fn set_rig_window(&self, rig: &str, w: Option<&Window>) -> Result<(), sqlx::Error> {
+        match w {
+            Some(w) => sqlx::query("INSERT INTO rig_windows (rig, window) VALUES (?, ?) ON CONFLICT (rig) DO UPDATE SET window = excluded.window")
+                .bind(rig)
+                .bind(serde_json::to_string(w).unwrap_or_default())
+                .execute(&self.pool)
+                .await
+                .map(|_| ()),
+            None => sqlx::query("DELETE FROM rig_windows WHERE rig = ?")
+                .bind(rig)
+                .execute(&self.pool)
+                .await
+                .map(|_| ()),
+        }
+    }
+
+    /// Per rig: experiments waiting, and the one running (if any).
+    pub async fn rig_load(&self, rig: &str) -> Result<(i64, Option<String>), sqlx::Error> {
+        let waiting: i64 = sqlx::query_scalar(
+            "SELECT COUNT(*) FROM experiments WHERE rig = ? AND state IN ('queued', 'scheduled')",
+        )
+        .bind(rig)
+        .fetch_one(&self.pool)
+        .await?;
+        let running: Option<String> = sqlx::query_scalar(
+            "SELECT id FROM experiments WHERE rig = ? AND state = 'running' LIMIT 1",
+        )
+        .bind(rig)
+        .fetch_optional(&self.pool)
+        .await?;
+        Ok((waiting, running))
     }
 
     pub async fn set_paused(&self, paused: bool) -> Result<(), sqlx::Error> {
@@ -161,9 +211,10 @@ impl Store {
         Ok((by_state, trials))
     }
 
-    pub async fn set_progress(&self, id: &str, trials: i64) -> Result<(), sqlx::Error> {
-        sqlx::query("UPDATE experiments SET trials_done = ? WHERE id = ? AND state = 'running'")
+    pub async fn set_progress(&self, id: &str, trials: i64, fraction: f64) -> Result<(), sqlx::Error> {
+        sqlx::query("UPDATE experiments SET trials_done = ?, progress = ? WHERE id = ? AND state = 'running'")
             .bind(trials)
+            .bind(if fraction.is_finite() { fraction.clamp(0.0, 1.0) } else { 0.0 })
             .bind(id)
             .execute(&self.pool)
             .await
@@ -179,7 +230,8 @@ impl Store {
         result: Option<&str>,
         error: Option<&str>,
     ) -> Result<(), sqlx::Error> {
-        sqlx::query("UPDATE experiments SET state = ?, trials_done = ?, result = ?, error = ?, finished_ms = ? WHERE id = ?")
+        sqlx::query("UPDATE experiments SET state = ?1, trials_done = ?2, result = ?3, error = ?4, finished_ms = ?5,
+                     progress = CASE WHEN ?1 = 'succeeded' THEN 1 ELSE progress END WHERE id = ?6")
             .bind(state)
             .bind(trials)
             .bind(result)
@@ -201,10 +253,21 @@ impl Store {
         Ok(r.rows_affected() == 1)
     }
 
-    /// After a restart: anything left running was interrupted; queue it again.
+    /// A running experiment stopped by shutdown (its trials are stored).
+    pub async fn interrupt(&self, id: &str, trials: i64) -> Result<(), sqlx::Error> {
+        sqlx::query("UPDATE experiments SET state = 'interrupted', trials_done = ? WHERE id = ? AND state = 'running'")
+            .bind(trials)
+            .bind(id)
+            .execute(&self.pool)
+            .await
+            .map(|_| ())
+    }
+
+    /// After a restart: anything left running (killed) or interrupted
+    /// (shut down) is queued again; it resumes from its stored trials.
     pub async fn requeue_interrupted(&self) -> Result<u64, sqlx::Error> {
         let r = sqlx::query(
-            "UPDATE experiments SET state = 'queued', started_ms = NULL WHERE state = 'running'",
+            "UPDATE experiments SET state = 'queued', started_ms = NULL WHERE state IN ('running', 'interrupted')",
         )
         .execute(&self.pool)
         .await?;
@@ -245,6 +308,35 @@ impl Store {
                 .bind(id)
                 .fetch_all(&self.pool)
                 .await?;
+        Ok(rows
+            .into_iter()
+            .filter_map(|(scope, p)| {
+                serde_json::from_str(&p).ok().map(|point| StoredTrial {
+                    scope: scope as u32,
+                    point,
+                })
+            })
+            .collect())
+    }
+
+    /// Stored trials in the order they finished, a page at a time.
+    pub async fn trials_page(
+        &self,
+        id: &str,
+        scope: Option<u32>,
+        offset: i64,
+        limit: i64,
+    ) -> Result<Vec<StoredTrial>, sqlx::Error> {
+        let rows: Vec<(i64, String)> = sqlx::query_as(
+            "SELECT scope, point FROM trials WHERE experiment_id = ?1 AND (?2 IS NULL OR scope = ?2)
+             ORDER BY rowid LIMIT ?3 OFFSET ?4",
+        )
+        .bind(id)
+        .bind(scope.map(|s| s as i64))
+        .bind(limit)
+        .bind(offset)
+        .fetch_all(&self.pool)
+        .await?;
         Ok(rows
             .into_iter()
             .filter_map(|(scope, p)| {

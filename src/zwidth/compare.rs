@@ -155,7 +155,11 @@ pub fn compare_observed(
 ) -> Result<CompareResult, SpecError> {
     let start = std::time::Instant::now();
     let c = estimate_c(scene)?;
-    let rows = paper_estimators(scene, c.estimate.lipschitz)
+    let estimators = paper_estimators(scene, c.estimate.lipschitz);
+    if let Some(o) = &observer {
+        o.set_scopes(estimators.len());
+    }
+    let rows = estimators
         .into_par_iter()
         .enumerate()
         .map(|(scope, (name, parameters, estimator))| {

@@ -10,6 +10,7 @@ pub mod probe;
 pub mod scene;
 pub mod search;
 pub mod settings;
+pub mod sweep;
 pub mod tradeoff;
 
 pub use scene::{Scene, SceneSpec};

@@ -404,6 +404,48 @@ impl SceneSpec {
     }
 }
 
+impl SceneSpec {
+    /// This scene with the number at `path` (dot-separated JSON names, e.g.
+    /// `estimator.cutoff_hz`, `device.damping`, `loop.sample_hz`) set to
+    /// `value`, then validated like any scene. `field` names the request
+    /// field to blame (e.g. `parameter.path`). The leaf need not be present
+    /// (optional fields), but its parent object must be.
+    pub fn with_number(&self, path: &str, value: f64, field: &str) -> Result<SceneSpec, SpecError> {
+        let unknown = || {
+            SpecError::new(
+                field,
+                format!("{path:?}"),
+                "must name a number in the scene, e.g. \"estimator.cutoff_hz\" or \"device.damping\"",
+            )
+        };
+        if !value.is_finite() {
+            return Err(SpecError::new(path, value, "must be a finite number"));
+        }
+        let mut doc = serde_json::to_value(self).map_err(|_| unknown())?;
+        let (parent, leaf) = path.rsplit_once('.').unwrap_or(("", path));
+        let mut node = &mut doc;
+        for name in parent.split('.').filter(|n| !n.is_empty()) {
+            node = node.get_mut(name).ok_or_else(unknown)?;
+        }
+        let obj = node.as_object_mut().ok_or_else(unknown)?;
+        if obj.get(leaf).is_some_and(|v| !v.is_number() && !v.is_null()) || leaf.is_empty() {
+            return Err(unknown());
+        }
+        // Whole numbers as integers, so counts (orders, windows) read back.
+        let number = if value.fract() == 0.0 && value.abs() < 9e15 {
+            serde_json::Value::from(value as i64)
+        } else {
+            serde_json::Value::from(value)
+        };
+        obj.insert(leaf.to_string(), number);
+        let spec: SceneSpec = serde_json::from_value(doc).map_err(|e| {
+            SpecError::new(field, format!("{path:?}"), format!("cannot be set on this scene: {e}"))
+        })?;
+        spec.validate().map_err(|e| e.within("scene"))?;
+        Ok(spec)
+    }
+}
+
 impl Scene {
     /// A fresh estimator (validated at scene construction, so this cannot fail).
     pub fn estimator(&self) -> Estimator {

@@ -23,7 +23,7 @@ use super::settings::{Criterion, MapSpec, Method, Resolved, SearchKind};
 use crate::error::SpecError;
 
 /// One evaluated (K, B).
-#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct Point {
     pub k: f64,
     pub b: f64,
@@ -66,13 +66,16 @@ pub struct MapResult {
     pub b_width: f64,
     /// Largest fidelity error over the passive points (N·s/m); impedance criteria only.
     pub max_fidelity_error: Option<f64>,
+    /// Area of the region that renders, ∫ K_max dB over the boundary
+    /// (trapezoids; N/m · N·s/m).
+    pub area: f64,
     pub points: Vec<Point>,
     pub trials: usize,
     pub elapsed_s: f64,
 }
 
 /// A finished trial of map `scope` within one experiment.
-#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct StoredTrial {
     pub scope: u32,
     pub point: Point,
@@ -88,6 +91,10 @@ pub struct Observer {
     pub cancel: std::sync::atomic::AtomicBool,
     done: std::collections::HashMap<(u32, u64, u64), Point>,
     new: std::sync::Mutex<Vec<StoredTrial>>,
+    /// Maps expected in the experiment (0 counts as 1) and each one's
+    /// fraction done, for the progress and ETA.
+    scopes: std::sync::atomic::AtomicUsize,
+    progress: std::sync::Mutex<std::collections::HashMap<u32, f64>>,
 }
 
 impl Observer {
@@ -109,6 +116,28 @@ impl Observer {
     /// The trials finished since the last call.
     pub fn take_new(&self) -> Vec<StoredTrial> {
         std::mem::take(&mut *self.new.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    /// How many maps the experiment runs (for [`Observer::fraction`]).
+    pub fn set_scopes(&self, n: usize) {
+        self.scopes.store(n, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Map `scope` is `fraction` (0 to 1) done.
+    pub fn report(&self, scope: u32, fraction: f64) {
+        if fraction.is_finite() {
+            self.progress
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .insert(scope, fraction.clamp(0.0, 1.0));
+        }
+    }
+
+    /// The fraction of the whole experiment done, 0 to 1.
+    pub fn fraction(&self) -> f64 {
+        let n = self.scopes.load(std::sync::atomic::Ordering::Relaxed).max(1);
+        let p = self.progress.lock().unwrap_or_else(|e| e.into_inner());
+        (p.values().sum::<f64>() / n as f64).clamp(0.0, 1.0)
     }
 
     fn replay(&self, scope: u32, k: f64, b: f64) -> Option<Point> {
@@ -303,6 +332,13 @@ impl Evaluator {
         p
     }
 
+    /// Tell the observer (if any) this map is `fraction` done.
+    fn report(&self, fraction: f64) {
+        if let Some(o) = &self.observer {
+            o.report(self.scope, fraction);
+        }
+    }
+
     /// Largest K that renders at B: bracket from `k0`, then bisect.
     fn bisect_k(&self, b: f64, k0: f64, k_cap: f64, points: &mut Vec<Point>) -> Option<f64> {
         let mut eval = |k: f64| {
@@ -443,6 +479,8 @@ pub fn map_observed(
         .filter(|p| p.passive == Some(true))
         .filter_map(|p| p.fidelity)
         .reduce(f64::max);
+    ev.report(1.0);
+    let area = area(&boundary);
     let resolution = match (spec.search, ev.criterion, ev.method) {
         (_, Criterion::StrictPassivity, _) => {
             "exact per B (θ grid of 8192 points, refined)".to_string()
@@ -461,10 +499,37 @@ pub fn map_observed(
         k_width,
         b_width,
         max_fidelity_error,
+        area,
         trials: points.len(),
         points,
         elapsed_s: start.elapsed().as_secs_f64(),
     })
+}
+
+/// ∫ K_max dB over a boundary, by trapezoids between successive B values
+/// (sorted by B); a single point has no area.
+pub fn area(boundary: &[BoundaryPoint]) -> f64 {
+    let mut pts: Vec<(f64, f64)> = boundary.iter().map(|p| (p.b, p.k_max)).collect();
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    pts.windows(2)
+        .map(|w| 0.5 * (w[1].0 - w[0].0) * (w[0].1 + w[1].1))
+        .sum()
+}
+
+/// How many B values an automatic search will likely visit: until the
+/// boundary, extrapolated linearly from its last two points, reaches K = 0
+/// (plus the two empty ones that end it); at most `n_auto`.
+fn planned_b(boundary: &[BoundaryPoint], n_auto: usize, b_step: f64) -> usize {
+    let nz: Vec<&BoundaryPoint> = boundary.iter().filter(|p| p.k_max > 0.0).collect();
+    let done = boundary.len();
+    if let [.., p, q] = nz.as_slice() {
+        if q.k_max < p.k_max && q.b > p.b {
+            let b_end = q.b + q.k_max * (q.b - p.b) / (p.k_max - q.k_max);
+            let n = (b_end / b_step).ceil() as usize + 3;
+            return n.clamp(done + 1, n_auto.max(done + 1));
+        }
+    }
+    n_auto.max(done + 1)
 }
 
 fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
@@ -480,7 +545,16 @@ fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPo
         )
     };
     if let Some(bs) = &spec.b {
-        let r: Vec<_> = bs.par_iter().map(|&b| one(b)).collect();
+        let finished = std::sync::atomic::AtomicUsize::new(0);
+        let r: Vec<_> = bs
+            .par_iter()
+            .map(|&b| {
+                let r = one(b);
+                let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                ev.report(n as f64 / bs.len() as f64);
+                r
+            })
+            .collect();
         let points = r.iter().flat_map(|(_, p)| p.clone()).collect();
         return (r.into_iter().map(|(b, _)| b).collect(), points);
     }
@@ -497,6 +571,7 @@ fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPo
         if n >= 2 && boundary[n - 1].k_max == 0.0 && boundary[n - 2].k_max == 0.0 {
             break;
         }
+        ev.report(n as f64 / planned_b(&boundary, b_auto.len(), ev.res.b_step) as f64);
     }
     // Drop the trailing B values that render nothing but the first.
     while boundary.len() >= 2
@@ -542,6 +617,11 @@ fn trace(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>,
         }
         boundary.push(BoundaryPoint { b, k_max });
         k = (k_max + step).min(spec.k_max);
+        let planned = match &spec.b {
+            Some(bs) => bs.len(),
+            None => planned_b(&boundary, b_auto.len(), ev.res.b_step),
+        };
+        ev.report(boundary.len() as f64 / planned as f64);
     }
     (boundary, points)
 }
@@ -554,10 +634,19 @@ fn grid(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, 
         .b
         .clone()
         .unwrap_or_else(|| b_auto.iter().copied().take(60).collect());
+    let total = (bs.len() * ks.len()).max(1);
+    let finished = std::sync::atomic::AtomicUsize::new(0);
     let points: Vec<Point> = bs
         .par_iter()
         .flat_map_iter(|&b| ks.iter().map(move |&k| (k, b)))
-        .map(|(k, b)| ev.classify(k, b))
+        .map(|(k, b)| {
+            let p = ev.classify(k, b);
+            let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if n % 16 == 0 {
+                ev.report(n as f64 / total as f64);
+            }
+            p
+        })
         .collect();
     let boundary = bs
         .iter()

@@ -1,0 +1,352 @@
+//! What finished experiments show: each map as a summary row, the points as
+//! CSV, the plot as SVG, and the comparison of several runs on one scene.
+//! Pure: reads stored specs and results (JSON), touches no store or HTTP.
+
+use serde::Serialize;
+use serde_json::Value;
+
+use crate::error::SpecError;
+use crate::jobs::ExperimentSpec;
+use crate::plot::{lines_svg, zwidth_map_svg, MapPlotPoint, Series};
+use crate::zwidth::compare::seed_2018_scene;
+use crate::zwidth::scene::SceneSpec;
+use crate::zwidth::search::{area, BoundaryPoint};
+
+/// One map of a finished experiment.
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+pub struct MapSummary {
+    /// The experiment it belongs to.
+    pub run: String,
+    /// Its name within the experiment (estimator, compare row, sweep variant).
+    pub label: String,
+    /// The estimator, in words.
+    pub estimator: String,
+    pub method: String,
+    pub criterion: String,
+    /// N/m.
+    pub k_width: f64,
+    /// N·s/m.
+    pub b_width: f64,
+    /// N·s/m; null when the criterion gives no fidelity.
+    pub max_fidelity_error: Option<f64>,
+    /// ∫ K_max dB (N/m · N·s/m).
+    pub area: f64,
+    #[serde(skip)]
+    pub boundary: Vec<BoundaryPoint>,
+    #[serde(skip)]
+    pub points: Vec<Value>,
+    /// The scene without its estimator: what "the same scene" means.
+    #[serde(skip)]
+    pub scene: SceneSpec,
+}
+
+fn summary(run: &str, label: String, scene: &SceneSpec, map: &Value) -> MapSummary {
+    let boundary: Vec<BoundaryPoint> = map["boundary"]
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .map(|p| BoundaryPoint {
+                    b: p["b"].as_f64().unwrap_or(0.0),
+                    k_max: p["k_max"].as_f64().unwrap_or(0.0),
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let mut bare = scene.clone();
+    bare.estimator = SceneSpec::default().estimator;
+    MapSummary {
+        run: run.into(),
+        label,
+        estimator: scene.estimator.label(),
+        method: map["method"].as_str().unwrap_or("").into(),
+        criterion: map["criterion"].as_str().unwrap_or("").into(),
+        k_width: map["k_width"].as_f64().unwrap_or(0.0),
+        b_width: map["b_width"].as_f64().unwrap_or(0.0),
+        max_fidelity_error: map["max_fidelity_error"].as_f64(),
+        // Results stored before `area` existed: the same integral.
+        area: map["area"].as_f64().unwrap_or_else(|| area(&boundary)),
+        boundary,
+        points: map["points"].as_array().cloned().unwrap_or_default(),
+        scene: bare,
+    }
+}
+
+/// Every map of experiment `run` with its stored `result`.
+pub fn maps(run: &str, spec: &ExperimentSpec, result: &Value) -> Vec<MapSummary> {
+    match spec {
+        ExperimentSpec::Map(m) => vec![summary(run, m.scene.estimator.label(), &m.scene, result)],
+        ExperimentSpec::Compare(c) => {
+            let base = c.scene.clone().unwrap_or_else(seed_2018_scene);
+            rows(result)
+                .iter()
+                .map(|r| {
+                    let mut scene = base.clone();
+                    if let Ok(e) = serde_json::from_value(r["estimator"].clone()) {
+                        scene.estimator = e;
+                    }
+                    let label = r["name"].as_str().unwrap_or("").to_string();
+                    summary(run, label, &scene, &r["map"])
+                })
+                .collect()
+        }
+        ExperimentSpec::Sweep(s) => {
+            let variants = s.variants().unwrap_or_default();
+            rows(result)
+                .iter()
+                .zip(variants)
+                .map(|(r, (label, _, m))| summary(run, label, &m.scene, &r["map"]))
+                .collect()
+        }
+    }
+}
+
+fn rows(result: &Value) -> &[Value] {
+    result["rows"].as_array().map(Vec::as_slice).unwrap_or(&[])
+}
+
+/// One row of a comparison: a map and how it differs from the first row.
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+pub struct ComparisonRow {
+    #[serde(flatten)]
+    pub map: MapSummary,
+    /// Differences from the first row (this − first), absolute and in %.
+    pub k_width_diff: f64,
+    pub k_width_diff_pct: Option<f64>,
+    pub b_width_diff: f64,
+    pub b_width_diff_pct: Option<f64>,
+    pub max_fidelity_error_diff: Option<f64>,
+    pub area_diff: f64,
+    pub area_diff_pct: Option<f64>,
+}
+
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+pub struct Comparison {
+    pub runs: Vec<String>,
+    pub rows: Vec<ComparisonRow>,
+    /// Index of the row with the largest K-width, B-width, area, and the
+    /// smallest max fidelity error.
+    pub best: Best,
+    /// Things to know before reading the table (e.g. different criteria).
+    pub notes: Vec<String>,
+}
+
+#[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
+pub struct Best {
+    pub k_width: usize,
+    pub b_width: usize,
+    pub area: usize,
+    pub max_fidelity_error: Option<usize>,
+}
+
+fn pct(d: f64, base: f64) -> Option<f64> {
+    (base != 0.0).then(|| 100.0 * d / base)
+}
+
+fn argmax(v: impl Iterator<Item = f64>) -> usize {
+    v.enumerate()
+        .fold((0, f64::MIN), |(bi, bv), (i, x)| if x > bv { (i, x) } else { (bi, bv) })
+        .0
+}
+
+/// Compare the maps of several runs; they must share one scene (the
+/// estimator aside). `runs` are the ids in the order asked.
+pub fn compare(runs: Vec<String>, maps: Vec<MapSummary>) -> Result<Comparison, SpecError> {
+    let first = maps
+        .first()
+        .ok_or_else(|| SpecError::new("runs", runs.join(","), "the runs hold no maps to compare"))?
+        .clone();
+    if let Some(other) = maps.iter().find(|m| m.scene != first.scene) {
+        return Err(SpecError::new(
+            "runs",
+            &other.run,
+            format!(
+                "ran on a different scene from run {} ({}): compare runs on the same device, loop, wall and protocol",
+                first.run,
+                scene_difference(&first.scene, &other.scene)
+            ),
+        ));
+    }
+    let mut notes = Vec::new();
+    let criteria: std::collections::BTreeSet<_> = maps.iter().map(|m| (m.method.as_str(), m.criterion.as_str())).collect();
+    if criteria.len() > 1 {
+        notes.push(format!(
+            "the maps used different engines or criteria ({}): widths are not directly comparable",
+            criteria.iter().map(|(m, c)| format!("{m}/{c}")).collect::<Vec<_>>().join(", ")
+        ));
+    }
+    let best = Best {
+        k_width: argmax(maps.iter().map(|m| m.k_width)),
+        b_width: argmax(maps.iter().map(|m| m.b_width)),
+        area: argmax(maps.iter().map(|m| m.area)),
+        max_fidelity_error: maps
+            .iter()
+            .enumerate()
+            .filter_map(|(i, m)| m.max_fidelity_error.map(|f| (i, f)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(i, _)| i),
+    };
+    let rows = maps
+        .into_iter()
+        .map(|m| ComparisonRow {
+            k_width_diff: m.k_width - first.k_width,
+            k_width_diff_pct: pct(m.k_width - first.k_width, first.k_width),
+            b_width_diff: m.b_width - first.b_width,
+            b_width_diff_pct: pct(m.b_width - first.b_width, first.b_width),
+            max_fidelity_error_diff: m.max_fidelity_error.zip(first.max_fidelity_error).map(|(a, b)| a - b),
+            area_diff: m.area - first.area,
+            area_diff_pct: pct(m.area - first.area, first.area),
+            map: m,
+        })
+        .collect();
+    Ok(Comparison { runs, rows, best, notes })
+}
+
+/// The first top-level part of the scene that differs, in words.
+fn scene_difference(a: &SceneSpec, b: &SceneSpec) -> String {
+    let (va, vb) = (serde_json::to_value(a).unwrap_or_default(), serde_json::to_value(b).unwrap_or_default());
+    for part in ["device", "loop", "wall", "hit", "probe"] {
+        if va[part] != vb[part] {
+            return format!("{part} {} vs {}", va[part], vb[part]);
+        }
+    }
+    "the scenes differ".into()
+}
+
+impl Comparison {
+    /// A plain-text table.
+    pub fn table(&self) -> String {
+        let mut s = format!(
+            "{:<38} {:>11} {:>9} {:>9} {:>11} {:>10} {:>9}\n",
+            "run / map", "K-width", "ΔK %", "B-width", "max fid.", "area", "Δarea %"
+        );
+        for r in &self.rows {
+            let m = &r.map;
+            let name = format!("{} {}", &m.run[..m.run.len().min(8)], m.label);
+            s.push_str(&format!(
+                "{:<38} {:>11.4e} {:>9} {:>9.1} {:>11} {:>10.3e} {:>9}\n",
+                name.chars().take(38).collect::<String>(),
+                m.k_width,
+                r.k_width_diff_pct.map_or("-".into(), |p| format!("{p:+.1}")),
+                m.b_width,
+                m.max_fidelity_error.map_or("-".into(), |f| format!("{f:.2}")),
+                m.area,
+                r.area_diff_pct.map_or("-".into(), |p| format!("{p:+.1}")),
+            ));
+        }
+        s
+    }
+
+    /// Every boundary K(B) on one chart.
+    pub fn svg(&self) -> Result<String, String> {
+        boundaries_svg("Z-width boundaries", self.rows.iter().map(|r| &r.map))
+    }
+}
+
+fn boundaries_svg<'a>(title: &str, maps: impl Iterator<Item = &'a MapSummary>) -> Result<String, String> {
+    let series: Vec<Series> = maps
+        .map(|m| Series {
+            name: format!("{} {}", &m.run[..m.run.len().min(8)], m.label),
+            points: m.boundary.iter().map(|p| (p.b, p.k_max)).collect(),
+        })
+        .collect();
+    lines_svg(title, "B (N·s/m)", "K (N/m)", &series)
+}
+
+/// CSV of every evaluated point of every map: map, k, b, renders, fidelity.
+pub fn points_csv(maps: &[MapSummary]) -> String {
+    let mut s = String::from("map,k_n_per_m,b_ns_per_m,renders,fidelity_ns_per_m\n");
+    for m in maps {
+        let label = m.label.replace([',', '"', '\n'], " ");
+        for p in &m.points {
+            let ok = p["stable"].as_bool().or(p["passive"].as_bool()).unwrap_or(false);
+            let fid = p["fidelity"].as_f64().map(|f| f.to_string()).unwrap_or_default();
+            s.push_str(&format!("{label},{},{},{ok},{fid}\n", p["k"], p["b"]));
+        }
+    }
+    s
+}
+
+/// The plot of a finished experiment: one map in the 2018 paper's Fig. 7
+/// style; a parameter sweep as K-width against the parameter; several maps
+/// as their boundaries on one chart.
+pub fn svg(spec: &ExperimentSpec, maps: &[MapSummary], result: &Value) -> Result<String, String> {
+    match (spec, maps) {
+        (ExperimentSpec::Map(_), [m]) => {
+            let points: Vec<MapPlotPoint> = m
+                .points
+                .iter()
+                .map(|p| MapPlotPoint {
+                    k: p["k"].as_f64().unwrap_or(0.0),
+                    b: p["b"].as_f64().unwrap_or(0.0),
+                    ok: p["stable"].as_bool().or(p["passive"].as_bool()).unwrap_or(false),
+                    fidelity: p["fidelity"].as_f64(),
+                })
+                .collect();
+            let boundary: Vec<(f64, f64)> = m.boundary.iter().map(|p| (p.b, p.k_max)).collect();
+            let label = if m.criterion == "stability" { "stable" } else { "passive" };
+            zwidth_map_svg(&format!("Z-width: {}", m.label), &points, &boundary, label)
+        }
+        (ExperimentSpec::Sweep(s), _) if s.parameter.is_some() => {
+            let path = s.parameter.as_ref().map(|p| p.path.as_str()).unwrap_or("");
+            let pts: Vec<(f64, f64)> = rows(result)
+                .iter()
+                .filter_map(|r| Some((r["value"].as_f64()?, r["k_width"].as_f64()?)))
+                .collect();
+            lines_svg(
+                &format!("K-width against {path}"),
+                path,
+                "K-width (N/m)",
+                &[Series { name: "K-width".into(), points: pts }],
+            )
+        }
+        _ => boundaries_svg("Z-width boundaries", maps.iter()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::zwidth::search::map;
+    use crate::zwidth::settings::MapSpec;
+
+    fn run(id: &str, scene: &str) -> (ExperimentSpec, Value) {
+        let spec: MapSpec = serde_json::from_str(&format!(
+            r#"{{"scene":{scene},"criterion":"strict_passivity","b":[0,5,10]}}"#
+        ))
+        .unwrap();
+        let result = serde_json::to_value(map(&spec).unwrap()).unwrap();
+        let _ = id;
+        (ExperimentSpec::Map(spec), result)
+    }
+
+    #[test]
+    fn comparison_of_fdm_and_butterworth_runs() {
+        let lin = r#""device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}"#;
+        let (s1, r1) = run("a", &format!(r#"{{{lin},"estimator":{{"kind":"fdm"}}}}"#));
+        let (s2, r2) = run("b", &format!(r#"{{{lin},"estimator":{{"kind":"butterworth","cutoff_hz":100}}}}"#));
+        let mut all = maps("run-a", &s1, &r1);
+        all.extend(maps("run-b", &s2, &r2));
+        let c = compare(vec!["run-a".into(), "run-b".into()], all).unwrap();
+        // FDM, strict passivity (Colgate & Schenkel): K = 2(b − |B|)/T with
+        // b = 13.2 N·s/m, T = 1 ms: 26 400, 16 400, 6 400 N/m at B = 0, 5, 10.
+        let fdm = &c.rows[0].map;
+        assert!((fdm.k_width - 26_400.0).abs() < 1.0, "{}", fdm.k_width);
+        // Trapezoids over those three points: 5·(26 400 + 16 400)/2 + 5·(16 400 + 6 400)/2.
+        assert!((fdm.area - 164_000.0).abs() < 20.0, "{}", fdm.area);
+        let d = &c.rows[1];
+        assert_eq!(d.k_width_diff, d.map.k_width - fdm.k_width);
+        assert_eq!(c.rows[0].k_width_diff, 0.0);
+        assert!(c.svg().unwrap().contains("<svg"));
+        assert!(c.table().contains("run-a"));
+        let csv = points_csv(&c.rows.iter().map(|r| r.map.clone()).collect::<Vec<_>>());
+        assert_eq!(csv.lines().count(), 1 + 6);
+
+        // A different device is refused, naming the run.
+        let (s3, r3) = run("c", &format!(r#"{{"device":{{"mass":1,"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000}}}}"#));
+        let mut all = maps("run-a", &s1, &r1);
+        all.extend(maps("run-c", &s3, &r3));
+        let e = compare(vec!["run-a".into(), "run-c".into()], all).unwrap_err();
+        assert_eq!((e.field.as_str(), e.value.as_str()), ("runs", "run-c"));
+        assert!(e.allowed.contains("device"), "{}", e.allowed);
+    }
+}
