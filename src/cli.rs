@@ -622,13 +622,13 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 rigs,
                 request_timeout_s,
             }))
-                .map_err(|e| {
-                    if e.starts_with("refusing") {
-                        CliError::Input(e)
-                    } else {
-                        CliError::Failure(e)
-                    }
-                })
+            .map_err(|e| {
+                if e.starts_with("refusing") {
+                    CliError::Input(e)
+                } else {
+                    CliError::Failure(e)
+                }
+            })
         }
         Command::Submit {
             file,

@@ -96,7 +96,10 @@ impl Client {
             let v = self.status(id)?;
             let state = v["state"].as_str().unwrap_or("?").to_string();
             let trials = v["progress"]["trials_done"].as_i64().unwrap_or(0);
-            let fraction = v["progress"]["fraction"].as_f64().unwrap_or(0.0).clamp(0.0, 1.0);
+            let fraction = v["progress"]["fraction"]
+                .as_f64()
+                .unwrap_or(0.0)
+                .clamp(0.0, 1.0);
             let eta = v["progress"]["eta_s"]
                 .as_f64()
                 .map_or("     ".to_string(), |e| format!("ETA {e:>5.0} s"));
@@ -112,7 +115,10 @@ impl Client {
             );
             let _ = err.flush();
             i += 1;
-            if matches!(state.as_str(), "succeeded" | "failed" | "cancelled" | "interrupted") {
+            if matches!(
+                state.as_str(),
+                "succeeded" | "failed" | "cancelled" | "interrupted"
+            ) {
                 let _ = writeln!(err);
                 return Ok(v);
             }

@@ -57,7 +57,12 @@ pub fn loglog_svg(
             .y_label_formatter(&|v| format!("{v:.1e}"))
             .draw()
             .map_err(|e| e.to_string())?;
-        draw_lines(&mut chart, series, |x, y| x > 0.0 && y > 0.0, SeriesLabelPosition::UpperLeft)?;
+        draw_lines(
+            &mut chart,
+            series,
+            |x, y| x > 0.0 && y > 0.0,
+            SeriesLabelPosition::UpperLeft,
+        )?;
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)
@@ -65,7 +70,12 @@ pub fn loglog_svg(
 
 /// Each series as a coloured line with markers (points passing `keep`), and
 /// the legend at `legend`.
-fn draw_lines<'a, DB: DrawingBackend + 'a, X: Ranged<ValueType = f64>, Y: Ranged<ValueType = f64>>(
+fn draw_lines<
+    'a,
+    DB: DrawingBackend + 'a,
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+>(
     chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
     series: &[Series],
     keep: impl Fn(f64, f64) -> bool,
@@ -73,12 +83,19 @@ fn draw_lines<'a, DB: DrawingBackend + 'a, X: Ranged<ValueType = f64>, Y: Ranged
 ) -> Result<(), String> {
     for (i, s) in series.iter().enumerate() {
         let colour = Palette99::pick(i).to_rgba();
-        let data: Vec<(f64, f64)> = s.points.iter().copied().filter(|&(x, y)| keep(x, y)).collect();
+        let data: Vec<(f64, f64)> = s
+            .points
+            .iter()
+            .copied()
+            .filter(|&(x, y)| keep(x, y))
+            .collect();
         chart
             .draw_series(LineSeries::new(data.clone(), colour.stroke_width(2)))
             .map_err(|e| e.to_string())?
             .label(s.name.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+            });
         chart
             .draw_series(data.into_iter().map(|p| Circle::new(p, 3, colour.filled())))
             .map_err(|e| e.to_string())?;
@@ -133,7 +150,12 @@ pub fn lines_svg(
             .y_label_formatter(&|v| format!("{v:.2e}"))
             .draw()
             .map_err(|e| e.to_string())?;
-        draw_lines(&mut chart, series, |x, y| x.is_finite() && y.is_finite(), SeriesLabelPosition::UpperRight)?;
+        draw_lines(
+            &mut chart,
+            series,
+            |x, y| x.is_finite() && y.is_finite(),
+            SeriesLabelPosition::UpperRight,
+        )?;
         root.present().map_err(|e| e.to_string())?;
     }
     Ok(svg)

@@ -144,7 +144,10 @@ fn pct(d: f64, base: f64) -> Option<f64> {
 
 fn argmax(v: impl Iterator<Item = f64>) -> usize {
     v.enumerate()
-        .fold((0, f64::MIN), |(bi, bv), (i, x)| if x > bv { (i, x) } else { (bi, bv) })
+        .fold(
+            (0, f64::MIN),
+            |(bi, bv), (i, x)| if x > bv { (i, x) } else { (bi, bv) },
+        )
         .0
 }
 
@@ -167,11 +170,18 @@ pub fn compare(runs: Vec<String>, maps: Vec<MapSummary>) -> Result<Comparison, S
         ));
     }
     let mut notes = Vec::new();
-    let criteria: std::collections::BTreeSet<_> = maps.iter().map(|m| (m.method.as_str(), m.criterion.as_str())).collect();
+    let criteria: std::collections::BTreeSet<_> = maps
+        .iter()
+        .map(|m| (m.method.as_str(), m.criterion.as_str()))
+        .collect();
     if criteria.len() > 1 {
         notes.push(format!(
             "the maps used different engines or criteria ({}): widths are not directly comparable",
-            criteria.iter().map(|(m, c)| format!("{m}/{c}")).collect::<Vec<_>>().join(", ")
+            criteria
+                .iter()
+                .map(|(m, c)| format!("{m}/{c}"))
+                .collect::<Vec<_>>()
+                .join(", ")
         ));
     }
     let best = Best {
@@ -192,18 +202,29 @@ pub fn compare(runs: Vec<String>, maps: Vec<MapSummary>) -> Result<Comparison, S
             k_width_diff_pct: pct(m.k_width - first.k_width, first.k_width),
             b_width_diff: m.b_width - first.b_width,
             b_width_diff_pct: pct(m.b_width - first.b_width, first.b_width),
-            max_fidelity_error_diff: m.max_fidelity_error.zip(first.max_fidelity_error).map(|(a, b)| a - b),
+            max_fidelity_error_diff: m
+                .max_fidelity_error
+                .zip(first.max_fidelity_error)
+                .map(|(a, b)| a - b),
             area_diff: m.area - first.area,
             area_diff_pct: pct(m.area - first.area, first.area),
             map: m,
         })
         .collect();
-    Ok(Comparison { runs, rows, best, notes })
+    Ok(Comparison {
+        runs,
+        rows,
+        best,
+        notes,
+    })
 }
 
 /// The first top-level part of the scene that differs, in words.
 fn scene_difference(a: &SceneSpec, b: &SceneSpec) -> String {
-    let (va, vb) = (serde_json::to_value(a).unwrap_or_default(), serde_json::to_value(b).unwrap_or_default());
+    let (va, vb) = (
+        serde_json::to_value(a).unwrap_or_default(),
+        serde_json::to_value(b).unwrap_or_default(),
+    );
     for part in ["device", "loop", "wall", "hit", "probe"] {
         if va[part] != vb[part] {
             return format!("{part} {} vs {}", va[part], vb[part]);
@@ -226,9 +247,11 @@ impl Comparison {
                 "{:<38} {:>11.4e} {:>9} {:>9.1} {:>11} {:>10.3e} {:>9}\n",
                 name.chars().take(38).collect::<String>(),
                 m.k_width,
-                r.k_width_diff_pct.map_or("-".into(), |p| format!("{p:+.1}")),
+                r.k_width_diff_pct
+                    .map_or("-".into(), |p| format!("{p:+.1}")),
                 m.b_width,
-                m.max_fidelity_error.map_or("-".into(), |f| format!("{f:.2}")),
+                m.max_fidelity_error
+                    .map_or("-".into(), |f| format!("{f:.2}")),
                 m.area,
                 r.area_diff_pct.map_or("-".into(), |p| format!("{p:+.1}")),
             ));
@@ -242,7 +265,10 @@ impl Comparison {
     }
 }
 
-fn boundaries_svg<'a>(title: &str, maps: impl Iterator<Item = &'a MapSummary>) -> Result<String, String> {
+fn boundaries_svg<'a>(
+    title: &str,
+    maps: impl Iterator<Item = &'a MapSummary>,
+) -> Result<String, String> {
     let series: Vec<Series> = maps
         .map(|m| Series {
             name: format!("{} {}", &m.run[..m.run.len().min(8)], m.label),
@@ -258,8 +284,14 @@ pub fn points_csv(maps: &[MapSummary]) -> String {
     for m in maps {
         let label = m.label.replace([',', '"', '\n'], " ");
         for p in &m.points {
-            let ok = p["stable"].as_bool().or(p["passive"].as_bool()).unwrap_or(false);
-            let fid = p["fidelity"].as_f64().map(|f| f.to_string()).unwrap_or_default();
+            let ok = p["stable"]
+                .as_bool()
+                .or(p["passive"].as_bool())
+                .unwrap_or(false);
+            let fid = p["fidelity"]
+                .as_f64()
+                .map(|f| f.to_string())
+                .unwrap_or_default();
             s.push_str(&format!("{label},{},{},{ok},{fid}\n", p["k"], p["b"]));
         }
     }
@@ -278,12 +310,19 @@ pub fn svg(spec: &ExperimentSpec, maps: &[MapSummary], result: &Value) -> Result
                 .map(|p| MapPlotPoint {
                     k: p["k"].as_f64().unwrap_or(0.0),
                     b: p["b"].as_f64().unwrap_or(0.0),
-                    ok: p["stable"].as_bool().or(p["passive"].as_bool()).unwrap_or(false),
+                    ok: p["stable"]
+                        .as_bool()
+                        .or(p["passive"].as_bool())
+                        .unwrap_or(false),
                     fidelity: p["fidelity"].as_f64(),
                 })
                 .collect();
             let boundary: Vec<(f64, f64)> = m.boundary.iter().map(|p| (p.b, p.k_max)).collect();
-            let label = if m.criterion == "stability" { "stable" } else { "passive" };
+            let label = if m.criterion == "stability" {
+                "stable"
+            } else {
+                "passive"
+            };
             zwidth_map_svg(&format!("Z-width: {}", m.label), &points, &boundary, label)
         }
         (ExperimentSpec::Sweep(s), _) if s.parameter.is_some() => {
@@ -296,7 +335,10 @@ pub fn svg(spec: &ExperimentSpec, maps: &[MapSummary], result: &Value) -> Result
                 &format!("K-width against {path}"),
                 path,
                 "K-width (N/m)",
-                &[Series { name: "K-width".into(), points: pts }],
+                &[Series {
+                    name: "K-width".into(),
+                    points: pts,
+                }],
             )
         }
         _ => boundaries_svg("Z-width boundaries", maps.iter()),
@@ -321,9 +363,13 @@ mod tests {
 
     #[test]
     fn comparison_of_fdm_and_butterworth_runs() {
-        let lin = r#""device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}"#;
+        let lin =
+            r#""device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}"#;
         let (s1, r1) = run("a", &format!(r#"{{{lin},"estimator":{{"kind":"fdm"}}}}"#));
-        let (s2, r2) = run("b", &format!(r#"{{{lin},"estimator":{{"kind":"butterworth","cutoff_hz":100}}}}"#));
+        let (s2, r2) = run(
+            "b",
+            &format!(r#"{{{lin},"estimator":{{"kind":"butterworth","cutoff_hz":100}}}}"#),
+        );
         let mut all = maps("run-a", &s1, &r1);
         all.extend(maps("run-b", &s2, &r2));
         let c = compare(vec!["run-a".into(), "run-b".into()], all).unwrap();
@@ -342,7 +388,10 @@ mod tests {
         assert_eq!(csv.lines().count(), 1 + 6);
 
         // A different device is refused, naming the run.
-        let (s3, r3) = run("c", &format!(r#"{{"device":{{"mass":1,"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000}}}}"#));
+        let (s3, r3) = run(
+            "c",
+            r#"{"device":{"mass":1,"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+        );
         let mut all = maps("run-a", &s1, &r1);
         all.extend(maps("run-c", &s3, &r3));
         let e = compare(vec!["run-a".into(), "run-c".into()], all).unwrap_err();

@@ -82,6 +82,30 @@ fn get(url: &str) -> serde_json::Value {
     ureq::get(url).call().unwrap().into_json().unwrap()
 }
 
+/// Status, content type and body text of any request.
+fn fetch(r: Result<ureq::Response, ureq::Error>) -> (u16, String, String) {
+    match r {
+        Ok(r) | Err(ureq::Error::Status(_, r)) => {
+            let (code, ct) = (r.status(), r.content_type().to_string());
+            (code, ct, r.into_string().unwrap())
+        }
+        Err(e) => panic!("{e}"),
+    }
+}
+
+/// Poll an experiment until it ends; panics after `secs`.
+fn wait_end(base: &str, id: &str, secs: u64) -> serde_json::Value {
+    let deadline = Instant::now() + Duration::from_secs(secs);
+    loop {
+        let v = get(&format!("{base}/v1/experiments/{id}"));
+        if ["succeeded", "failed", "cancelled"].contains(&v["state"].as_str().unwrap()) {
+            return v;
+        }
+        assert!(Instant::now() < deadline, "still {v}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 #[test]
 fn submit_progress_result() {
     let s = start();
@@ -365,11 +389,264 @@ fn pause_schedule_metrics_and_the_cli_client() {
     assert_eq!(code, Some(0), "{err}");
     assert!(std::fs::read_to_string(&csv)
         .unwrap()
-        .starts_with("k_n_per_m,b_ns_per_m,renders,fidelity_ns_per_m"));
+        .starts_with("map,k_n_per_m,b_ns_per_m,renders,fidelity_ns_per_m"));
     assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
     // A bad experiment through the client: exit 2 with the server's detail.
     std::fs::write(&file, r#"{"kind":"map","scene":{"device":{"mass":0}}}"#).unwrap();
     let (code, _, err) = run(&["submit", file.to_str().unwrap()]);
     assert_eq!(code, Some(2));
     assert!(err.contains("scene.device.mass"), "{err}");
+}
+
+const LINEAR: &str =
+    r#""device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}"#;
+
+#[test]
+fn rigs_windows_sweeps_comparison_and_exports() {
+    let dir = std::env::temp_dir().join(format!(
+        "zwidth-svc-rigs-{}-{}",
+        std::process::id(),
+        uuid_like()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let s = start_with(dir, &["--rigs", "sim:1,night:1"]);
+    let url = format!("{}/v1/experiments", s.base);
+    // The rigs, with their capabilities.
+    let rigs = get(&format!("{}/v1/rigs", s.base));
+    assert_eq!(rigs.as_array().unwrap().len(), 2, "{rigs}");
+    assert_eq!(rigs[0]["id"], "sim");
+    assert_eq!(rigs[0]["kind"], "simulator");
+    assert_eq!(rigs[1]["parallelism"], 1);
+    assert_eq!(rigs[1]["open_now"], true);
+    // A window that opens two hours from now (UTC) keeps `night` idle.
+    let now = jiff::Timestamp::now();
+    let hhmm = |t: jiff::Timestamp| t.strftime("%H:%M").to_string();
+    let opens = now + jiff::SignedDuration::from_hours(2);
+    let window = format!(
+        r#"{{"start":"{}","end":"{}","tz":"UTC"}}"#,
+        hhmm(opens),
+        hhmm(opens + jiff::SignedDuration::from_hours(1))
+    );
+    let put = |rig: &str, body: &str| {
+        fetch(ureq::put(&format!("{}/v1/rigs/{rig}/window", s.base)).send_string(body))
+    };
+    let (code, _, text) = put("night", &window);
+    assert_eq!(code, 200, "{text}");
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["open_now"], false, "{v}");
+    // Opens at the start minute, within two hours and a minute from now.
+    let next = v["next_start_ms"].as_i64().unwrap();
+    let dt = next - now.as_millisecond();
+    assert!((7_140_000..=7_200_000).contains(&dt), "{dt}");
+    let (code, ct, text) = put(
+        "night",
+        r#"{"start":"22:00","end":"06:00","tz":"Mars/Olympus"}"#,
+    );
+    assert_eq!(
+        (code, ct.as_str()),
+        (422, "application/problem+json"),
+        "{text}"
+    );
+    assert!(text.contains("window.tz"), "{text}");
+    assert_eq!(put("nope", &window).0, 404);
+
+    // Runs: FDM and Butterworth maps on `sim`, one map waiting on `night`.
+    let map = |est: &str| {
+        format!(
+            r#"{{"kind":"map","scene":{{{LINEAR},"estimator":{est}}},"criterion":"strict_passivity","b":[0,5,10]}}"#
+        )
+    };
+    let waiting = post(&format!("{url}?rig=night"), &map(r#"{"kind":"fdm"}"#)).1["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let fdm = post(&url, &map(r#"{"kind":"fdm"}"#)).1["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let bw = post(&url, &map(r#"{"kind":"butterworth","cutoff_hz":100}"#)).1["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    // The sweep: device damping b = 1, 2, 4 N·s/m.
+    let sweep = format!(
+        r#"{{"kind":"sweep","map":{{"scene":{{{LINEAR}}},"criterion":"strict_passivity","b":[0]}},"parameter":{{"path":"device.damping","values":[1,2,4]}}}}"#
+    );
+    let (code, v, _) = post(&url, &sweep);
+    assert_eq!(code, 202, "{v}");
+    let sweep_id = v["id"].as_str().unwrap().to_string();
+    for id in [&fdm, &bw, &sweep_id] {
+        assert_eq!(wait_end(&s.base, id, 60)["state"], "succeeded");
+    }
+    let w = get(&format!("{url}/{waiting}"));
+    assert_eq!(
+        (w["state"].as_str(), w["rig"].as_str()),
+        (Some("queued"), Some("night")),
+        "{w}"
+    );
+    // Strict passivity with FDM (Colgate & Schenkel): K = 2(b − |B|)/T per B.
+    let sw = get(&format!("{url}/{sweep_id}"));
+    for (row, want) in sw["result"]["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip([2000.0, 4000.0, 8000.0])
+    {
+        assert!(
+            (row["k_width"].as_f64().unwrap() - want).abs() < 1e-3 * want,
+            "{row}"
+        );
+    }
+    assert_eq!(sw["progress"]["fraction"], 1.0);
+
+    // Comparison across runs: FDM at B = 0 renders 2b/T = 26 400 N/m.
+    let (code, _, text) =
+        fetch(ureq::get(&format!("{}/v1/compare?runs={fdm},{bw}", s.base)).call());
+    assert_eq!(code, 200, "{text}");
+    let c: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert!(
+        (c["rows"][0]["k_width"].as_f64().unwrap() - 26_400.0).abs() < 1.0,
+        "{c}"
+    );
+    let d = c["rows"][1]["k_width"].as_f64().unwrap() - 26_400.0;
+    assert!(
+        (c["rows"][1]["k_width_diff"].as_f64().unwrap() - d).abs() < 1.0,
+        "{c}"
+    );
+    assert_eq!(c["rows"][0]["k_width_diff"], 0.0);
+    let (code, ct, svg) =
+        fetch(ureq::get(&format!("{}/v1/compare?runs={fdm},{bw}&format=svg", s.base)).call());
+    assert_eq!((code, ct.as_str()), (200, "image/svg+xml"));
+    assert!(
+        svg.contains("<svg") && svg.contains("butterworth(100 Hz"),
+        "{}",
+        &svg[..200.min(svg.len())]
+    );
+    let (code, _, table) = fetch(
+        ureq::get(&format!(
+            "{}/v1/compare?runs={fdm},{bw}&format=text",
+            s.base
+        ))
+        .call(),
+    );
+    assert_eq!(code, 200);
+    assert!(table.contains("K-width"), "{table}");
+    // Other scenes, runs without results, bad formats: problems naming the field.
+    let (code, _, text) =
+        fetch(ureq::get(&format!("{}/v1/compare?runs={fdm},{sweep_id}", s.base)).call());
+    assert_eq!(code, 422, "{text}");
+    assert!(
+        text.contains(r#""field":"runs""#) && text.contains("device"),
+        "{text}"
+    );
+    assert_eq!(
+        fetch(ureq::get(&format!("{}/v1/compare?runs={fdm},{waiting}", s.base)).call()).0,
+        409
+    );
+    assert_eq!(
+        fetch(ureq::get(&format!("{}/v1/compare?runs=", s.base)).call()).0,
+        422
+    );
+    assert_eq!(
+        fetch(ureq::get(&format!("{}/v1/compare?runs={fdm}&format=pdf", s.base)).call()).0,
+        422
+    );
+    assert_eq!(
+        fetch(ureq::get(&format!("{}/v1/compare?runs=nope", s.base)).call()).0,
+        404
+    );
+
+    // Each trial, the plot and the CSV, from the server.
+    let t = get(&format!("{url}/{fdm}/trials?limit=2"));
+    assert_eq!(t.as_array().unwrap().len(), 2, "{t}");
+    assert_eq!(t[0]["scope"], 0);
+    assert_eq!(
+        fetch(ureq::get(&format!("{url}/{fdm}/trials?limit=0")).call()).0,
+        422
+    );
+    let (code, ct, svg) = fetch(ureq::get(&format!("{url}/{sweep_id}/plot.svg")).call());
+    assert_eq!((code, ct.as_str()), (200, "image/svg+xml"));
+    assert!(svg.contains("device.damping"));
+    let (code, ct, csv) = fetch(ureq::get(&format!("{url}/{bw}/points.csv")).call());
+    assert_eq!((code, ct.as_str()), (200, "text/csv"));
+    assert_eq!(csv.lines().count(), 1 + 3, "{csv}");
+    assert_eq!(
+        fetch(ureq::get(&format!("{url}/{waiting}/plot.svg")).call()).0,
+        409
+    );
+
+    // Unknown rig on submit; request ids made, or echoed when given.
+    let (code, v, _) = post(&format!("{url}?rig=nope"), &map(r#"{"kind":"fdm"}"#));
+    assert_eq!((code, v["field"].as_str()), (422, Some("rig")), "{v}");
+    let r = ureq::get(&format!("{}/healthz", s.base)).call().unwrap();
+    assert_eq!(r.header("x-request-id").map(str::len), Some(36));
+    let r = ureq::get(&format!("{}/healthz", s.base))
+        .set("x-request-id", "lab-42")
+        .call()
+        .unwrap();
+    assert_eq!(r.header("x-request-id"), Some("lab-42"));
+
+    // Clearing the window lets `night` start its experiment.
+    let (code, _, _) = fetch(ureq::delete(&format!("{}/v1/rigs/night/window", s.base)).call());
+    assert_eq!(code, 200);
+    assert_eq!(wait_end(&s.base, &waiting, 30)["state"], "succeeded");
+}
+
+#[test]
+fn sigterm_interrupts_the_running_experiment_and_restart_resumes_it() {
+    let spec = r#"{"kind":"map","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},
+                   "estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","search":"trace"}"#;
+    let s = start();
+    let dir = s._dir.clone();
+    let url = format!("{}/v1/experiments", s.base);
+    let id = post(&url, spec).1["id"].as_str().unwrap().to_string();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let mut eta_seen = false;
+    loop {
+        let v = get(&format!("{url}/{id}"));
+        assert!(v["state"] == "running" || v["state"] == "queued", "{v}");
+        eta_seen |= v["progress"]["eta_s"].as_f64().is_some_and(|e| e > 0.0);
+        if v["progress"]["trials_done"].as_i64().unwrap() >= 40 && eta_seen {
+            break;
+        }
+        assert!(Instant::now() < deadline, "{v}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let mut s = s;
+    let pid = s.child.id().to_string();
+    assert!(Command::new("kill")
+        .args(["-TERM", &pid])
+        .status()
+        .unwrap()
+        .success());
+    let t0 = Instant::now();
+    let code = s.child.wait().unwrap();
+    assert!(code.success(), "{code:?}");
+    assert!(t0.elapsed() < Duration::from_secs(10));
+    std::mem::forget(s);
+    // The store says interrupted, with its trials kept.
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let row = rt.block_on(async {
+        let st = zwidth::store::Store::open(&dir.join("test.db"))
+            .await
+            .unwrap();
+        let row = st.get(&id).await.unwrap().unwrap();
+        (row, st.trial_count(&id).await.unwrap())
+    });
+    assert_eq!(row.0.state, "interrupted");
+    assert!(row.1 >= 40, "{} trials stored", row.1);
+    // Restarted, it resumes and succeeds with the uninterrupted result.
+    let s2 = start_in(dir);
+    let done = wait_end(&s2.base, &id, 120);
+    assert_eq!(done["state"], "succeeded", "{done}");
+    let spec: zwidth::jobs::ExperimentSpec = serde_json::from_str(spec).unwrap();
+    let zwidth::jobs::ExperimentSpec::Map(m) = spec else {
+        unreachable!()
+    };
+    let want = zwidth::zwidth::search::map(&m).unwrap();
+    assert_eq!(done["result"]["k_width"].as_f64().unwrap(), want.k_width);
+    assert_eq!(
+        done["result"]["trials"].as_u64().unwrap() as usize,
+        want.trials
+    );
 }

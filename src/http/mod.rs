@@ -19,7 +19,7 @@ use crate::jobs::window::Window;
 use crate::jobs::ExperimentSpec;
 use crate::report::{self, Comparison, MapSummary};
 use crate::rig::{Rig, RigInfo};
-use crate::store::{now_ms, ExperimentRow, Store};
+use crate::store::{now_ms, ExperimentRow, NewExperiment, Store};
 use crate::zwidth::search::StoredTrial;
 
 /// Largest request body accepted (bytes).
@@ -380,15 +380,15 @@ async fn submit(
     let text = serde_json::to_string(&spec).map_err(Problem::internal)?;
     let (row, created) = st
         .store
-        .insert(
-            &id,
-            spec.kind(),
-            &text,
-            q.priority,
-            key.as_deref(),
-            q.not_before_ms,
-            &rig.info().id,
-        )
+        .insert(NewExperiment {
+            id: &id,
+            kind: spec.kind(),
+            spec: &text,
+            priority: q.priority,
+            key: key.as_deref(),
+            not_before_ms: q.not_before_ms,
+            rig: &rig.info().id,
+        })
         .await
         .map_err(Problem::internal)?;
     let status = if created {
@@ -524,11 +524,19 @@ async fn metrics(State(st): State<AppState>) -> Result<Response, Problem> {
 }
 
 fn rig_ids(st: &AppState) -> String {
-    st.rigs.iter().map(|r| r.info().id.clone()).collect::<Vec<_>>().join(", ")
+    st.rigs
+        .iter()
+        .map(|r| r.info().id.clone())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 fn not_found(what: &str, id: &str) -> Problem {
-    Problem::new(StatusCode::NOT_FOUND, "Not found", format!("no {what} {id}"))
+    Problem::new(
+        StatusCode::NOT_FOUND,
+        "Not found",
+        format!("no {what} {id}"),
+    )
 }
 
 /// A rig: what it can do, its window, and its load.
@@ -599,7 +607,10 @@ async fn set_window(
         )
     })?;
     w.validate()?;
-    st.store.set_rig_window(&id, Some(&w)).await.map_err(Problem::internal)?;
+    st.store
+        .set_rig_window(&id, Some(&w))
+        .await
+        .map_err(Problem::internal)?;
     Ok(Json(rig_view(&st, &rig).await?))
 }
 
@@ -616,7 +627,10 @@ async fn clear_window(
 ) -> Result<Json<RigView>, Problem> {
     authorize(&st, &headers)?;
     let rig = st.rig(&id).cloned().ok_or_else(|| not_found("rig", &id))?;
-    st.store.set_rig_window(&id, None).await.map_err(Problem::internal)?;
+    st.store
+        .set_rig_window(&id, None)
+        .await
+        .map_err(Problem::internal)?;
     Ok(Json(rig_view(&st, &rig).await?))
 }
 
@@ -648,27 +662,50 @@ async fn trials(
 ) -> Result<Json<Vec<StoredTrial>>, Problem> {
     let limit = q.limit.unwrap_or(1000);
     if !(1..=TRIALS_PAGE_MAX).contains(&limit) {
-        return Err(SpecError::new("limit", limit, format!("must be 1 to {TRIALS_PAGE_MAX}")).into());
+        return Err(
+            SpecError::new("limit", limit, format!("must be 1 to {TRIALS_PAGE_MAX}")).into(),
+        );
     }
     let offset = q.offset.unwrap_or(0);
     if offset < 0 {
         return Err(SpecError::new("offset", offset, "must be >= 0").into());
     }
-    if st.store.state(&id).await.map_err(Problem::internal)?.is_none() {
+    if st
+        .store
+        .state(&id)
+        .await
+        .map_err(Problem::internal)?
+        .is_none()
+    {
         return Err(not_found("experiment", &id));
     }
-    let t = st.store.trials_page(&id, q.scope, offset, limit).await.map_err(Problem::internal)?;
+    let t = st
+        .store
+        .trials_page(&id, q.scope, offset, limit)
+        .await
+        .map_err(Problem::internal)?;
     Ok(Json(t))
 }
 
 /// The maps of a succeeded experiment (409 while it is not).
-async fn finished_maps(st: &AppState, id: &str) -> Result<(ExperimentSpec, Value, Vec<MapSummary>), Problem> {
-    let row = st.store.get(id).await.map_err(Problem::internal)?.ok_or_else(|| not_found("experiment", id))?;
+async fn finished_maps(
+    st: &AppState,
+    id: &str,
+) -> Result<(ExperimentSpec, Value, Vec<MapSummary>), Problem> {
+    let row = st
+        .store
+        .get(id)
+        .await
+        .map_err(Problem::internal)?
+        .ok_or_else(|| not_found("experiment", id))?;
     let (Some(result), "succeeded") = (row.result.as_deref(), row.state.as_str()) else {
         return Err(Problem::new(
             StatusCode::CONFLICT,
             "No result yet",
-            format!("experiment {id} is {}: results exist once it has succeeded", row.state),
+            format!(
+                "experiment {id} is {}: results exist once it has succeeded",
+                row.state
+            ),
         ));
     };
     let spec: ExperimentSpec = serde_json::from_str(&row.spec).map_err(Problem::internal)?;
@@ -693,7 +730,11 @@ async fn plot(State(st): State<AppState>, Path(id): Path<String>) -> Result<Resp
               (status = 409, description = "not succeeded (yet)", body = ProblemBody, content_type = "application/problem+json")))]
 async fn points(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, Problem> {
     let (_, _, maps) = finished_maps(&st, &id).await?;
-    Ok(([(header::CONTENT_TYPE, "text/csv")], report::points_csv(&maps)).into_response())
+    Ok((
+        [(header::CONTENT_TYPE, "text/csv")],
+        report::points_csv(&maps),
+    )
+        .into_response())
 }
 
 #[derive(Debug, Deserialize)]
@@ -714,10 +755,15 @@ pub const COMPARE_MAX_RUNS: usize = 50;
               (status = 404, body = ProblemBody, content_type = "application/problem+json"),
               (status = 409, description = "a run has not succeeded", body = ProblemBody, content_type = "application/problem+json"),
               (status = 422, description = "bad runs or format, or different scenes", body = ProblemBody, content_type = "application/problem+json")))]
-async fn compare_runs(State(st): State<AppState>, Query(q): Query<CompareQuery>) -> Result<Response, Problem> {
+async fn compare_runs(
+    State(st): State<AppState>,
+    Query(q): Query<CompareQuery>,
+) -> Result<Response, Problem> {
     let format = q.format.as_deref().unwrap_or("json");
     if !["json", "svg", "text"].contains(&format) {
-        return Err(SpecError::new("format", format!("{format:?}"), "must be json, svg or text").into());
+        return Err(
+            SpecError::new("format", format!("{format:?}"), "must be json, svg or text").into(),
+        );
     }
     let ids: Vec<String> = q
         .runs
@@ -742,8 +788,16 @@ async fn compare_runs(State(st): State<AppState>, Query(q): Query<CompareQuery>)
     }
     let c = report::compare(ids, all)?;
     Ok(match format {
-        "svg" => ([(header::CONTENT_TYPE, "image/svg+xml")], c.svg().map_err(Problem::internal)?).into_response(),
-        "text" => ([(header::CONTENT_TYPE, "text/plain; charset=utf-8")], c.table()).into_response(),
+        "svg" => (
+            [(header::CONTENT_TYPE, "image/svg+xml")],
+            c.svg().map_err(Problem::internal)?,
+        )
+            .into_response(),
+        "text" => (
+            [(header::CONTENT_TYPE, "text/plain; charset=utf-8")],
+            c.table(),
+        )
+            .into_response(),
         _ => Json(c).into_response(),
     })
 }
@@ -754,13 +808,21 @@ async fn compare_runs(State(st): State<AppState>, Query(q): Query<CompareQuery>)
 /// stored (state `interrupted`, resumed at the next start), then it returns.
 /// Prints the bound address on stdout first.
 pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
-    let ServeConfig { db, bind, tokens, rigs, request_timeout_s } = cfg;
+    let ServeConfig {
+        db,
+        bind,
+        tokens,
+        rigs,
+        request_timeout_s,
+    } = cfg;
     let db = db.as_path();
     if rigs.is_empty() {
         return Err("refusing to serve without a rig".into());
     }
     if !(request_timeout_s.is_finite() && (0.1..=3600.0).contains(&request_timeout_s)) {
-        return Err(format!("refusing: --request-timeout-s = {request_timeout_s} must be 0.1 to 3600 s"));
+        return Err(format!(
+            "refusing: --request-timeout-s = {request_timeout_s} must be 0.1 to 3600 s"
+        ));
     }
     let store = Store::open(db)
         .await
@@ -795,7 +857,11 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         .iter()
         .map(|r| {
             tracing::info!(rig = %r.info().id, parallelism = r.info().parallelism, "rig ready");
-            tokio::spawn(crate::jobs::runner(store.clone(), r.clone(), stop_rx.clone()))
+            tokio::spawn(crate::jobs::runner(
+                store.clone(),
+                r.clone(),
+                stop_rx.clone(),
+            ))
         })
         .collect();
     let state = AppState {
@@ -803,10 +869,13 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         tokens: Arc::new(tokens),
         rigs: Arc::new(rigs),
     };
-    let served = axum::serve(listener, router(state, Duration::from_secs_f64(request_timeout_s)))
-        .with_graceful_shutdown(shutdown_signal())
-        .await
-        .map_err(|e| e.to_string());
+    let served = axum::serve(
+        listener,
+        router(state, Duration::from_secs_f64(request_timeout_s)),
+    )
+    .with_graceful_shutdown(shutdown_signal())
+    .await
+    .map_err(|e| e.to_string());
     tracing::info!("shutting down: letting the runners stop");
     let _ = stop_tx.send(true);
     for r in runners {

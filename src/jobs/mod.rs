@@ -12,10 +12,10 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crate::error::SpecError;
+use crate::rig::Rig;
 use crate::store::Store;
 use crate::zwidth::compare;
 use crate::zwidth::scene::SceneSpec;
-use crate::rig::Rig;
 use crate::zwidth::search::{self, map_observed, Observer};
 use crate::zwidth::settings::{Accuracy, MapSpec};
 use crate::zwidth::sweep::{sweep_observed, SweepSpec};

@@ -35,7 +35,13 @@ pub struct OpenHours {
 }
 
 fn hhmm(field: &str, s: &str) -> Result<Time, SpecError> {
-    let bad = || SpecError::new(field, format!("{s:?}"), "must be a time \"HH:MM\" (00:00 to 23:59)");
+    let bad = || {
+        SpecError::new(
+            field,
+            format!("{s:?}"),
+            "must be a time \"HH:MM\" (00:00 to 23:59)",
+        )
+    };
     let (h, m) = s.split_once(':').ok_or_else(bad)?;
     if h.len() != 2 || m.len() != 2 {
         return Err(bad());
@@ -105,7 +111,13 @@ mod tests {
     use super::*;
 
     fn w(start: &str, end: &str, tz: &str) -> OpenHours {
-        Window { start: start.into(), end: end.into(), tz: tz.into() }.validate().unwrap()
+        Window {
+            start: start.into(),
+            end: end.into(),
+            tz: tz.into(),
+        }
+        .validate()
+        .unwrap()
     }
 
     fn ts(s: &str) -> Timestamp {
@@ -123,8 +135,14 @@ mod tests {
         assert!(!o.is_open(ts("2026-11-23T05:00:00Z"))); // 06:00 CET
         assert!(o.is_open(ts("2026-07-01T20:30:00Z"))); // 22:30 CEST
         assert!(!o.is_open(ts("2026-07-01T19:30:00Z"))); // 21:30 CEST
-        assert_eq!(o.next_open(ts("2026-11-22T12:00:00Z")), ts("2026-11-22T21:00:00Z"));
-        assert_eq!(o.next_open(ts("2026-07-01T12:00:00Z")), ts("2026-07-01T20:00:00Z"));
+        assert_eq!(
+            o.next_open(ts("2026-11-22T12:00:00Z")),
+            ts("2026-11-22T21:00:00Z")
+        );
+        assert_eq!(
+            o.next_open(ts("2026-07-01T12:00:00Z")),
+            ts("2026-07-01T20:00:00Z")
+        );
         let now = ts("2026-11-22T23:00:00Z");
         assert_eq!(o.next_open(now), now);
     }
@@ -134,9 +152,19 @@ mod tests {
         let o = w("09:00", "17:30", "UTC");
         assert!(o.is_open(ts("2026-11-22T17:29:00Z")));
         assert!(!o.is_open(ts("2026-11-22T17:30:00Z")));
-        assert_eq!(o.next_open(ts("2026-11-22T18:00:00Z")), ts("2026-11-23T09:00:00Z"));
+        assert_eq!(
+            o.next_open(ts("2026-11-22T18:00:00Z")),
+            ts("2026-11-23T09:00:00Z")
+        );
         let bad = |s: &str, e: &str, tz: &str| {
-            Window { start: s.into(), end: e.into(), tz: tz.into() }.validate().unwrap_err().field
+            Window {
+                start: s.into(),
+                end: e.into(),
+                tz: tz.into(),
+            }
+            .validate()
+            .unwrap_err()
+            .field
         };
         assert_eq!(bad("24:00", "06:00", "UTC"), "window.start");
         assert_eq!(bad("22:00", "6:00", "UTC"), "window.end");

@@ -72,7 +72,10 @@ pub fn check_scene(info: &RigInfo, scene: &SceneSpec) -> Result<(), SpecError> {
                 return Err(SpecError::new(
                     "device.force_limit",
                     f.map(|f| f.to_string()).unwrap_or("null".into()),
-                    format!("rig {} exerts at most {limit} N: set a force_limit <= {limit}", info.id),
+                    format!(
+                        "rig {} exerts at most {limit} N: set a force_limit <= {limit}",
+                        info.id
+                    ),
                 ))
             }
         }

@@ -35,7 +35,11 @@ impl SimulatedRig {
             threads
         };
         if threads > 256 {
-            return Err(SpecError::new("rigs", threads, "at most 256 threads per rig"));
+            return Err(SpecError::new(
+                "rigs",
+                threads,
+                "at most 256 threads per rig",
+            ));
         }
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -78,7 +82,11 @@ impl SimulatedRig {
             rigs.push(Self::new(id, threads)?);
         }
         if rigs.is_empty() {
-            return Err(SpecError::new("rigs", format!("{text:?}"), "name at least one rig, e.g. sim:2"));
+            return Err(SpecError::new(
+                "rigs",
+                format!("{text:?}"),
+                "name at least one rig, e.g. sim:2",
+            ));
         }
         Ok(rigs)
     }
@@ -110,7 +118,14 @@ mod tests {
         assert_eq!(r[1].info().id, "night");
         assert_eq!(r[1].pool.current_num_threads(), 1);
         for bad in ["", "a:b", "sim:1,sim:2", "with space", "x:1000"] {
-            assert_eq!(SimulatedRig::parse_list(bad).err().map(|e| e.field).as_deref(), Some("rigs"), "{bad}");
+            assert_eq!(
+                SimulatedRig::parse_list(bad)
+                    .err()
+                    .map(|e| e.field)
+                    .as_deref(),
+                Some("rigs"),
+                "{bad}"
+            );
         }
     }
 }

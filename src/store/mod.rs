@@ -39,6 +39,20 @@ pub struct ExperimentRow {
     pub progress: f64,
 }
 
+/// What a submission stores.
+#[derive(Debug, Clone, Copy)]
+pub struct NewExperiment<'a> {
+    pub id: &'a str,
+    pub kind: &'a str,
+    /// The validated spec JSON.
+    pub spec: &'a str,
+    pub priority: i64,
+    /// Idempotency key.
+    pub key: Option<&'a str>,
+    pub not_before_ms: Option<i64>,
+    pub rig: &'a str,
+}
+
 pub fn now_ms() -> i64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -66,16 +80,16 @@ impl Store {
 
     /// Insert a queued experiment; with an idempotency key already used,
     /// return the existing row instead (`false`).
-    pub async fn insert(
-        &self,
-        id: &str,
-        kind: &str,
-        spec: &str,
-        priority: i64,
-        key: Option<&str>,
-        not_before_ms: Option<i64>,
-        rig: &str,
-    ) -> Result<(ExperimentRow, bool), sqlx::Error> {
+    pub async fn insert(&self, e: NewExperiment<'_>) -> Result<(ExperimentRow, bool), sqlx::Error> {
+        let NewExperiment {
+            id,
+            kind,
+            spec,
+            priority,
+            key,
+            not_before_ms,
+            rig,
+        } = e;
         if let Some(k) = key {
             if let Some(row) = sqlx::query_as::<_, ExperimentRow>(
                 "SELECT * FROM experiments WHERE idempotency_key = ?",
@@ -211,7 +225,12 @@ impl Store {
         Ok((by_state, trials))
     }
 
-    pub async fn set_progress(&self, id: &str, trials: i64, fraction: f64) -> Result<(), sqlx::Error> {
+    pub async fn set_progress(
+        &self,
+        id: &str,
+        trials: i64,
+        fraction: f64,
+    ) -> Result<(), sqlx::Error> {
         sqlx::query("UPDATE experiments SET trials_done = ?, progress = ? WHERE id = ? AND state = 'running'")
             .bind(trials)
             .bind(if fraction.is_finite() { fraction.clamp(0.0, 1.0) } else { 0.0 })

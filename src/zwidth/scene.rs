@@ -428,7 +428,11 @@ impl SceneSpec {
             node = node.get_mut(name).ok_or_else(unknown)?;
         }
         let obj = node.as_object_mut().ok_or_else(unknown)?;
-        if obj.get(leaf).is_some_and(|v| !v.is_number() && !v.is_null()) || leaf.is_empty() {
+        if obj
+            .get(leaf)
+            .is_some_and(|v| !v.is_number() && !v.is_null())
+            || leaf.is_empty()
+        {
             return Err(unknown());
         }
         // Whole numbers as integers, so counts (orders, windows) read back.
@@ -439,7 +443,11 @@ impl SceneSpec {
         };
         obj.insert(leaf.to_string(), number);
         let spec: SceneSpec = serde_json::from_value(doc).map_err(|e| {
-            SpecError::new(field, format!("{path:?}"), format!("cannot be set on this scene: {e}"))
+            SpecError::new(
+                field,
+                format!("{path:?}"),
+                format!("cannot be set on this scene: {e}"),
+            )
         })?;
         spec.validate().map_err(|e| e.within("scene"))?;
         Ok(spec)

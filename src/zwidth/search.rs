@@ -135,7 +135,10 @@ impl Observer {
 
     /// The fraction of the whole experiment done, 0 to 1.
     pub fn fraction(&self) -> f64 {
-        let n = self.scopes.load(std::sync::atomic::Ordering::Relaxed).max(1);
+        let n = self
+            .scopes
+            .load(std::sync::atomic::Ordering::Relaxed)
+            .max(1);
         let p = self.progress.lock().unwrap_or_else(|e| e.into_inner());
         (p.values().sum::<f64>() / n as f64).clamp(0.0, 1.0)
     }

@@ -90,10 +90,18 @@ impl ParameterRange {
                     ));
                 }
                 if !(2..=MAX_VARIANTS).contains(&n) {
-                    return Err(SpecError::new("parameter.count", n, format!("must be 2 to {MAX_VARIANTS}")));
+                    return Err(SpecError::new(
+                        "parameter.count",
+                        n,
+                        format!("must be 2 to {MAX_VARIANTS}"),
+                    ));
                 }
                 if self.scale == Scale::Log && lo <= 0.0 {
-                    return Err(SpecError::new("parameter.min", lo, "must be > 0 on a log scale"));
+                    return Err(SpecError::new(
+                        "parameter.min",
+                        lo,
+                        "must be > 0 on a log scale",
+                    ));
                 }
                 (0..n)
                     .map(|i| {
@@ -144,7 +152,13 @@ impl SweepSpec {
                 scenes
                     .iter()
                     .enumerate()
-                    .map(|(i, s)| (format!("scene {i}: {}", s.estimator.label()), None, with_scene(s.clone())))
+                    .map(|(i, s)| {
+                        (
+                            format!("scene {i}: {}", s.estimator.label()),
+                            None,
+                            with_scene(s.clone()),
+                        )
+                    })
                     .collect()
             }
             (None, Some(p)) => {
@@ -164,9 +178,16 @@ impl SweepSpec {
             }
         };
         for (i, (_, _, m)) in out.iter().enumerate() {
-            let field = if self.scenes.is_some() { format!("scenes[{i}]") } else { "map".into() };
+            let field = if self.scenes.is_some() {
+                format!("scenes[{i}]")
+            } else {
+                "map".into()
+            };
             super::search::validate(m).map_err(|e| match self.scenes {
-                Some(_) => SpecError { field: e.field.replacen("scene", &field, 1), ..e },
+                Some(_) => SpecError {
+                    field: e.field.replacen("scene", &field, 1),
+                    ..e
+                },
                 None => e.within(&field),
             })?;
         }
@@ -175,7 +196,10 @@ impl SweepSpec {
 }
 
 /// Run every variant in turn (each map parallel inside), reporting to `observer`.
-pub fn sweep_observed(spec: &SweepSpec, observer: Option<Arc<Observer>>) -> Result<SweepResult, SpecError> {
+pub fn sweep_observed(
+    spec: &SweepSpec,
+    observer: Option<Arc<Observer>>,
+) -> Result<SweepResult, SpecError> {
     let start = std::time::Instant::now();
     let variants = spec.variants()?;
     if let Some(o) = &observer {
@@ -230,16 +254,17 @@ mod tests {
                 path: "estimator.cutoff_hz".into(),
                 values: None,
                 min: Some(30.0),
-                max: Some(1000.0),
+                max: Some(480.0),
                 count: Some(4),
                 scale: Scale::Log,
             }),
         };
         let v = s.variants().unwrap();
-        // 30·(1000/30)^(i/3): 30, 96.54, 310.7, 1000 (by hand).
-        let want = [30.0, 30.0 * (1000.0f64 / 30.0).powf(1.0 / 3.0), 30.0 * (1000.0f64 / 30.0).powf(2.0 / 3.0), 1000.0];
+        // 30·(480/30)^(i/3) = 30·16^(i/3): 30, 75.59, 190.5, 480 (by hand:
+        // 16^(1/3) = 2.5198, 16^(2/3) = 6.3496).
+        let want = [30.0, 75.595_263_0, 190.488_126_2, 480.0];
         for ((_, x, m), w) in v.iter().zip(want) {
-            assert!((x.unwrap() - w).abs() < 1e-9 * w);
+            assert!((x.unwrap() - w).abs() < 1e-8 * w, "{x:?} vs {w}");
             match m.scene.estimator.kind {
                 crate::estimators::EstimatorKind::Butterworth { cutoff_hz, order } => {
                     assert_eq!(cutoff_hz, x.unwrap());
@@ -259,13 +284,31 @@ mod tests {
             .unwrap()
         };
         let field = |p: &str| mk(p).variants().unwrap_err().field;
-        assert_eq!(field(r#"{"path":"estimator.nope","values":[1]}"#), "parameter.path");
-        assert_eq!(field(r#"{"path":"estimator","values":[1]}"#), "parameter.path");
-        assert_eq!(field(r#"{"path":"estimator.cutoff_hz","min":500,"max":30,"count":3}"#), "parameter.max");
-        assert_eq!(field(r#"{"path":"estimator.cutoff_hz","min":30,"max":500,"count":1000}"#), "parameter.count");
-        assert_eq!(field(r#"{"path":"estimator.cutoff_hz","min":30}"#), "parameter");
+        assert_eq!(
+            field(r#"{"path":"estimator.nope","values":[1]}"#),
+            "parameter.path"
+        );
+        assert_eq!(
+            field(r#"{"path":"estimator","values":[1]}"#),
+            "parameter.path"
+        );
+        assert_eq!(
+            field(r#"{"path":"estimator.cutoff_hz","min":500,"max":30,"count":3}"#),
+            "parameter.max"
+        );
+        assert_eq!(
+            field(r#"{"path":"estimator.cutoff_hz","min":30,"max":500,"count":1000}"#),
+            "parameter.count"
+        );
+        assert_eq!(
+            field(r#"{"path":"estimator.cutoff_hz","min":30}"#),
+            "parameter"
+        );
         // 600 Hz is above Nyquist at the default 1 kHz: the scene validation says so.
-        assert_eq!(field(r#"{"path":"estimator.cutoff_hz","values":[100,600]}"#), "scene.estimator.cutoff_hz");
+        assert_eq!(
+            field(r#"{"path":"estimator.cutoff_hz","values":[100,600]}"#),
+            "scene.estimator.cutoff_hz"
+        );
         let none: SweepSpec = serde_json::from_str(r#"{"map":{"scene":{}}}"#).unwrap();
         assert_eq!(none.variants().unwrap_err().field, "sweep");
     }
@@ -281,7 +324,11 @@ mod tests {
         .unwrap();
         let r = sweep_observed(&s, None).unwrap();
         for (row, want) in r.rows.iter().zip([2000.0, 4000.0, 8000.0]) {
-            assert!((row.k_width - want).abs() < 1e-3 * want, "{} vs {want}", row.k_width);
+            assert!(
+                (row.k_width - want).abs() < 1e-3 * want,
+                "{} vs {want}",
+                row.k_width
+            );
         }
         assert_eq!(r.best_k_width, 2);
     }
