@@ -599,8 +599,10 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                     .into_iter()
                     .map(|r| std::sync::Arc::new(r) as std::sync::Arc<dyn crate::rig::Rig>)
                     .collect();
+            use std::io::IsTerminal;
             let _ = tracing_subscriber::fmt()
                 .with_writer(std::io::stderr)
+                .with_ansi(std::io::stderr().is_terminal())
                 .with_env_filter(
                     tracing_subscriber::EnvFilter::try_from_default_env()
                         .unwrap_or_else(|_| "info".into()),
