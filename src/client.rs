@@ -139,6 +139,9 @@ pub struct ServiceBench {
     pub get_p99_ms: f64,
     pub get_max_ms: f64,
     pub busy_experiment: String,
+    /// From the cancel request to the running simulation having stopped
+    /// (the experiment's `finished_ms` as the runner records it).
+    pub cancel_to_stop_ms: f64,
 }
 
 impl Client {
@@ -200,10 +203,16 @@ impl Client {
             }
             all
         });
+        let cancel_ms = crate::store::now_ms();
         let _ = self.call(
             ureq::post(&format!("{}/v1/experiments/{busy}/cancel", self.server)),
             None,
         );
+        // The runner rewrites finished_ms when the simulation has stopped.
+        std::thread::sleep(Duration::from_millis(1000));
+        let stopped = self.status(&busy)?["finished_ms"]
+            .as_i64()
+            .unwrap_or(cancel_ms);
         let mut sorted = lat.clone();
         sorted.sort_by(f64::total_cmp);
         let pct = |p: f64| {
@@ -222,6 +231,7 @@ impl Client {
             get_p99_ms: pct(0.99),
             get_max_ms: sorted.last().copied().unwrap_or(f64::NAN),
             busy_experiment: busy,
+            cancel_to_stop_ms: (stopped - cancel_ms) as f64,
         })
     }
 }

@@ -33,6 +33,8 @@ pub struct AppState {
     pub tokens: Arc<Vec<String>>,
     /// The rigs experiments run on; the first is the default.
     pub rigs: Arc<Vec<Arc<dyn Rig>>>,
+    /// Running experiments' observers (cancel reaches them at once).
+    pub running: crate::jobs::Running,
 }
 
 impl AppState {
@@ -440,6 +442,9 @@ async fn cancel(
 ) -> Result<Json<ExperimentView>, Problem> {
     authorize(&st, &headers)?;
     let changed = st.store.cancel(&id).await.map_err(Problem::internal)?;
+    if changed {
+        crate::jobs::cancel_running(&st.running, &id);
+    }
     match st.store.get(&id).await.map_err(Problem::internal)? {
         None => Err(Problem::new(
             StatusCode::NOT_FOUND,
@@ -853,6 +858,7 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     use std::io::Write;
     let _ = std::io::stdout().flush();
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let running = crate::jobs::Running::default();
     let runners: Vec<_> = rigs
         .iter()
         .map(|r| {
@@ -860,6 +866,7 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
             tokio::spawn(crate::jobs::runner(
                 store.clone(),
                 r.clone(),
+                running.clone(),
                 stop_rx.clone(),
             ))
         })
@@ -868,6 +875,7 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         store,
         tokens: Arc::new(tokens),
         rigs: Arc::new(rigs),
+        running,
     };
     let served = axum::serve(
         listener,

@@ -99,6 +99,22 @@ impl ExperimentSpec {
     }
 }
 
+/// The observers of running experiments by id, so a cancel request reaches
+/// the simulation at once (not at the runner's next 100 ms look).
+pub type Running = Arc<std::sync::Mutex<std::collections::HashMap<String, Arc<Observer>>>>;
+
+/// Stop a running experiment's simulation now (false if it is not running here).
+pub fn cancel_running(running: &Running, id: &str) -> bool {
+    let map = running.lock().unwrap_or_else(|e| e.into_inner());
+    match map.get(id) {
+        Some(o) => {
+            o.cancel.store(true, Ordering::Relaxed);
+            true
+        }
+        None => false,
+    }
+}
+
 /// Trials per second of the running experiment over the last second (for /metrics).
 pub static TRIALS_PER_SECOND: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
@@ -106,7 +122,12 @@ pub static TRIALS_PER_SECOND: std::sync::atomic::AtomicU64 = std::sync::atomic::
 /// the rig's window (if it has one) nothing new starts. On shutdown a
 /// running experiment stops within one trial, its finished trials stored,
 /// and is marked `interrupted` (it resumes at the next start).
-pub async fn runner(store: Store, rig: Arc<dyn Rig>, shutdown: tokio::sync::watch::Receiver<bool>) {
+pub async fn runner(
+    store: Store,
+    rig: Arc<dyn Rig>,
+    running: Running,
+    shutdown: tokio::sync::watch::Receiver<bool>,
+) {
     let id = rig.info().id.clone();
     while !*shutdown.borrow() {
         match store.rig_window(&id).await {
@@ -122,7 +143,17 @@ pub async fn runner(store: Store, rig: Arc<dyn Rig>, shutdown: tokio::sync::watc
             Err(e) => tracing::warn!(error = %e, rig = %id, "reading the rig window failed"),
         }
         match store.claim_next(&id).await {
-            Ok(Some(row)) => run_one(&store, rig.clone(), row.id, row.spec, shutdown.clone()).await,
+            Ok(Some(row)) => {
+                run_one(
+                    &store,
+                    rig.clone(),
+                    &running,
+                    row.id,
+                    row.spec,
+                    shutdown.clone(),
+                )
+                .await
+            }
             Ok(None) => tokio::time::sleep(Duration::from_millis(100)).await,
             Err(e) => {
                 tracing::error!(error = %e, "claiming the next experiment failed");
@@ -132,10 +163,11 @@ pub async fn runner(store: Store, rig: Arc<dyn Rig>, shutdown: tokio::sync::watc
     }
 }
 
-#[tracing::instrument(skip(store, rig, spec, shutdown), fields(rig = %rig.info().id))]
+#[tracing::instrument(skip(store, rig, running, spec, shutdown), fields(rig = %rig.info().id))]
 async fn run_one(
     store: &Store,
     rig: Arc<dyn Rig>,
+    running: &Running,
     id: String,
     spec: String,
     shutdown: tokio::sync::watch::Receiver<bool>,
@@ -167,6 +199,10 @@ async fn run_one(
         tracing::info!(stored = done.len(), "resuming from stored trials");
     }
     let observer = Arc::new(Observer::resuming(done));
+    running
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .insert(id.clone(), observer.clone());
     let obs = observer.clone();
     let mut task = tokio::task::spawn_blocking(move || rig.run(&parsed, obs));
     // Every 100 ms: store the trials finished since (one transaction), write
@@ -202,6 +238,10 @@ async fn run_one(
             }
         }
     };
+    running
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .remove(&id);
     if let Err(e) = store.add_trials(&id, &observer.take_new()).await {
         tracing::warn!(error = %e, "storing trials failed");
     }
