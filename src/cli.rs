@@ -137,6 +137,54 @@ pub enum Command {
         #[arg(long)]
         svg: Option<PathBuf>,
     },
+    /// Tune the scene's estimator parameters (argmin) for an objective.
+    Tune {
+        #[arg(long)]
+        scene: PathBuf,
+        /// Parameters with bounds, e.g. '{"cutoff_hz":{"min":10,"max":500}}',
+        /// '{"q":{"min":1e2,"max":1e8,"scale":"log"}}'.
+        #[arg(long)]
+        params: String,
+        /// k_width | b_width | max_fidelity_error | area, or JSON:
+        /// '{"weighted":{"k_width":1e-5,"b_width":1e-2}}', '{"pareto":["k_width","max_fidelity_error"]}'.
+        #[arg(long)]
+        objective: String,
+        /// auto | analytic | time | frequency
+        #[arg(long, default_value = "auto")]
+        method: String,
+        /// stability | impedance | strict_passivity
+        #[arg(long, default_value = "impedance")]
+        criterion: String,
+        /// auto | brent | golden | nelder_mead | particle_swarm | grid | halton
+        #[arg(long, default_value = "auto")]
+        solver: String,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Accuracy while searching: draft | standard | reference.
+        #[arg(long, default_value = "draft")]
+        accuracy: String,
+        /// Accuracy the finalists are re-evaluated at.
+        #[arg(long, default_value = "reference")]
+        final_accuracy: String,
+        #[arg(long, default_value_t = 3)]
+        finalists: usize,
+        #[arg(long, default_value_t = 40)]
+        max_evaluations: usize,
+        /// levant | lyapunov (Levant gains only).
+        #[arg(long)]
+        constraint: Option<String>,
+        /// Only these damping values (N·s/m), comma-separated.
+        #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+        b: Option<Vec<f64>>,
+        #[arg(long)]
+        json: bool,
+        /// Plot of the objective over evaluations (or the Pareto front).
+        #[arg(long)]
+        svg: Option<PathBuf>,
+        /// Every evaluation as CSV.
+        #[arg(long)]
+        csv: Option<PathBuf>,
+    },
     /// Every estimator on one scene, as the 2018 paper's Table I.
     Compare {
         /// Scene JSON file (default: the 2018 paper's simulated device at 1 kHz).
@@ -319,6 +367,36 @@ fn read_scene(path: &std::path::Path) -> Result<SceneSpec, CliError> {
 }
 
 /// A snake_case enum value from a flag, with serde's message naming the choices.
+/// Run `work` while drawing a progress bar on stderr from `observer` (only
+/// when stderr is a terminal).
+fn with_progress<T>(
+    observer: &std::sync::Arc<crate::zwidth::search::Observer>,
+    work: impl FnOnce() -> T,
+) -> T {
+    use std::io::IsTerminal;
+    if !std::io::stderr().is_terminal() {
+        return work();
+    }
+    let done = std::sync::atomic::AtomicBool::new(false);
+    std::thread::scope(|s| {
+        s.spawn(|| {
+            let start = std::time::Instant::now();
+            while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                let f = observer.fraction();
+                let t = start.elapsed().as_secs_f64();
+                let eta = if f > 0.01 { format!("ETA {:>5.0} s", t * (1.0 - f) / f) } else { String::new() };
+                let filled = (f * 30.0).round() as usize;
+                eprint!("\r[{}{}] {:>3.0} % {t:>6.1} s {eta}  ", "#".repeat(filled), ".".repeat(30 - filled.min(30)), 100.0 * f);
+                std::thread::sleep(std::time::Duration::from_millis(200));
+            }
+            eprintln!();
+        });
+        let r = work();
+        done.store(true, std::sync::atomic::Ordering::Relaxed);
+        r
+    })
+}
+
 fn parse_choice<T: serde::de::DeserializeOwned>(flag: &str, value: &str) -> Result<T, CliError> {
     serde_json::from_value(serde_json::Value::String(value.to_string()))
         .map_err(|e| CliError::Input(format!("--{flag} = {value:?} is not allowed: {e}")))
@@ -541,6 +619,74 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 write_json(stdout, &r)
             } else {
                 write!(stdout, "{}", map_table(&r)).map_err(io)
+            }
+        }
+        Command::Tune {
+            scene,
+            params,
+            objective,
+            method,
+            criterion,
+            solver,
+            seed,
+            accuracy,
+            final_accuracy,
+            finalists,
+            max_evaluations,
+            constraint,
+            b,
+            json,
+            svg,
+            csv,
+        } => {
+            let params = serde_json::from_str(&params).map_err(|e| {
+                CliError::Input(format!(
+                    "--params = {params:?} is not allowed: {e}; e.g. '{{\"cutoff_hz\":{{\"min\":10,\"max\":500}}}}'"
+                ))
+            })?;
+            let objective: crate::tune::Objective = if objective.trim_start().starts_with('{') {
+                serde_json::from_str(&objective)
+            } else {
+                serde_json::from_value(serde_json::Value::String(objective.clone()))
+            }
+            .map_err(|e| {
+                CliError::Input(format!(
+                    "--objective = {objective:?} is not allowed: {e}; k_width, b_width, max_fidelity_error, area, {{\"weighted\":{{…}}}} or {{\"pareto\":[…]}}"
+                ))
+            })?;
+            let spec = crate::tune::TuneSpec {
+                scene: read_scene(&scene)?,
+                params,
+                objective,
+                method: parse_choice("method", &method)?,
+                criterion: parse_choice("criterion", &criterion)?,
+                accuracy: Accuracy::Preset(parse_choice("accuracy", &accuracy)?),
+                final_accuracy: Accuracy::Preset(parse_choice("final-accuracy", &final_accuracy)?),
+                finalists,
+                solver: parse_choice("solver", &solver)?,
+                seed,
+                max_evaluations,
+                constraint: constraint
+                    .map(|c| parse_choice("constraint", &c))
+                    .transpose()?,
+                b,
+                b_max: 1000.0,
+                k_max: 1e7,
+            };
+            let tune = spec.validate()?;
+            let observer = std::sync::Arc::new(crate::zwidth::search::Observer::default());
+            let r = with_progress(&observer, || tune.run(Some(observer.clone())))?;
+            if let Some(p) = svg {
+                write_file(&p, &r.svg().map_err(CliError::Failure)?)?;
+            }
+            if let Some(p) = csv {
+                let v = serde_json::to_value(&r).map_err(|e| CliError::Failure(e.to_string()))?;
+                write_file(&p, &crate::report::tune_csv(&v).map_err(CliError::Failure)?)?;
+            }
+            if json {
+                write_json(stdout, &r)
+            } else {
+                write!(stdout, "{}", r.table()).map_err(io)
             }
         }
         Command::Compare {

@@ -18,6 +18,7 @@ pub mod rig;
 pub mod signals;
 pub mod spectral;
 pub mod store;
+pub mod tune;
 pub mod zwidth;
 
 pub use error::SpecError;

@@ -143,7 +143,7 @@ pub struct ProblemBody {
 #[openapi(
     info(title = "zwidth", description = "Z-width experiments: queue, run and store maps and estimator comparisons"),
     paths(healthz, rigs, set_window, clear_window, submit, list, show, cancel, trials, plot, points, compare_runs, queue, pause, resume, metrics),
-    components(schemas(ProblemBody, ExperimentView, ExperimentSpec, RigView, Window, Comparison, StoredTrial)),
+    components(schemas(ProblemBody, ExperimentView, ExperimentSpec, RigView, Window, Comparison, StoredTrial, crate::tune::TuneResult)),
     modifiers(&BearerAuth)
 )]
 pub struct ApiDoc;
@@ -170,7 +170,7 @@ pub fn openapi_json() -> String {
     // `additionalProperties: false`; inside allOf that forbids `kind` itself
     // and makes the union unsatisfiable. The server still rejects unknown
     // fields; the schema just leaves them open.
-    for name in ["MapSpec", "CompareSpec", "SweepSpec"] {
+    for name in ["MapSpec", "CompareSpec", "SweepSpec", "TuneSpec"] {
         if let Some(o) = v["components"]["schemas"][name].as_object_mut() {
             o.remove("additionalProperties");
         }
@@ -252,7 +252,8 @@ pub struct ExperimentView {
     pub not_before_ms: Option<i64>,
     /// The rig it runs on.
     pub rig: String,
-    /// `trials_done`, `fraction` (0 to 1) and, while running, `elapsed_s` and `eta_s`.
+    /// `trials_done`, `fraction` (0 to 1), a tune's `best` so far, and while
+    /// running `elapsed_s` and `eta_s`.
     pub progress: Value,
     pub spec: Value,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -265,6 +266,9 @@ pub struct ExperimentView {
 /// elapsed and the estimated time left (s), extrapolated from the fraction.
 fn progress(r: &ExperimentRow) -> Value {
     let mut p = json!({ "trials_done": r.trials_done, "fraction": r.progress });
+    if let Some(best) = r.best.as_deref().and_then(|b| serde_json::from_str::<Value>(b).ok()) {
+        p["best"] = best;
+    }
     if r.state == "running" {
         if let Some(t0) = r.started_ms {
             let elapsed = ((now_ms() - t0) as f64 / 1000.0).max(0.0);
@@ -730,7 +734,7 @@ async fn plot(State(st): State<AppState>, Path(id): Path<String>) -> Result<Resp
 }
 
 #[utoipa::path(get, path = "/v1/experiments/{id}/points.csv", params(("id" = String, Path, description = "experiment id")),
-    responses((status = 200, description = "map,k_n_per_m,b_ns_per_m,renders,fidelity_ns_per_m", body = String, content_type = "text/csv"),
+    responses((status = 200, description = "maps: map,k_n_per_m,b_ns_per_m,renders,fidelity_ns_per_m; a tune: its evaluations", body = String, content_type = "text/csv"),
               (status = 404, body = ProblemBody, content_type = "application/problem+json"),
               (status = 409, description = "not succeeded (yet)", body = ProblemBody, content_type = "application/problem+json")))]
 async fn points(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, Problem> {

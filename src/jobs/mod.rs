@@ -18,6 +18,7 @@ use crate::zwidth::compare;
 use crate::zwidth::scene::SceneSpec;
 use crate::zwidth::search::{self, map_observed, Observer};
 use crate::zwidth::settings::{Accuracy, MapSpec};
+use crate::tune::TuneSpec;
 use crate::zwidth::sweep::{sweep_observed, SweepSpec};
 
 /// An experiment as submitted: `{"kind":"map", …MapSpec}`,
@@ -29,6 +30,7 @@ pub enum ExperimentSpec {
     Map(MapSpec),
     Compare(CompareSpec),
     Sweep(SweepSpec),
+    Tune(TuneSpec),
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -47,6 +49,7 @@ impl ExperimentSpec {
             ExperimentSpec::Map(_) => "map",
             ExperimentSpec::Compare(_) => "compare",
             ExperimentSpec::Sweep(_) => "sweep",
+            ExperimentSpec::Tune(_) => "tune",
         }
     }
 
@@ -66,6 +69,7 @@ impl ExperimentSpec {
                     .collect(),
                 None => vec![("map.scene".into(), s.map.scene.clone())],
             },
+            ExperimentSpec::Tune(t) => vec![("scene".into(), t.scene.clone())],
         }
     }
 
@@ -79,6 +83,7 @@ impl ExperimentSpec {
                 c.accuracy.resolve(&sc).map(|_| ())
             }
             ExperimentSpec::Sweep(s) => s.variants().map(|_| ()),
+            ExperimentSpec::Tune(t) => t.validate().map(|_| ()),
         }
     }
 
@@ -94,6 +99,10 @@ impl ExperimentSpec {
                     .map(|r| serde_json::to_value(r).unwrap_or_default())
             }
             ExperimentSpec::Sweep(s) => sweep_observed(s, Some(observer))
+                .map(|r| serde_json::to_value(r).unwrap_or_default()),
+            ExperimentSpec::Tune(t) => t
+                .validate()?
+                .run(Some(observer))
                 .map(|r| serde_json::to_value(r).unwrap_or_default()),
         }
     }
@@ -198,7 +207,17 @@ async fn run_one(
     if !done.is_empty() {
         tracing::info!(stored = done.len(), "resuming from stored trials");
     }
-    let observer = Arc::new(Observer::resuming(done));
+    let evals = match store.evaluations(&id).await {
+        Ok(e) => e,
+        Err(e) => {
+            tracing::error!(error = %e, "reading stored evaluations failed");
+            Vec::new()
+        }
+    };
+    if !evals.is_empty() {
+        tracing::info!(stored = evals.len(), "resuming from stored evaluations");
+    }
+    let observer = Arc::new(Observer::resuming(done).with_evaluations(evals));
     running
         .lock()
         .unwrap_or_else(|e| e.into_inner())
@@ -215,6 +234,9 @@ async fn run_one(
             _ = tokio::time::sleep(Duration::from_millis(100)) => {
                 if let Err(e) = store.add_trials(&id, &observer.take_new()).await {
                     tracing::warn!(error = %e, "storing trials failed");
+                }
+                if let Err(e) = store.add_evaluations(&id, &observer.take_new_evaluations(), observer.best()).await {
+                    tracing::warn!(error = %e, "storing evaluations failed");
                 }
                 let trials = observer.trials.load(Ordering::Relaxed) as i64;
                 let dt = rate_mark.0.elapsed().as_secs_f64();
@@ -244,6 +266,12 @@ async fn run_one(
         .remove(&id);
     if let Err(e) = store.add_trials(&id, &observer.take_new()).await {
         tracing::warn!(error = %e, "storing trials failed");
+    }
+    if let Err(e) = store
+        .add_evaluations(&id, &observer.take_new_evaluations(), observer.best())
+        .await
+    {
+        tracing::warn!(error = %e, "storing evaluations failed");
     }
     TRIALS_PER_SECOND.store(0, Ordering::Relaxed);
     let trials = observer.trials.load(Ordering::Relaxed) as i64;

@@ -9,7 +9,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use crate::jobs::window::Window;
-use crate::zwidth::search::StoredTrial;
+use crate::zwidth::search::{StoredEvaluation, StoredTrial};
 
 static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
 
@@ -37,6 +37,8 @@ pub struct ExperimentRow {
     pub rig: String,
     /// Fraction of the work done, 0 to 1.
     pub progress: f64,
+    /// A tune's best so far (JSON).
+    pub best: Option<String>,
 }
 
 /// What a submission stores.
@@ -363,6 +365,56 @@ impl Store {
                     scope: scope as u32,
                     point,
                 })
+            })
+            .collect())
+    }
+
+    /// Store finished evaluations (already stored ones are kept) and the best so far.
+    pub async fn add_evaluations(
+        &self,
+        id: &str,
+        evals: &[StoredEvaluation],
+        best: Option<serde_json::Value>,
+    ) -> Result<(), sqlx::Error> {
+        if evals.is_empty() {
+            return Ok(());
+        }
+        let mut tx = self.pool.begin().await?;
+        for e in evals {
+            sqlx::query(
+                "INSERT OR IGNORE INTO evaluations (experiment_id, key, seq, record)
+                 VALUES (?1, ?2, (SELECT COUNT(*) FROM evaluations WHERE experiment_id = ?1), ?3)",
+            )
+            .bind(id)
+            .bind(&e.key)
+            .bind(e.record.to_string())
+            .execute(&mut *tx)
+            .await?;
+        }
+        if let Some(b) = best {
+            sqlx::query("UPDATE experiments SET best = ? WHERE id = ?")
+                .bind(b.to_string())
+                .bind(id)
+                .execute(&mut *tx)
+                .await?;
+        }
+        tx.commit().await
+    }
+
+    /// Every stored evaluation of a tune, in the order stored.
+    pub async fn evaluations(&self, id: &str) -> Result<Vec<StoredEvaluation>, sqlx::Error> {
+        let rows: Vec<(String, String)> = sqlx::query_as(
+            "SELECT key, record FROM evaluations WHERE experiment_id = ? ORDER BY seq",
+        )
+        .bind(id)
+        .fetch_all(&self.pool)
+        .await?;
+        Ok(rows
+            .into_iter()
+            .filter_map(|(key, r)| {
+                serde_json::from_str(&r)
+                    .ok()
+                    .map(|record| StoredEvaluation { key, record })
             })
             .collect())
     }

@@ -411,47 +411,67 @@ impl SceneSpec {
     /// field to blame (e.g. `parameter.path`). The leaf need not be present
     /// (optional fields), but its parent object must be.
     pub fn with_number(&self, path: &str, value: f64, field: &str) -> Result<SceneSpec, SpecError> {
-        let unknown = || {
-            SpecError::new(
-                field,
-                format!("{path:?}"),
-                "must name a number in the scene, e.g. \"estimator.cutoff_hz\" or \"device.damping\"",
-            )
-        };
-        if !value.is_finite() {
-            return Err(SpecError::new(path, value, "must be a finite number"));
+        self.with_numbers(&[(path, value)], &[], field)
+    }
+
+    /// The same for several numbers at once, after removing the `remove`
+    /// paths (e.g. one gain form replaced by another).
+    pub fn with_numbers(
+        &self,
+        set: &[(&str, f64)],
+        remove: &[&str],
+        field: &str,
+    ) -> Result<SceneSpec, SpecError> {
+        let mut doc = serde_json::to_value(self)
+            .map_err(|e| SpecError::new(field, "(scene)", e.to_string()))?;
+        for path in remove {
+            let (parent, leaf) = path.rsplit_once('.').unwrap_or(("", path));
+            if let Some(obj) = lookup(&mut doc, parent).and_then(|n| n.as_object_mut()) {
+                obj.remove(leaf);
+            }
         }
-        let mut doc = serde_json::to_value(self).map_err(|_| unknown())?;
-        let (parent, leaf) = path.rsplit_once('.').unwrap_or(("", path));
-        let mut node = &mut doc;
-        for name in parent.split('.').filter(|n| !n.is_empty()) {
-            node = node.get_mut(name).ok_or_else(unknown)?;
+        for &(path, value) in set {
+            let unknown = || {
+                SpecError::new(
+                    field,
+                    format!("{path:?}"),
+                    "must name a number in the scene, e.g. \"estimator.cutoff_hz\" or \"device.damping\"",
+                )
+            };
+            if !value.is_finite() {
+                return Err(SpecError::new(path, value, "must be a finite number"));
+            }
+            let (parent, leaf) = path.rsplit_once('.').unwrap_or(("", path));
+            let obj = lookup(&mut doc, parent)
+                .and_then(|n| n.as_object_mut())
+                .ok_or_else(unknown)?;
+            if leaf.is_empty() || obj.get(leaf).is_some_and(|v| !v.is_number() && !v.is_null()) {
+                return Err(unknown());
+            }
+            // Whole numbers as integers, so counts (orders, windows) read back.
+            let number = if value.fract() == 0.0 && value.abs() < 9e15 {
+                serde_json::Value::from(value as i64)
+            } else {
+                serde_json::Value::from(value)
+            };
+            obj.insert(leaf.to_string(), number);
         }
-        let obj = node.as_object_mut().ok_or_else(unknown)?;
-        if obj
-            .get(leaf)
-            .is_some_and(|v| !v.is_number() && !v.is_null())
-            || leaf.is_empty()
-        {
-            return Err(unknown());
-        }
-        // Whole numbers as integers, so counts (orders, windows) read back.
-        let number = if value.fract() == 0.0 && value.abs() < 9e15 {
-            serde_json::Value::from(value as i64)
-        } else {
-            serde_json::Value::from(value)
-        };
-        obj.insert(leaf.to_string(), number);
         let spec: SceneSpec = serde_json::from_value(doc).map_err(|e| {
-            SpecError::new(
-                field,
-                format!("{path:?}"),
-                format!("cannot be set on this scene: {e}"),
-            )
+            let paths: Vec<&str> = set.iter().map(|(p, _)| *p).collect();
+            SpecError::new(field, format!("{paths:?}"), format!("cannot be set on this scene: {e}"))
         })?;
         spec.validate().map_err(|e| e.within("scene"))?;
         Ok(spec)
     }
+}
+
+/// The JSON node at a dot-separated path ("" is the root).
+fn lookup<'a>(doc: &'a mut serde_json::Value, path: &str) -> Option<&'a mut serde_json::Value> {
+    let mut node = doc;
+    for name in path.split('.').filter(|n| !n.is_empty()) {
+        node = node.get_mut(name)?;
+    }
+    Some(node)
 }
 
 impl Scene {

@@ -95,6 +95,19 @@ pub struct Observer {
     /// fraction done, for the progress and ETA.
     scopes: std::sync::atomic::AtomicUsize,
     progress: std::sync::Mutex<std::collections::HashMap<u32, f64>>,
+    /// Whole evaluations (a tune's objective at some parameters) done by an
+    /// earlier run, by key; the new ones to store; the best so far.
+    evals_done: std::collections::HashMap<String, serde_json::Value>,
+    evals_new: std::sync::Mutex<Vec<StoredEvaluation>>,
+    best: std::sync::Mutex<Option<serde_json::Value>>,
+}
+
+/// A finished evaluation of a tune (the record is the tune's own JSON).
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct StoredEvaluation {
+    /// Identifies the evaluation: accuracy and exact parameter values.
+    pub key: String,
+    pub record: serde_json::Value,
 }
 
 impl Observer {
@@ -107,6 +120,39 @@ impl Observer {
                 .collect(),
             ..Self::default()
         }
+    }
+
+    /// Also replay the evaluations `evals` (a resumed tune).
+    pub fn with_evaluations(mut self, evals: Vec<StoredEvaluation>) -> Self {
+        self.evals_done = evals.into_iter().map(|e| (e.key, e.record)).collect();
+        self
+    }
+
+    /// An evaluation stored by an earlier run.
+    pub fn stored_evaluation(&self, key: &str) -> Option<serde_json::Value> {
+        self.evals_done.get(key).cloned()
+    }
+
+    /// A new evaluation to store.
+    pub fn record_evaluation(&self, key: String, record: serde_json::Value) {
+        self.evals_new
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(StoredEvaluation { key, record });
+    }
+
+    /// The evaluations finished since the last call.
+    pub fn take_new_evaluations(&self) -> Vec<StoredEvaluation> {
+        std::mem::take(&mut *self.evals_new.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    /// The best result so far (shown while running).
+    pub fn set_best(&self, best: serde_json::Value) {
+        *self.best.lock().unwrap_or_else(|e| e.into_inner()) = Some(best);
+    }
+
+    pub fn best(&self) -> Option<serde_json::Value> {
+        self.best.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
     pub fn cancelled(&self) -> bool {

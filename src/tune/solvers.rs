@@ -1,0 +1,199 @@
+//! The solvers a tune drives, all minimizing a cost over the unit cube:
+//! argmin's Brent (Brent 1973, ch. 5) and golden-section search for one
+//! parameter, Nelder–Mead (Nelder & Mead 1965) and particle swarm (Kennedy
+//! & Eberhart 1995; argmin's defaults from Zambrano-Bigiarini et al. 2013)
+//! for more; a brute-force grid; and a Halton design (Halton 1960) for
+//! Pareto fronts. The cost function itself keeps the log: solvers only
+//! steer, so a solver stopped by the budget or a cancel loses nothing.
+
+use argmin::core::{CostFunction, Error, Executor};
+use argmin::solver::brent::BrentOpt;
+use argmin::solver::goldensectionsearch::GoldenSectionSearch;
+use argmin::solver::neldermead::NelderMead;
+use argmin::solver::particleswarm::ParticleSwarm;
+use rand::{Rng, SeedableRng};
+
+/// Evaluate the objective at u (unit cube); Err stops the solver (budget
+/// spent, or cancelled).
+pub trait Cost {
+    fn cost(&self, u: &[f64]) -> Result<f64, Error>;
+}
+
+struct OneD<'a, C: Cost>(&'a C);
+
+impl<C: Cost> CostFunction for OneD<'_, C> {
+    type Param = f64;
+    type Output = f64;
+    fn cost(&self, u: &f64) -> Result<f64, Error> {
+        self.0.cost(&[*u])
+    }
+}
+
+struct ManyD<'a, C: Cost>(&'a C);
+
+impl<C: Cost> CostFunction for ManyD<'_, C> {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, u: &Vec<f64>) -> Result<f64, Error> {
+        self.0.cost(u)
+    }
+}
+
+/// Brent's method on [lo, hi] (one parameter) to absolute tolerance `tol` in u.
+pub fn brent<C: Cost>(c: &C, lo: f64, hi: f64, tol: f64, max_iters: u64) {
+    let solver = BrentOpt::new(lo, hi).set_tolerance(1e-8, tol);
+    let _ = Executor::new(OneD(c), solver)
+        .configure(|s| s.max_iters(max_iters))
+        .run();
+}
+
+/// Golden-section search on [0, 1] to tolerance `tol` in u.
+pub fn golden<C: Cost>(c: &C, tol: f64, max_iters: u64) -> Result<(), Error> {
+    let solver = GoldenSectionSearch::new(0.0, 1.0)?.with_tolerance(tol)?;
+    let _ = Executor::new(OneD(c), solver)
+        .configure(|s| s.param(0.5).max_iters(max_iters))
+        .run();
+    Ok(())
+}
+
+/// Nelder–Mead from the simplex around `start` (steps of `step` in u).
+pub fn nelder_mead<C: Cost>(c: &C, start: &[f64], step: f64, max_iters: u64) -> Result<(), Error> {
+    let n = start.len();
+    let mut simplex = vec![start.to_vec()];
+    for i in 0..n {
+        let mut p = start.to_vec();
+        // Step inwards when the start sits near the upper bound.
+        p[i] = if p[i] + step <= 1.0 { p[i] + step } else { p[i] - step };
+        simplex.push(p);
+    }
+    let solver = NelderMead::new(simplex).with_sd_tolerance(1e-6)?;
+    let _ = Executor::new(ManyD(c), solver)
+        .configure(|s| s.max_iters(max_iters))
+        .run();
+    Ok(())
+}
+
+/// Particle swarm over the unit cube with `particles`, seeded.
+pub fn particle_swarm<C: Cost>(c: &C, n: usize, particles: usize, max_iters: u64, seed: u64) {
+    let solver = ParticleSwarm::new((vec![0.0; n], vec![1.0; n]), particles)
+        .with_rng_generator(rand::rngs::StdRng::seed_from_u64(seed));
+    let _ = Executor::new(ManyD(c), solver)
+        .configure(|s| s.max_iters(max_iters))
+        .run();
+}
+
+/// `count` evenly spaced points of [0, 1] (both ends), in order.
+pub fn grid(count: usize) -> Vec<f64> {
+    match count {
+        0 => vec![],
+        1 => vec![0.5],
+        n => (0..n).map(|i| i as f64 / (n - 1) as f64).collect(),
+    }
+}
+
+/// The i-th point of the Halton sequence in `dim` dimensions (bases 2, 3,
+/// 5, …), shifted by a seeded random offset mod 1 (Cranley–Patterson
+/// rotation) so different seeds give different, equally even designs.
+pub fn halton(count: usize, dim: usize, seed: u64) -> Vec<Vec<f64>> {
+    const PRIMES: [u64; 12] = [2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37];
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let shift: Vec<f64> = (0..dim).map(|_| rng.random::<f64>()).collect();
+    (1..=count as u64)
+        .map(|i| {
+            (0..dim)
+                .map(|d| {
+                    let base = PRIMES[d % PRIMES.len()];
+                    let (mut f, mut r, mut k) = (1.0, 0.0, i);
+                    while k > 0 {
+                        f /= base as f64;
+                        r += f * (k % base) as f64;
+                        k /= base;
+                    }
+                    (r + shift[d]).fract()
+                })
+                .collect()
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::cell::RefCell;
+
+    struct Quad(RefCell<usize>);
+    impl Cost for Quad {
+        fn cost(&self, u: &[f64]) -> Result<f64, Error> {
+            *self.0.borrow_mut() += 1;
+            // Minimum 0 at u = (0.3, 0.7, …).
+            Ok(u.iter().enumerate().map(|(i, x)| (x - if i % 2 == 0 { 0.3 } else { 0.7 }).powi(2)).sum())
+        }
+    }
+
+    struct Best<'a>(&'a Quad, RefCell<(f64, Vec<f64>)>);
+    impl Cost for Best<'_> {
+        fn cost(&self, u: &[f64]) -> Result<f64, Error> {
+            let c = self.0.cost(u)?;
+            let mut b = self.1.borrow_mut();
+            if c < b.0 {
+                *b = (c, u.to_vec());
+            }
+            Ok(c)
+        }
+    }
+
+    fn best() -> (Quad, RefCell<(f64, Vec<f64>)>) {
+        (Quad(RefCell::new(0)), RefCell::new((f64::MAX, vec![])))
+    }
+
+    #[test]
+    fn solvers_find_a_quadratic_minimum() {
+        let (q, b) = best();
+        let c = Best(&q, b);
+        brent(&c, 0.0, 1.0, 1e-6, 100);
+        assert!((c.1.borrow().1[0] - 0.3).abs() < 1e-4, "{:?}", c.1.borrow());
+        let (q, b) = best();
+        let c = Best(&q, b);
+        golden(&c, 1e-6, 200).unwrap();
+        assert!((c.1.borrow().1[0] - 0.3).abs() < 1e-3, "{:?}", c.1.borrow());
+        let (q, b) = best();
+        let c = Best(&q, b);
+        nelder_mead(&c, &[0.5, 0.5], 0.2, 200).unwrap();
+        let u = c.1.borrow().1.clone();
+        assert!((u[0] - 0.3).abs() < 1e-3 && (u[1] - 0.7).abs() < 1e-3, "{u:?}");
+        let (q, b) = best();
+        let c = Best(&q, b);
+        particle_swarm(&c, 2, 20, 50, 7);
+        let u = c.1.borrow().1.clone();
+        assert!((u[0] - 0.3).abs() < 1e-2 && (u[1] - 0.7).abs() < 1e-2, "{u:?}");
+    }
+
+    #[test]
+    fn particle_swarm_is_reproducible_with_a_seed() {
+        let run = |seed| {
+            let (q, b) = best();
+            let c = Best(&q, b);
+            particle_swarm(&c, 2, 8, 5, seed);
+            let r = c.1.borrow().clone();
+            r
+        };
+        assert_eq!(run(3), run(3));
+        assert_ne!(run(3), run(4));
+    }
+
+    #[test]
+    fn halton_is_the_radical_inverse() {
+        // Base 2: 1/2, 1/4, 3/4; base 3: 1/3, 2/3, 1/9 (the definition),
+        // here shifted by the seed's offset mod 1.
+        let h = halton(3, 2, 0);
+        let off = (h[0][0] - 0.5).rem_euclid(1.0);
+        for (p, want) in h.iter().zip([0.5, 0.25, 0.75]) {
+            assert!(((p[0] - want).rem_euclid(1.0) - off).abs() < 1e-12);
+        }
+        let off = (h[0][1] - 1.0 / 3.0).rem_euclid(1.0);
+        for (p, want) in h.iter().zip([1.0 / 3.0, 2.0 / 3.0, 1.0 / 9.0]) {
+            let d = (p[1] - want).rem_euclid(1.0) - off;
+            assert!(d.abs() < 1e-12 || (d.abs() - 1.0).abs() < 1e-12);
+        }
+    }
+}
