@@ -119,7 +119,7 @@ pub enum Command {
         /// stability | impedance | strict_passivity
         #[arg(long, default_value = "impedance")]
         criterion: String,
-        /// trace | bisect | grid
+        /// trace | bisect | robust_bisect | grid
         #[arg(long, default_value = "bisect")]
         search: String,
         /// Only these damping values (N·s/m), comma-separated.
@@ -155,6 +155,9 @@ pub enum Command {
         /// stability | impedance | strict_passivity
         #[arg(long, default_value = "impedance")]
         criterion: String,
+        /// robust_bisect | bisect | trace | grid: how each map searches.
+        #[arg(long, default_value = "robust_bisect")]
+        search: String,
         /// auto | brent | golden | nelder_mead | particle_swarm | grid | halton
         #[arg(long, default_value = "auto")]
         solver: String,
@@ -288,6 +291,23 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 10.0)]
         seconds: f64,
     },
+    /// Tuning on the seed device: Butterworth tuner vs a 1 Hz brute-force scan, Levant tuned vs rule gains.
+    Tune {
+        /// Accuracy of the Butterworth scan and tune.
+        #[arg(long, default_value = "draft")]
+        accuracy: String,
+        /// Points of the brute-force scan (490: 1 Hz steps over 10–499 Hz); the tuner gets a fifth.
+        #[arg(long, default_value_t = 490)]
+        scan_points: usize,
+        /// Accuracy of the Levant tune.
+        #[arg(long, default_value = "standard")]
+        levant_accuracy: String,
+        /// Evaluations the Levant tune may make.
+        #[arg(long, default_value_t = 20)]
+        levant_evaluations: usize,
+        #[arg(long)]
+        json: bool,
+    },
     /// Wall time and K/B-width error against `reference` for each accuracy preset, on the example scenes.
     Tradeoff {
         #[arg(long)]
@@ -384,9 +404,18 @@ fn with_progress<T>(
             while !done.load(std::sync::atomic::Ordering::Relaxed) {
                 let f = observer.fraction();
                 let t = start.elapsed().as_secs_f64();
-                let eta = if f > 0.01 { format!("ETA {:>5.0} s", t * (1.0 - f) / f) } else { String::new() };
+                let eta = if f > 0.01 {
+                    format!("ETA {:>5.0} s", t * (1.0 - f) / f)
+                } else {
+                    String::new()
+                };
                 let filled = (f * 30.0).round() as usize;
-                eprint!("\r[{}{}] {:>3.0} % {t:>6.1} s {eta}  ", "#".repeat(filled), ".".repeat(30 - filled.min(30)), 100.0 * f);
+                eprint!(
+                    "\r[{}{}] {:>3.0} % {t:>6.1} s {eta}  ",
+                    "#".repeat(filled),
+                    ".".repeat(30 - filled.min(30)),
+                    100.0 * f
+                );
                 std::thread::sleep(std::time::Duration::from_millis(200));
             }
             eprintln!();
@@ -627,6 +656,7 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
             objective,
             method,
             criterion,
+            search,
             solver,
             seed,
             accuracy,
@@ -660,6 +690,7 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 objective,
                 method: parse_choice("method", &method)?,
                 criterion: parse_choice("criterion", &criterion)?,
+                search: parse_choice("search", &search)?,
                 accuracy: Accuracy::Preset(parse_choice("accuracy", &accuracy)?),
                 final_accuracy: Accuracy::Preset(parse_choice("final-accuracy", &final_accuracy)?),
                 finalists,
@@ -869,6 +900,38 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
             }
             let r = client(server).bench(submissions, rate, seconds)?;
             write_json(stdout, &r)
+        }
+        Command::Bench {
+            what:
+                BenchCommand::Tune {
+                    accuracy,
+                    scan_points,
+                    levant_accuracy,
+                    levant_evaluations,
+                    json,
+                },
+        } => {
+            if !(5..=5000).contains(&scan_points) || !(1..=1000).contains(&levant_evaluations) {
+                return Err(CliError::Input(
+                    "bench tune: --scan-points must be 5 to 5000, --levant-evaluations 1 to 1000"
+                        .into(),
+                ));
+            }
+            let study = crate::tune::study::Study {
+                cutoff: crate::tune::study::cutoff(
+                    parse_choice("accuracy", &accuracy)?,
+                    scan_points,
+                )?,
+                levant: crate::tune::study::levant(
+                    parse_choice("levant-accuracy", &levant_accuracy)?,
+                    levant_evaluations,
+                )?,
+            };
+            if json {
+                write_json(stdout, &study)
+            } else {
+                write!(stdout, "{}", study.table()).map_err(io)
+            }
         }
         Command::Bench {
             what: BenchCommand::Tradeoff { json },

@@ -125,7 +125,9 @@ pub fn tune_csv(result: &Value) -> Result<String, String> {
             p.join(","),
             m.k_width,
             m.b_width,
-            m.max_fidelity_error.map(|f| f.to_string()).unwrap_or_default(),
+            m.max_fidelity_error
+                .map(|f| f.to_string())
+                .unwrap_or_default(),
             m.area,
             e.score,
             e.feasible,
@@ -339,9 +341,11 @@ pub fn points_csv(maps: &[MapSummary]) -> String {
 /// as their boundaries on one chart.
 pub fn svg(spec: &ExperimentSpec, maps: &[MapSummary], result: &Value) -> Result<String, String> {
     match (spec, maps) {
-        (ExperimentSpec::Tune(_), _) => serde_json::from_value::<crate::tune::TuneResult>(result.clone())
-            .map_err(|e| format!("not a tune result: {e}"))?
-            .svg(),
+        (ExperimentSpec::Tune(_), _) => {
+            serde_json::from_value::<crate::tune::TuneResult>(result.clone())
+                .map_err(|e| format!("not a tune result: {e}"))?
+                .svg()
+        }
         (ExperimentSpec::Map(_), [m]) => {
             let points: Vec<MapPlotPoint> = m
                 .points

@@ -20,7 +20,7 @@ use crate::jobs::ExperimentSpec;
 use crate::report::{self, Comparison, MapSummary};
 use crate::rig::{Rig, RigInfo};
 use crate::store::{now_ms, ExperimentRow, NewExperiment, Store};
-use crate::zwidth::search::StoredTrial;
+use crate::zwidth::search::{StoredEvaluation, StoredTrial};
 
 /// Largest request body accepted (bytes).
 pub const BODY_LIMIT: usize = 1 << 20;
@@ -101,6 +101,7 @@ pub fn router(state: AppState, timeout: Duration) -> Router {
         .route("/v1/experiments/{id}", get(show))
         .route("/v1/experiments/{id}/cancel", post(cancel))
         .route("/v1/experiments/{id}/trials", get(trials))
+        .route("/v1/experiments/{id}/evaluations", get(evaluations))
         .route("/v1/experiments/{id}/plot.svg", get(plot))
         .route("/v1/experiments/{id}/points.csv", get(points))
         .route("/v1/compare", get(compare_runs))
@@ -142,7 +143,7 @@ pub struct ProblemBody {
 #[derive(utoipa::OpenApi)]
 #[openapi(
     info(title = "zwidth", description = "Z-width experiments: queue, run and store maps and estimator comparisons"),
-    paths(healthz, rigs, set_window, clear_window, submit, list, show, cancel, trials, plot, points, compare_runs, queue, pause, resume, metrics),
+    paths(healthz, rigs, set_window, clear_window, submit, list, show, cancel, trials, evaluations, plot, points, compare_runs, queue, pause, resume, metrics),
     components(schemas(ProblemBody, ExperimentView, ExperimentSpec, RigView, Window, Comparison, StoredTrial, crate::tune::TuneResult)),
     modifiers(&BearerAuth)
 )]
@@ -266,7 +267,11 @@ pub struct ExperimentView {
 /// elapsed and the estimated time left (s), extrapolated from the fraction.
 fn progress(r: &ExperimentRow) -> Value {
     let mut p = json!({ "trials_done": r.trials_done, "fraction": r.progress });
-    if let Some(best) = r.best.as_deref().and_then(|b| serde_json::from_str::<Value>(b).ok()) {
+    if let Some(best) = r
+        .best
+        .as_deref()
+        .and_then(|b| serde_json::from_str::<Value>(b).ok())
+    {
         p["best"] = best;
     }
     if r.state == "running" {
@@ -696,6 +701,27 @@ async fn trials(
     Ok(Json(t))
 }
 
+#[utoipa::path(get, path = "/v1/experiments/{id}/evaluations", params(("id" = String, Path, description = "experiment id")),
+    responses((status = 200, description = "a tune's stored evaluations (parameters, objectives, elapsed time), in the order stored, also while it runs", body = Vec<StoredEvaluation>),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json")))]
+async fn evaluations(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<Vec<StoredEvaluation>>, Problem> {
+    if st
+        .store
+        .state(&id)
+        .await
+        .map_err(Problem::internal)?
+        .is_none()
+    {
+        return Err(not_found("experiment", &id));
+    }
+    Ok(Json(
+        st.store.evaluations(&id).await.map_err(Problem::internal)?,
+    ))
+}
+
 /// The maps of a succeeded experiment (409 while it is not).
 async fn finished_maps(
     st: &AppState,
@@ -943,6 +969,7 @@ mod tests {
             "/v1/experiments/{id}/trials",
             "/v1/experiments/{id}/plot.svg",
             "/v1/experiments/{id}/points.csv",
+            "/v1/experiments/{id}/evaluations",
         ] {
             assert!(v["paths"].get(path).is_some(), "{path} missing");
         }

@@ -14,11 +14,11 @@ use std::time::Duration;
 use crate::error::SpecError;
 use crate::rig::Rig;
 use crate::store::Store;
+use crate::tune::TuneSpec;
 use crate::zwidth::compare;
 use crate::zwidth::scene::SceneSpec;
 use crate::zwidth::search::{self, map_observed, Observer};
 use crate::zwidth::settings::{Accuracy, MapSpec};
-use crate::tune::TuneSpec;
 use crate::zwidth::sweep::{sweep_observed, SweepSpec};
 
 /// An experiment as submitted: `{"kind":"map", …MapSpec}`,

@@ -9,6 +9,7 @@
 
 pub mod params;
 pub mod solvers;
+pub mod study;
 
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap};
@@ -23,7 +24,9 @@ use crate::zwidth::settings::{Accuracy, Criterion, MapSpec, Method, Preset, Sear
 pub use params::{Bounds, Space};
 
 /// What a tune optimizes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize, utoipa::ToSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Metric {
     /// Maximize the largest K that renders (N/m).
@@ -89,6 +92,10 @@ pub struct TuneSpec {
     pub method: Method,
     #[serde(default)]
     pub criterion: Criterion,
+    /// How each map searches (default robust_bisect: a lucky pass high up
+    /// must not count as width, or the tune chases noise).
+    #[serde(default = "robust")]
+    pub search: SearchKind,
     /// Accuracy while searching (default draft).
     #[serde(default = "draft")]
     pub accuracy: Accuracy,
@@ -118,6 +125,9 @@ pub struct TuneSpec {
     pub k_max: f64,
 }
 
+fn robust() -> SearchKind {
+    SearchKind::RobustBisect
+}
 fn draft() -> Accuracy {
     Accuracy::Preset(Preset::Draft)
 }
@@ -272,11 +282,19 @@ impl TuneSpec {
             Objective::Single(m) => vec![*m],
             Objective::Weighted(w) => {
                 if w.is_empty() {
-                    return Err(SpecError::new("objective.weighted", "{}", "give at least one metric with its weight"));
+                    return Err(SpecError::new(
+                        "objective.weighted",
+                        "{}",
+                        "give at least one metric with its weight",
+                    ));
                 }
                 for (m, x) in w {
                     if !x.is_finite() {
-                        return Err(SpecError::new(format!("objective.weighted.{}", metric_name(*m)), x, "weights must be finite"));
+                        return Err(SpecError::new(
+                            format!("objective.weighted.{}", metric_name(*m)),
+                            x,
+                            "weights must be finite",
+                        ));
                     }
                 }
                 w.keys().copied().collect()
@@ -296,38 +314,72 @@ impl TuneSpec {
             }
         };
         if !(1..=MAX_EVALUATIONS).contains(&self.max_evaluations) {
-            return Err(SpecError::new("max_evaluations", self.max_evaluations, format!("must be 1 to {MAX_EVALUATIONS}")));
+            return Err(SpecError::new(
+                "max_evaluations",
+                self.max_evaluations,
+                format!("must be 1 to {MAX_EVALUATIONS}"),
+            ));
         }
         if self.finalists > 20 {
-            return Err(SpecError::new("finalists", self.finalists, "must be 0 to 20"));
+            return Err(SpecError::new(
+                "finalists",
+                self.finalists,
+                "must be 0 to 20",
+            ));
         }
-        let one_d = matches!(self.solver, SolverKind::Brent | SolverKind::Golden | SolverKind::Grid);
+        let one_d = matches!(
+            self.solver,
+            SolverKind::Brent | SolverKind::Golden | SolverKind::Grid
+        );
         if one_d && space.dim() != 1 {
             return Err(SpecError::new(
                 "solver",
                 format!("{:?}", self.solver).to_lowercase(),
-                format!("tunes one parameter; {} given: use nelder_mead, particle_swarm or halton", space.dim()),
+                format!(
+                    "tunes one parameter; {} given: use nelder_mead, particle_swarm or halton",
+                    space.dim()
+                ),
             ));
         }
         if matches!(self.objective, Objective::Pareto(_))
-            && !matches!(self.solver, SolverKind::Auto | SolverKind::Halton | SolverKind::Grid)
+            && !matches!(
+                self.solver,
+                SolverKind::Auto | SolverKind::Halton | SolverKind::Grid
+            )
         {
-            return Err(SpecError::new("solver", format!("{:?}", self.solver).to_lowercase(), "a Pareto front needs a design: auto, halton or grid"));
+            return Err(SpecError::new(
+                "solver",
+                format!("{:?}", self.solver).to_lowercase(),
+                "a Pareto front needs a design: auto, halton or grid",
+            ));
         }
         let lipschitz = match (&self.scene.estimator.kind, self.constraint) {
             (_, None) => None,
             (EstimatorKind::Levant(l), Some(_)) => Some(l.lipschitz.ok_or_else(|| {
-                SpecError::new("constraint", "(set)", "needs the scene's estimator.lipschitz (C) to check the gains against")
+                SpecError::new(
+                    "constraint",
+                    "(set)",
+                    "needs the scene's estimator.lipschitz (C) to check the gains against",
+                )
             })?),
             (_, Some(_)) => {
-                return Err(SpecError::new("constraint", "(set)", "applies to Levant gains only"));
+                return Err(SpecError::new(
+                    "constraint",
+                    "(set)",
+                    "applies to Levant gains only",
+                ));
             }
         };
         // The engines' own checks, on the base scene at both accuracies.
         for acc in [&self.accuracy, &self.final_accuracy] {
             crate::zwidth::search::validate(&self.map_spec(self.scene.clone(), acc.clone()))?;
         }
-        Ok(Tune { spec: self.clone(), space, metrics, lipschitz })
+        Ok(Tune {
+            spec: self.clone(),
+            space,
+            metrics,
+            lipschitz,
+        })
     }
 
     fn map_spec(&self, scene: SceneSpec, accuracy: Accuracy) -> MapSpec {
@@ -335,7 +387,7 @@ impl TuneSpec {
             scene,
             method: self.method,
             criterion: self.criterion,
-            search: SearchKind::Bisect,
+            search: self.search,
             accuracy,
             b: self.b.clone(),
             b_max: self.b_max,
@@ -384,7 +436,10 @@ struct Run<'a> {
 
 impl Run<'_> {
     fn key(&self, phase_acc: &Accuracy, params: &BTreeMap<String, f64>) -> String {
-        let p: Vec<String> = params.iter().map(|(n, x)| format!("{n}={:016x}", x.to_bits())).collect();
+        let p: Vec<String> = params
+            .iter()
+            .map(|(n, x)| format!("{n}={:016x}", x.to_bits()))
+            .collect();
         format!("{}|{}", accuracy_name(phase_acc), p.join(","))
     }
 
@@ -405,7 +460,9 @@ impl Run<'_> {
         let (Some(cond), Some(c)) = (self.tune.spec.constraint, self.tune.lipschitz) else {
             return 0.0;
         };
-        let EstimatorKind::Levant(l) = &scene.estimator.kind else { return 0.0 };
+        let EstimatorKind::Levant(l) = &scene.estimator.kind else {
+            return 0.0;
+        };
         let Ok(g) = l.gains() else { return 1.0 };
         let (a, lam) = (g.alpha, g.lambda);
         match cond {
@@ -425,7 +482,11 @@ impl Run<'_> {
     /// Evaluate at unit point u in `phase` ("search" / "final").
     fn evaluate(&self, u: &[f64], phase: &str) -> Result<Evaluation, Stop> {
         let spec = &self.tune.spec;
-        let acc = if phase == "final" { &spec.final_accuracy } else { &spec.accuracy };
+        let acc = if phase == "final" {
+            &spec.final_accuracy
+        } else {
+            &spec.accuracy
+        };
         let params = self.tune.space.values(u);
         let key = self.key(acc, &params);
         let index = self.log.lock().unwrap_or_else(|e| e.into_inner()).len();
@@ -467,20 +528,42 @@ impl Run<'_> {
             let violation = self.violation(&scene);
             let (metrics, trials) = if violation > 0.0 {
                 // Infeasible gains: no map is run.
-                (Metrics { k_width: 0.0, b_width: 0.0, max_fidelity_error: None, area: 0.0 }, 0)
+                (
+                    Metrics {
+                        k_width: 0.0,
+                        b_width: 0.0,
+                        max_fidelity_error: None,
+                        area: 0.0,
+                    },
+                    0,
+                )
             } else {
-                let m = map_observed(&spec.map_spec(scene, acc.clone()), self.observer.clone(), index as u32)
-                    .map_err(Stop::Spec)?;
+                let m = map_observed(
+                    &spec.map_spec(scene, acc.clone()),
+                    self.observer.clone(),
+                    index as u32,
+                )
+                .map_err(Stop::Spec)?;
                 if self.observer.as_ref().is_some_and(|o| o.cancelled()) {
                     return Err(Stop::Cancelled);
                 }
                 (
-                    Metrics { k_width: m.k_width, b_width: m.b_width, max_fidelity_error: m.max_fidelity_error, area: m.area },
+                    Metrics {
+                        k_width: m.k_width,
+                        b_width: m.b_width,
+                        max_fidelity_error: m.max_fidelity_error,
+                        area: m.area,
+                    },
                     m.trials,
                 )
             };
             let mut objectives: BTreeMap<String, Option<f64>> = BTreeMap::new();
-            for m in [Metric::KWidth, Metric::BWidth, Metric::MaxFidelityError, Metric::Area] {
+            for m in [
+                Metric::KWidth,
+                Metric::BWidth,
+                Metric::MaxFidelityError,
+                Metric::Area,
+            ] {
                 objectives.insert(metric_name(m).into(), metrics.get(m));
             }
             let e = Evaluation {
@@ -500,14 +583,21 @@ impl Run<'_> {
             }
             e
         };
-        self.cache.lock().unwrap_or_else(|e| e.into_inner()).insert(key, ev.clone());
+        self.cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(key, ev.clone());
         if let Some(o) = &self.observer {
             o.report(index as u32, 1.0);
         }
         let mut log = self.log.lock().unwrap_or_else(|e| e.into_inner());
         log.push(ev.clone());
         if let Some(o) = &self.observer {
-            if let Some(b) = log.iter().filter(|e| e.phase == phase).max_by(|a, b| a.score.total_cmp(&b.score)) {
+            if let Some(b) = log
+                .iter()
+                .filter(|e| e.phase == phase)
+                .max_by(|a, b| a.score.total_cmp(&b.score))
+            {
                 o.set_best(serde_json::json!({"params": b.params, "score": b.score, "objectives": b.objectives, "phase": b.phase}));
             }
         }
@@ -574,11 +664,21 @@ impl Tune {
                 }
             }
             SolverKind::Brent => solvers::brent(&run, 0.0, 1.0, tolerance(budget), iters),
-            SolverKind::Golden => solvers::golden(&run, tolerance(budget), iters).map_err(internal)?,
-            SolverKind::NelderMead => solvers::nelder_mead(&run, &vec![0.5; n], 0.25, iters).map_err(internal)?,
+            SolverKind::Golden => {
+                solvers::golden(&run, tolerance(budget), iters).map_err(internal)?
+            }
+            SolverKind::NelderMead => {
+                solvers::nelder_mead(&run, &vec![0.5; n], 0.25, iters).map_err(internal)?
+            }
             SolverKind::ParticleSwarm => {
                 let particles = (4 * n).clamp(6, 20).min(budget.max(1));
-                solvers::particle_swarm(&run, n, particles, (budget / particles).max(1) as u64, spec.seed)
+                solvers::particle_swarm(
+                    &run,
+                    n,
+                    particles,
+                    (budget / particles).max(1) as u64,
+                    spec.seed,
+                )
             }
             SolverKind::Auto if n == 1 => {
                 // Coarse grid over a third of the budget, then Brent inside
@@ -615,7 +715,11 @@ impl Tune {
         let search_s = start.elapsed().as_secs_f64();
         let history = run.log.lock().unwrap_or_else(|e| e.into_inner()).clone();
         if history.is_empty() {
-            return Err(SpecError::new("tune", "(cancelled)", "stopped before any evaluation"));
+            return Err(SpecError::new(
+                "tune",
+                "(cancelled)",
+                "stopped before any evaluation",
+            ));
         }
         // Distinct parameter sets, best first.
         let mut ranked: Vec<&Evaluation> = Vec::new();
@@ -629,10 +733,18 @@ impl Tune {
         let front = pareto.then(|| pareto_front(&history, &self.metrics));
         // Finalists: the best few (Pareto: front members by the first metric).
         let candidates: Vec<&Evaluation> = match &front {
-            Some(f) => ranked.iter().copied().filter(|e| f.contains(&e.index)).collect(),
+            Some(f) => ranked
+                .iter()
+                .copied()
+                .filter(|e| f.contains(&e.index))
+                .collect(),
             None => ranked.clone(),
         };
-        let picked: Vec<&Evaluation> = candidates.into_iter().filter(|e| e.feasible).take(spec.finalists).collect();
+        let picked: Vec<&Evaluation> = candidates
+            .into_iter()
+            .filter(|e| e.feasible)
+            .take(spec.finalists)
+            .collect();
         let mut finals = Vec::new();
         let t_final = Instant::now();
         for e in &picked {
@@ -643,8 +755,10 @@ impl Tune {
             }
         }
         let final_s = t_final.elapsed().as_secs_f64();
-        let computed = history.iter().filter(|e| !e.cached).count() + finals.iter().filter(|e| !e.cached).count();
-        let cache_hits = history.iter().filter(|e| e.cached).count() + finals.iter().filter(|e| e.cached).count();
+        let computed = history.iter().filter(|e| !e.cached).count()
+            + finals.iter().filter(|e| !e.cached).count();
+        let cache_hits = history.iter().filter(|e| e.cached).count()
+            + finals.iter().filter(|e| e.cached).count();
         let coarse_to_fine = (!finals.is_empty()).then(|| {
             let mut order: Vec<usize> = (0..finals.len()).collect();
             order.sort_by(|&a, &b| finals[b].score.total_cmp(&finals[a].score).then(a.cmp(&b)));
@@ -653,8 +767,16 @@ impl Tune {
                 final_rank[i] = r;
             }
             let mean = |v: &[&Evaluation]| {
-                let c: Vec<f64> = v.iter().filter(|e| !e.cached).map(|e| e.elapsed_s).collect();
-                if c.is_empty() { 0.0 } else { c.iter().sum::<f64>() / c.len() as f64 }
+                let c: Vec<f64> = v
+                    .iter()
+                    .filter(|e| !e.cached)
+                    .map(|e| e.elapsed_s)
+                    .collect();
+                if c.is_empty() {
+                    0.0
+                } else {
+                    c.iter().sum::<f64>() / c.len() as f64
+                }
             };
             let mean_search = mean(&history.iter().collect::<Vec<_>>());
             let mean_final = mean(&finals.iter().collect::<Vec<_>>());
@@ -732,13 +854,22 @@ fn pareto_front(history: &[Evaluation], metrics: &[Metric]) -> Vec<usize> {
     let pts: Vec<(usize, Vec<f64>)> = history
         .iter()
         .filter(|e| e.phase == "search" && e.feasible)
-        .map(|e| (e.index, metrics.iter().map(|&m| e.metrics.signed(m)).collect()))
+        .map(|e| {
+            (
+                e.index,
+                metrics.iter().map(|&m| e.metrics.signed(m)).collect(),
+            )
+        })
         .collect();
-    let dominates = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| x >= y) && a.iter().zip(b).any(|(x, y)| x > y);
+    let dominates = |a: &[f64], b: &[f64]| {
+        a.iter().zip(b).all(|(x, y)| x >= y) && a.iter().zip(b).any(|(x, y)| x > y)
+    };
     let mut front: Vec<usize> = Vec::new();
     for (i, p) in &pts {
         let dominated = pts.iter().any(|(_, q)| dominates(q, p));
-        let duplicate = front.iter().any(|f| pts.iter().any(|(j, q)| j == f && q == p));
+        let duplicate = front
+            .iter()
+            .any(|f| pts.iter().any(|(j, q)| j == f && q == p));
         if !dominated && !duplicate {
             front.push(*i);
         }
@@ -764,10 +895,17 @@ impl TuneResult {
                 "Pareto front (search evaluations)",
                 metric_name(mx),
                 metric_name(my),
-                &[Series { name: "non-dominated".into(), points: pts }],
+                &[Series {
+                    name: "non-dominated".into(),
+                    points: pts,
+                }],
             );
         }
-        let search: Vec<&Evaluation> = self.history.iter().filter(|e| e.phase == "search" && e.feasible).collect();
+        let search: Vec<&Evaluation> = self
+            .history
+            .iter()
+            .filter(|e| e.phase == "search" && e.feasible)
+            .collect();
         let mut best = f64::MIN;
         let running: Vec<(f64, f64)> = search
             .iter()
@@ -781,8 +919,14 @@ impl TuneResult {
             "evaluation",
             "score (higher is better)",
             &[
-                Series { name: "each evaluation".into(), points: search.iter().map(|e| (e.index as f64, e.score)).collect() },
-                Series { name: "best so far".into(), points: running },
+                Series {
+                    name: "each evaluation".into(),
+                    points: search.iter().map(|e| (e.index as f64, e.score)).collect(),
+                },
+                Series {
+                    name: "best so far".into(),
+                    points: running,
+                },
             ],
         )
     }
@@ -792,10 +936,18 @@ impl TuneResult {
         let mut s = format!(
             "best {}: {}\n",
             self.best.phase,
-            self.best.params.iter().map(|(n, x)| format!("{n} = {x:.6}")).collect::<Vec<_>>().join(", ")
+            self.best
+                .params
+                .iter()
+                .map(|(n, x)| format!("{n} = {x:.6}"))
+                .collect::<Vec<_>>()
+                .join(", ")
         );
         for (n, v) in &self.best.objectives {
-            s.push_str(&format!("  {n:<20} {}\n", v.map_or("-".into(), |v| format!("{v:.6e}"))));
+            s.push_str(&format!(
+                "  {n:<20} {}\n",
+                v.map_or("-".into(), |v| format!("{v:.6e}"))
+            ));
         }
         if let Some(g) = &self.best.gains {
             s.push_str(&format!("  gains: {g}\n"));
@@ -811,7 +963,10 @@ impl TuneResult {
             ));
         }
         if let Some(f) = &self.pareto_front {
-            s.push_str(&format!("Pareto front: {} non-dominated evaluations\n", f.len()));
+            s.push_str(&format!(
+                "Pareto front: {} non-dominated evaluations\n",
+                f.len()
+            ));
         }
         s
     }

@@ -71,11 +71,18 @@ impl Space {
                 return Err(SpecError::new(
                     field,
                     format!("{name:?}"),
-                    format!("is not a parameter of {kind_name}; tunable: {}", names(allowed)),
+                    format!(
+                        "is not a parameter of {kind_name}; tunable: {}",
+                        names(allowed)
+                    ),
                 ));
             };
             if !(b.min.is_finite() && b.max.is_finite()) {
-                return Err(SpecError::new(format!("{field}.min"), b.min, "bounds must be finite"));
+                return Err(SpecError::new(
+                    format!("{field}.min"),
+                    b.min,
+                    "bounds must be finite",
+                ));
             }
             if b.min >= b.max {
                 return Err(SpecError::new(
@@ -85,7 +92,11 @@ impl Space {
                 ));
             }
             if b.scale == Scale::Log && b.min <= 0.0 {
-                return Err(SpecError::new(format!("{field}.min"), b.min, "must be > 0 on a log scale"));
+                return Err(SpecError::new(
+                    format!("{field}.min"),
+                    b.min,
+                    "must be > 0 on a log scale",
+                ));
             }
             out.push((name.clone(), b.clone(), integer));
         }
@@ -97,7 +108,10 @@ impl Space {
                 "tune Levant gains either as alpha, lambda or as normalized mu1, mu2, not both",
             ));
         }
-        let space = Self { base: base.clone(), params: out };
+        let space = Self {
+            base: base.clone(),
+            params: out,
+        };
         // Both corners must make valid scenes (e.g. a cutoff below Nyquist).
         for u in [0.0, 1.0] {
             space.scene(&vec![u; space.params.len()])?;
@@ -115,7 +129,11 @@ impl Space {
             .iter()
             .zip(u)
             .map(|((name, b, integer), &u)| {
-                let u = if u.is_finite() { u.clamp(0.0, 1.0) } else { 0.5 };
+                let u = if u.is_finite() {
+                    u.clamp(0.0, 1.0)
+                } else {
+                    0.5
+                };
                 let x = match b.scale {
                     Scale::Linear => b.min + u * (b.max - b.min),
                     Scale::Log => b.min * (b.max / b.min).powf(u),
@@ -163,7 +181,10 @@ impl Space {
                 }
             }
         }
-        let set: Vec<(String, f64)> = values.iter().map(|(n, &x)| (format!("estimator.{n}"), x)).collect();
+        let set: Vec<(String, f64)> = values
+            .iter()
+            .map(|(n, &x)| (format!("estimator.{n}"), x))
+            .collect();
         let set_ref: Vec<(&str, f64)> = set.iter().map(|(p, x)| (p.as_str(), *x)).collect();
         self.base.with_numbers(&set_ref, &remove, "params")
     }
@@ -191,14 +212,24 @@ mod tests {
 
     #[test]
     fn scales_map_the_unit_cube() {
-        let s = space(r#"{"kind":"kalman","q":1}"#, r#"{"q":{"min":1e2,"max":1e8,"scale":"log"}}"#).unwrap();
+        let s = space(
+            r#"{"kind":"kalman","q":1}"#,
+            r#"{"q":{"min":1e2,"max":1e8,"scale":"log"}}"#,
+        )
+        .unwrap();
         // log: 1e2·(1e6)^0.5 = 1e5.
         assert!((s.values(&[0.5])["q"] - 1e5).abs() < 1e-6);
         assert!((s.unit(&s.values(&[0.25]))[0] - 0.25).abs() < 1e-12);
-        let s = space(r#"{"kind":"foaw","fit":"best","max_window":15}"#, r#"{"max_window":{"min":2,"max":32}}"#).unwrap();
+        let s = space(
+            r#"{"kind":"foaw","fit":"best","max_window":15}"#,
+            r#"{"max_window":{"min":2,"max":32}}"#,
+        )
+        .unwrap();
         assert_eq!(s.values(&[0.51])["max_window"], 17.0); // 2 + 0.51·30 = 17.3 → 17
         let sc = s.scene(&[1.0]).unwrap();
-        assert!(serde_json::to_string(&sc.estimator).unwrap().contains(r#""max_window":32"#));
+        assert!(serde_json::to_string(&sc.estimator)
+            .unwrap()
+            .contains(r#""max_window":32"#));
     }
 
     #[test]
@@ -210,20 +241,35 @@ mod tests {
         .unwrap();
         let sc = s.scene(&[0.0, 1.0]).unwrap();
         let t = serde_json::to_string(&sc.estimator).unwrap();
-        assert!(t.contains(r#""mu1":1.5"#) && t.contains(r#""mu2":8"#) && !t.contains("rule"), "{t}");
+        assert!(
+            t.contains(r#""mu1":1.5"#) && t.contains(r#""mu2":8"#) && !t.contains("rule"),
+            "{t}"
+        );
     }
 
     #[test]
     fn bad_spaces_name_the_field() {
         let f = |est: &str, p: &str| space(est, p).unwrap_err().field;
         let bw = r#"{"kind":"butterworth","cutoff_hz":100}"#;
-        assert_eq!(f(bw, r#"{"cutoff_hz":{"min":500,"max":10}}"#), "params.cutoff_hz.max");
+        assert_eq!(
+            f(bw, r#"{"cutoff_hz":{"min":500,"max":10}}"#),
+            "params.cutoff_hz.max"
+        );
         assert_eq!(f(bw, r#"{"q":{"min":1,"max":10}}"#), "params.q");
         assert_eq!(f(bw, r#"{}"#), "params");
-        assert_eq!(f(bw, r#"{"cutoff_hz":{"min":0,"max":10,"scale":"log"}}"#), "params.cutoff_hz.min");
+        assert_eq!(
+            f(bw, r#"{"cutoff_hz":{"min":0,"max":10,"scale":"log"}}"#),
+            "params.cutoff_hz.min"
+        );
         // 900 Hz is above Nyquist at 1 kHz: the scene validation says so.
-        assert_eq!(f(bw, r#"{"cutoff_hz":{"min":10,"max":900}}"#), "scene.estimator.cutoff_hz");
+        assert_eq!(
+            f(bw, r#"{"cutoff_hz":{"min":10,"max":900}}"#),
+            "scene.estimator.cutoff_hz"
+        );
         let lv = r#"{"kind":"levant","rule":"hba_sc","lipschitz":2}"#;
-        assert_eq!(f(lv, r#"{"alpha":{"min":1,"max":9},"mu2":{"min":1,"max":3}}"#), "params");
+        assert_eq!(
+            f(lv, r#"{"alpha":{"min":1,"max":9},"mu2":{"min":1,"max":3}}"#),
+            "params"
+        );
     }
 }

@@ -63,7 +63,11 @@ pub fn nelder_mead<C: Cost>(c: &C, start: &[f64], step: f64, max_iters: u64) -> 
     for i in 0..n {
         let mut p = start.to_vec();
         // Step inwards when the start sits near the upper bound.
-        p[i] = if p[i] + step <= 1.0 { p[i] + step } else { p[i] - step };
+        p[i] = if p[i] + step <= 1.0 {
+            p[i] + step
+        } else {
+            p[i] - step
+        };
         simplex.push(p);
     }
     let solver = NelderMead::new(simplex).with_sd_tolerance(1e-6)?;
@@ -126,7 +130,10 @@ mod tests {
         fn cost(&self, u: &[f64]) -> Result<f64, Error> {
             *self.0.borrow_mut() += 1;
             // Minimum 0 at u = (0.3, 0.7, …).
-            Ok(u.iter().enumerate().map(|(i, x)| (x - if i % 2 == 0 { 0.3 } else { 0.7 }).powi(2)).sum())
+            Ok(u.iter()
+                .enumerate()
+                .map(|(i, x)| (x - if i % 2 == 0 { 0.3 } else { 0.7 }).powi(2))
+                .sum())
         }
     }
 
@@ -160,12 +167,18 @@ mod tests {
         let c = Best(&q, b);
         nelder_mead(&c, &[0.5, 0.5], 0.2, 200).unwrap();
         let u = c.1.borrow().1.clone();
-        assert!((u[0] - 0.3).abs() < 1e-3 && (u[1] - 0.7).abs() < 1e-3, "{u:?}");
+        assert!(
+            (u[0] - 0.3).abs() < 1e-3 && (u[1] - 0.7).abs() < 1e-3,
+            "{u:?}"
+        );
         let (q, b) = best();
         let c = Best(&q, b);
         particle_swarm(&c, 2, 20, 50, 7);
         let u = c.1.borrow().1.clone();
-        assert!((u[0] - 0.3).abs() < 1e-2 && (u[1] - 0.7).abs() < 1e-2, "{u:?}");
+        assert!(
+            (u[0] - 0.3).abs() < 1e-2 && (u[1] - 0.7).abs() < 1e-2,
+            "{u:?}"
+        );
     }
 
     #[test]

@@ -445,7 +445,11 @@ impl SceneSpec {
             let obj = lookup(&mut doc, parent)
                 .and_then(|n| n.as_object_mut())
                 .ok_or_else(unknown)?;
-            if leaf.is_empty() || obj.get(leaf).is_some_and(|v| !v.is_number() && !v.is_null()) {
+            if leaf.is_empty()
+                || obj
+                    .get(leaf)
+                    .is_some_and(|v| !v.is_number() && !v.is_null())
+            {
                 return Err(unknown());
             }
             // Whole numbers as integers, so counts (orders, windows) read back.
@@ -458,7 +462,11 @@ impl SceneSpec {
         }
         let spec: SceneSpec = serde_json::from_value(doc).map_err(|e| {
             let paths: Vec<&str> = set.iter().map(|(p, _)| *p).collect();
-            SpecError::new(field, format!("{paths:?}"), format!("cannot be set on this scene: {e}"))
+            SpecError::new(
+                field,
+                format!("{paths:?}"),
+                format!("cannot be set on this scene: {e}"),
+            )
         })?;
         spec.validate().map_err(|e| e.within("scene"))?;
         Ok(spec)

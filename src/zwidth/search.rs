@@ -388,8 +388,65 @@ impl Evaluator {
         }
     }
 
-    /// Largest K that renders at B: bracket from `k0`, then bisect.
-    fn bisect_k(&self, b: f64, k0: f64, k_cap: f64, points: &mut Vec<Point>) -> Option<f64> {
+    /// Largest K that renders at B: bracket from `k0`, then bisect. With
+    /// `robust`, K values below the result are checked as well (see
+    /// `SearchKind::RobustBisect`).
+    fn bisect_k(
+        &self,
+        b: f64,
+        k0: f64,
+        k_cap: f64,
+        robust: bool,
+        points: &mut Vec<Point>,
+    ) -> Option<f64> {
+        let mut k = self.bisect_once(b, k0, k_cap, points)?;
+        if !robust {
+            return Some(k);
+        }
+        // Fractions of the result checked below it, lowest first.
+        const CHECKS: [f64; 5] = [0.3, 0.45, 0.6, 0.75, 0.9];
+        for _ in 0..8 {
+            let below = CHECKS
+                .iter()
+                .map(|f| f * k)
+                .filter(|&x| x >= k0)
+                .find(|&x| {
+                    let p = self.classify(x, b);
+                    let ok = p.ok();
+                    points.push(p);
+                    !ok
+                });
+            let Some(fail) = below else { return Some(k) };
+            // Bisect between the highest pass below the failure and it.
+            let lo = points
+                .iter()
+                .filter(|p| p.b == b && p.ok() && p.k < fail)
+                .map(|p| p.k)
+                .fold(0.0, f64::max);
+            if lo < k0 {
+                return None;
+            }
+            k = self.bisect_between(b, lo, fail, points);
+        }
+        Some(k)
+    }
+
+    fn bisect_between(&self, b: f64, mut lo: f64, mut hi: f64, points: &mut Vec<Point>) -> f64 {
+        while (hi - lo) > self.res.k_rel_tol * hi {
+            let mid = 0.5 * (lo + hi);
+            let p = self.classify(mid, b);
+            let ok = p.ok();
+            points.push(p);
+            if ok {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        lo
+    }
+
+    fn bisect_once(&self, b: f64, k0: f64, k_cap: f64, points: &mut Vec<Point>) -> Option<f64> {
         let mut eval = |k: f64| {
             let p = self.classify(k, b);
             let ok = p.ok();
@@ -425,15 +482,7 @@ impl Evaluator {
                 hi = k;
             }
         }
-        while (hi - lo) > self.res.k_rel_tol * hi {
-            let mid = 0.5 * (lo + hi);
-            if eval(mid) {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        Some(lo)
+        Some(self.bisect_between(b, lo, hi, points))
     }
 }
 
@@ -513,7 +562,7 @@ pub fn map_observed(
             }
             (boundary, points)
         }
-        (SearchKind::Bisect, _, _) => bisect_all(&ev, spec, &b_auto),
+        (SearchKind::Bisect | SearchKind::RobustBisect, _, _) => bisect_all(&ev, spec, &b_auto),
         (SearchKind::Trace, _, _) => trace(&ev, spec, &b_auto),
         (SearchKind::Grid, _, _) => grid(&ev, spec, &b_auto),
     };
@@ -535,6 +584,10 @@ pub fn map_observed(
             "exact per B (θ grid of 8192 points, refined)".to_string()
         }
         (SearchKind::Bisect, _, _) => format!("K to {:.2} % (bisection)", 100.0 * res.k_rel_tol),
+        (SearchKind::RobustBisect, _, _) => format!(
+            "K to {:.2} % (bisection, checked at 0.3–0.9 of the result: the first failure from below)",
+            100.0 * res.k_rel_tol
+        ),
         _ => format!("K step {} N/m, B step {} N·s/m", res.k_step, res.b_step),
     };
     Ok(MapResult {
@@ -584,7 +637,8 @@ fn planned_b(boundary: &[BoundaryPoint], n_auto: usize, b_step: f64) -> usize {
 fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
     let one = |b: f64| {
         let mut pts = Vec::new();
-        let k = ev.bisect_k(b, ev.res.k_step, spec.k_max, &mut pts);
+        let robust = spec.search == SearchKind::RobustBisect;
+        let k = ev.bisect_k(b, ev.res.k_step, spec.k_max, robust, &mut pts);
         (
             BoundaryPoint {
                 b,

@@ -1,0 +1,305 @@
+//! Tuning: the library against independent brute force, seeds, the cache,
+//! resume, Pareto fronts, and the `zwidth tune` command's contract.
+
+use std::process::Command;
+use std::sync::Arc;
+
+use zwidth::tune::{Bounds, Metric, Objective, SolverKind, TuneSpec};
+use zwidth::zwidth::scene::SceneSpec;
+use zwidth::zwidth::search::{map, Observer};
+use zwidth::zwidth::settings::{Accuracy, Criterion, MapSpec, Method, Preset, SearchKind};
+use zwidth::zwidth::sweep::Scale;
+
+/// The 2018 paper's device without friction and quantization at 1 kHz: the
+/// analytic engine answers exactly and in milliseconds.
+fn linear(estimator: &str) -> SceneSpec {
+    serde_json::from_str(&format!(
+        r#"{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{estimator}}}"#
+    ))
+    .unwrap()
+}
+
+fn spec(
+    scene: SceneSpec,
+    params: &[(&str, f64, f64)],
+    objective: Objective,
+    solver: SolverKind,
+    evals: usize,
+) -> TuneSpec {
+    TuneSpec {
+        scene,
+        params: params
+            .iter()
+            .map(|&(n, min, max)| {
+                (
+                    n.to_string(),
+                    Bounds {
+                        min,
+                        max,
+                        scale: Scale::Linear,
+                    },
+                )
+            })
+            .collect(),
+        objective,
+        method: Method::Auto,
+        criterion: Criterion::Impedance,
+        search: SearchKind::Bisect,
+        accuracy: Accuracy::Preset(Preset::Standard),
+        final_accuracy: Accuracy::Preset(Preset::Standard),
+        finalists: 3,
+        solver,
+        seed: 0,
+        max_evaluations: evals,
+        constraint: None,
+        b: Some(vec![20.0]),
+        b_max: 1000.0,
+        k_max: 1e7,
+    }
+}
+
+fn k_at(cutoff: f64) -> f64 {
+    let m = MapSpec {
+        scene: linear(&format!(r#"{{"kind":"butterworth","cutoff_hz":{cutoff}}}"#)),
+        method: Method::Auto,
+        criterion: Criterion::Impedance,
+        search: SearchKind::Bisect,
+        accuracy: Accuracy::Preset(Preset::Standard),
+        b: Some(vec![20.0]),
+        b_max: 1000.0,
+        k_max: 1e7,
+    };
+    map(&m).unwrap().k_width
+}
+
+#[test]
+fn tuned_cutoff_matches_an_independent_scan() {
+    // Brute force by plain maps, 1 Hz steps over 20…200 Hz at B = 20 N·s/m
+    // (the impedance test has a dip near 100 Hz: not unimodal).
+    let scan_best = (20..=200).map(|f| k_at(f as f64)).fold(0.0, f64::max);
+    let s = spec(
+        linear(r#"{"kind":"butterworth","cutoff_hz":100}"#),
+        &[("cutoff_hz", 20.0, 200.0)],
+        Objective::Single(Metric::KWidth),
+        SolverKind::Auto,
+        36,
+    );
+    let r = s.validate().unwrap().run(None).unwrap();
+    let k = r.best.objectives["k_width"].unwrap();
+    assert!(k >= 0.98 * scan_best, "tuned {k} vs scan {scan_best}");
+    assert!(r.evaluations <= 36 + 3, "{}", r.evaluations);
+    // The reported K-width is what a plain map at those parameters gives.
+    assert_eq!(k, k_at(r.best.params["cutoff_hz"]));
+}
+
+#[test]
+fn a_seed_reproduces_a_particle_swarm_exactly() {
+    let run = |seed| {
+        let mut s = spec(
+            linear(r#"{"kind":"butterworth","cutoff_hz":100}"#),
+            &[("cutoff_hz", 20.0, 400.0), ("order", 1.0, 4.0)],
+            Objective::Single(Metric::KWidth),
+            SolverKind::ParticleSwarm,
+            24,
+        );
+        s.seed = seed;
+        let r = s.validate().unwrap().run(None).unwrap();
+        r.history
+            .iter()
+            .map(|e| e.params.clone())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(run(11), run(11));
+    assert_ne!(run(11), run(12));
+}
+
+#[test]
+fn identical_evaluations_come_from_the_cache_and_a_resumed_tune_redoes_none() {
+    // Butterworth order 1…4 on a 10-point grid: only 4 distinct points.
+    let s = spec(
+        linear(r#"{"kind":"butterworth","cutoff_hz":150}"#),
+        &[("order", 1.0, 4.0)],
+        Objective::Single(Metric::KWidth),
+        SolverKind::Grid,
+        10,
+    );
+    let tune = s.validate().unwrap();
+    let obs = Arc::new(Observer::default());
+    let r = tune.run(Some(obs.clone())).unwrap();
+    assert_eq!(r.evaluations, 4, "{r:#?}");
+    assert!(r.cache_hits >= 6);
+    // Resume: an observer holding the stored evaluations makes none anew.
+    let stored = obs.take_new_evaluations();
+    assert_eq!(stored.len(), 4);
+    let again = tune
+        .run(Some(Arc::new(Observer::default().with_evaluations(stored))))
+        .unwrap();
+    assert_eq!(again.evaluations, 0);
+    assert_eq!(again.best.params, r.best.params);
+    assert_eq!(again.best.objectives, r.best.objectives);
+}
+
+#[test]
+fn the_pareto_front_is_non_dominated() {
+    let s = spec(
+        linear(r#"{"kind":"butterworth","cutoff_hz":100}"#),
+        &[("cutoff_hz", 20.0, 450.0)],
+        Objective::Pareto(vec![Metric::KWidth, Metric::MaxFidelityError]),
+        SolverKind::Auto,
+        24,
+    );
+    let r = s.validate().unwrap().run(None).unwrap();
+    let front = r.pareto_front.clone().unwrap();
+    assert!(!front.is_empty());
+    let search: Vec<_> = r.history.iter().filter(|e| e.phase == "search").collect();
+    let val = |e: &zwidth::tune::Evaluation| {
+        (
+            e.metrics.k_width,
+            -e.metrics.max_fidelity_error.unwrap_or(1e12),
+        )
+    };
+    for &i in &front {
+        let f = val(search.iter().find(|e| e.index == i).unwrap());
+        for e in &search {
+            let o = val(e);
+            let dominates = o.0 >= f.0 && o.1 >= f.1 && (o.0 > f.0 || o.1 > f.1);
+            assert!(
+                !dominates,
+                "front member {i} {f:?} dominated by {} {o:?}",
+                e.index
+            );
+        }
+    }
+    // And every non-member is dominated by (or equal to) some member.
+    for e in &search {
+        if !front.contains(&e.index) {
+            let o = val(e);
+            assert!(front.iter().any(|&i| {
+                let f = val(search.iter().find(|x| x.index == i).unwrap());
+                f.0 >= o.0 && f.1 >= o.1
+            }));
+        }
+    }
+    assert!(r.svg().unwrap().contains("<svg"));
+}
+
+#[test]
+fn levant_constraint_keeps_the_gains_inside_the_condition() {
+    // Levant 1998 (2018 paper eq. 10): α > C and λ² ≥ 4C(α+C)/(α−C).
+    let c = 2.0;
+    let mut s = spec(
+        serde_json::from_str(&format!(
+            r#"{{"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{{"kind":"levant","rule":"hba_sc","lipschitz":{c}}}}}"#
+        ))
+        .unwrap(),
+        &[("alpha", 0.5, 20.0), ("lambda", 0.5, 20.0)],
+        Objective::Single(Metric::BWidth),
+        SolverKind::Halton,
+        12,
+    );
+    s.constraint = Some(zwidth::tune::GainCondition::Levant);
+    s.accuracy = Accuracy::Preset(Preset::Draft);
+    s.final_accuracy = Accuracy::Preset(Preset::Draft);
+    s.b = Some(vec![0.0, 10.0]);
+    let r = s.validate().unwrap().run(None).unwrap();
+    for e in &r.history {
+        let (a, l) = (e.params["alpha"], e.params["lambda"]);
+        let meets = a > c && l * l >= 4.0 * c * (a + c) / (a - c);
+        assert_eq!(e.feasible, meets, "{a} {l}");
+        if !meets {
+            assert_eq!(e.trials, 0, "infeasible gains are not simulated");
+        }
+    }
+    let (a, l) = (r.best.params["alpha"], r.best.params["lambda"]);
+    assert!(a > c && l * l >= 4.0 * c * (a + c) / (a - c));
+    assert!(r.best.gains.as_deref().unwrap().contains("Levant 1998"));
+}
+
+fn zwidth(args: &[&str]) -> (i32, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn zwidth_tune_contract_and_bad_requests() {
+    let dir = std::env::temp_dir().join(format!("zwidth-tune-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("scene.json");
+    std::fs::write(
+        &scene,
+        serde_json::to_string(&linear(r#"{"kind":"kalman","q":1e4}"#)).unwrap(),
+    )
+    .unwrap();
+    let sc = scene.to_str().unwrap();
+    let svg = dir.join("t.svg");
+    let (code, out, err) = zwidth(&[
+        "tune",
+        "--scene",
+        sc,
+        "--params",
+        r#"{"q":{"min":1e2,"max":1e8,"scale":"log"}}"#,
+        "--objective",
+        "b_width",
+        "--seed",
+        "3",
+        "--max-evaluations",
+        "12",
+        "--json",
+        "--svg",
+        svg.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let q = v["best"]["params"]["q"].as_f64().unwrap();
+    assert!((1e2..=1e8).contains(&q), "{q}");
+    assert!(v["best"]["objectives"]["b_width"].as_f64().is_some());
+    assert!(v["evaluations"].as_u64().unwrap() >= 1);
+    assert!(v["elapsed_s"].as_f64().unwrap() > 0.0);
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
+    // Bad requests: exit 2, one line naming the field.
+    for (params, objective, needle) in [
+        (r#"{"q":{"min":1e8,"max":1e2}}"#, "k_width", "params.q.max"),
+        (
+            r#"{"cutoff_hz":{"min":10,"max":100}}"#,
+            "k_width",
+            "params.cutoff_hz",
+        ),
+        (r#"{}"#, "k_width", "params"),
+        (r#"{"q":{"min":1,"max":10}}"#, "", "--objective"),
+        (
+            r#"{"q":{"min":1,"max":10}}"#,
+            r#"{"weighted":{}}"#,
+            "objective.weighted",
+        ),
+        (
+            r#"{"q":{"min":1,"max":10}}"#,
+            r#"{"pareto":[]}"#,
+            "objective.pareto",
+        ),
+        (r#"{"q":{"min":1,"max":10}}"#, "fastest", "--objective"),
+        ("not json", "k_width", "--params"),
+    ] {
+        let (code, _, err) = zwidth(&[
+            "tune",
+            "--scene",
+            sc,
+            "--params",
+            params,
+            "--objective",
+            objective,
+        ]);
+        assert_eq!(code, 2, "{params} {objective}: {err}");
+        assert!(
+            err.contains(needle),
+            "{params} {objective}: {err} lacks {needle}"
+        );
+        assert!(!err.contains("panicked"));
+    }
+}
