@@ -650,3 +650,97 @@ fn sigterm_interrupts_the_running_experiment_and_restart_resumes_it() {
         want.trials
     );
 }
+
+#[test]
+fn a_killed_tune_resumes_from_its_stored_evaluations() {
+    // The seed device (frequency engine, draft) at two damping values; a
+    // seeded Halton design, so the run is deterministic.
+    let spec = r#"{"kind":"tune","scene":{"loop":{"sample_hz":1000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":100}},
+                   "params":{"cutoff_hz":{"min":20,"max":450}},"objective":"k_width","solver":"halton","seed":4,
+                   "max_evaluations":14,"finalists":0,"b":[0,30]}"#;
+    let s = start();
+    let dir = s._dir.clone();
+    let url = format!("{}/v1/experiments", s.base);
+    let (code, v, _) = post(&url, spec);
+    assert_eq!(code, 202, "{v}");
+    let id = v["id"].as_str().unwrap().to_string();
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let stored_before = loop {
+        let ev = get(&format!("{url}/{id}/evaluations"));
+        let n = ev.as_array().unwrap().len();
+        let v = get(&format!("{url}/{id}"));
+        assert_ne!(
+            v["state"], "succeeded",
+            "finished before it could be killed"
+        );
+        if n >= 4 {
+            // Best so far is shown while running.
+            assert!(
+                v["progress"]["best"]["params"]["cutoff_hz"]
+                    .as_f64()
+                    .is_some(),
+                "{v}"
+            );
+            break n;
+        }
+        assert!(Instant::now() < deadline);
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut s = s;
+    s.child.kill().unwrap();
+    s.child.wait().unwrap();
+    std::mem::forget(s);
+    let s2 = start_in(dir);
+    let url = format!("{}/v1/experiments", s2.base);
+    let done = wait_end(&s2.base, &id, 180);
+    assert_eq!(done["state"], "succeeded", "{done}");
+    let r = &done["result"];
+    // What was stored came from the cache; nothing ran twice.
+    assert!(
+        r["cache_hits"].as_u64().unwrap() as usize >= stored_before,
+        "{r}"
+    );
+    assert_eq!(
+        r["evaluations"].as_u64().unwrap() + r["cache_hits"].as_u64().unwrap(),
+        14
+    );
+    // The same result as an uninterrupted run in this process.
+    let zwidth::jobs::ExperimentSpec::Tune(t) = serde_json::from_str(spec).unwrap() else {
+        unreachable!()
+    };
+    let want = t.validate().unwrap().run(None).unwrap();
+    assert_eq!(
+        r["best"]["params"]["cutoff_hz"].as_f64().unwrap(),
+        want.best.params["cutoff_hz"]
+    );
+    assert_eq!(
+        r["best"]["objectives"]["k_width"].as_f64(),
+        want.best.objectives["k_width"]
+    );
+    let csv = fetch(ureq::get(&format!("{url}/{id}/points.csv")).call());
+    assert_eq!(csv.2.lines().count(), 1 + 14, "{}", csv.2);
+    let svg = fetch(ureq::get(&format!("{url}/{id}/plot.svg")).call());
+    assert!(svg.2.contains("best so far"));
+    // Bad tune requests are problems naming the field.
+    for (body, field) in [
+        (
+            r#"{"kind":"tune","scene":{},"params":{"cutoff_hz":{"min":500,"max":10}},"objective":"k_width"}"#,
+            "params.cutoff_hz",
+        ),
+        (
+            r#"{"kind":"tune","scene":{"estimator":{"kind":"butterworth","cutoff_hz":100}},"params":{"q":{"min":1,"max":10}},"objective":"k_width"}"#,
+            "params.q",
+        ),
+        (
+            r#"{"kind":"tune","scene":{"estimator":{"kind":"butterworth","cutoff_hz":100}},"params":{"cutoff_hz":{"min":10,"max":100}},"objective":{"weighted":{}}}"#,
+            "objective.weighted",
+        ),
+    ] {
+        let (code, v, _) = post(&url, body);
+        assert_eq!(code, 422, "{body}: {v}");
+        assert!(
+            v["field"].as_str().unwrap_or("").starts_with(field),
+            "{body}: {v}"
+        );
+    }
+}

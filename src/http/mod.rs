@@ -764,12 +764,12 @@ async fn plot(State(st): State<AppState>, Path(id): Path<String>) -> Result<Resp
               (status = 404, body = ProblemBody, content_type = "application/problem+json"),
               (status = 409, description = "not succeeded (yet)", body = ProblemBody, content_type = "application/problem+json")))]
 async fn points(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, Problem> {
-    let (_, _, maps) = finished_maps(&st, &id).await?;
-    Ok((
-        [(header::CONTENT_TYPE, "text/csv")],
-        report::points_csv(&maps),
-    )
-        .into_response())
+    let (spec, result, maps) = finished_maps(&st, &id).await?;
+    let csv = match spec {
+        ExperimentSpec::Tune(_) => report::tune_csv(&result).map_err(Problem::internal)?,
+        _ => report::points_csv(&maps),
+    };
+    Ok(([(header::CONTENT_TYPE, "text/csv")], csv).into_response())
 }
 
 #[derive(Debug, Deserialize)]
