@@ -37,6 +37,7 @@ fn spec(
                         min,
                         max,
                         scale: Scale::Linear,
+                        step: None,
                     },
                 )
             })

@@ -616,6 +616,10 @@ impl solvers::Cost for Run<'_> {
             Err(s) => Err(argmin::core::Error::msg(s.to_string())),
         }
     }
+
+    fn observer(&self) -> Option<Arc<Observer>> {
+        self.observer.clone()
+    }
 }
 
 impl Tune {
@@ -681,20 +685,39 @@ impl Tune {
                 )
             }
             SolverKind::Auto if n == 1 => {
-                // Coarse grid over a third of the budget, then Brent inside
-                // the best grid cell (the objective need not be unimodal).
-                let g = (budget / 3).clamp(3, 25);
+                // A coarse grid over a quarter of the budget; Brent inside
+                // the best grid cell; then the rest of the budget on an even
+                // grid over that cell (the objective need not be smooth or
+                // unimodal: a Z-width measured with friction and
+                // quantization is not).
+                let g = (budget / 4).clamp(3, 25);
                 let mut best = (f64::MAX, 0.5);
+                let mut stopped = false;
                 for u in solvers::grid(g) {
                     match cost(&[u]) {
                         Ok(c) if c < best.0 => best = (c, u),
                         Ok(_) => {}
-                        Err(_) => break,
+                        Err(_) => {
+                            stopped = true;
+                            break;
+                        }
                     }
                 }
                 let cell = 1.0 / (g - 1) as f64;
                 let (lo, hi) = ((best.1 - cell).max(0.0), (best.1 + cell).min(1.0));
-                solvers::brent(&run, lo, hi, tolerance(budget), iters);
+                if !stopped {
+                    solvers::brent(&run, lo, hi, tolerance(budget), iters);
+                }
+                let spent = *run.computed.lock().unwrap_or_else(|e| e.into_inner());
+                let left = budget.saturating_sub(spent);
+                if !stopped && left > 0 && !run.observer.as_ref().is_some_and(|o| o.cancelled()) {
+                    // Points on a lattice (`step`) repeat: those are cache hits.
+                    for u in solvers::grid(4 * left + 1) {
+                        if cost(&[lo + u * (hi - lo)]).is_err() {
+                            break;
+                        }
+                    }
+                }
             }
             SolverKind::Auto => {
                 // The best of a small Halton design starts Nelder–Mead.

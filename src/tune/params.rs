@@ -14,7 +14,8 @@ use crate::estimators::EstimatorKind;
 use crate::zwidth::scene::SceneSpec;
 use crate::zwidth::sweep::Scale;
 
-/// Bounds and scale of one parameter: `{"min":10,"max":500,"scale":"log"}`.
+/// Bounds and scale of one parameter: `{"min":10,"max":500,"scale":"log"}`,
+/// optionally on a lattice `min + k·step` (e.g. whole hertz: `"step":1`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Bounds {
@@ -22,6 +23,9 @@ pub struct Bounds {
     pub max: f64,
     #[serde(default)]
     pub scale: Scale,
+    /// Resolution: values are snapped to min + k·step (same unit as the parameter).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step: Option<f64>,
 }
 
 /// The tunable parameters of an estimator kind: (name, integer?).
@@ -138,9 +142,13 @@ impl Space {
                     Scale::Linear => b.min + u * (b.max - b.min),
                     Scale::Log => b.min * (b.max / b.min).powf(u),
                 };
+                let x = match b.step {
+                    Some(st) => b.min + ((x - b.min) / st).round() * st,
+                    None => x,
+                };
                 // Keep inside the bounds despite rounding.
-                let x = x.clamp(b.min, b.max);
-                (name.clone(), if *integer { x.round() } else { x })
+                let x = if *integer { x.round() } else { x };
+                (name.clone(), x.clamp(b.min, b.max))
             })
             .collect()
     }

@@ -6,7 +6,11 @@
 //! Pareto fronts. The cost function itself keeps the log: solvers only
 //! steer, so a solver stopped by the budget or a cancel loses nothing.
 
-use argmin::core::{CostFunction, Error, Executor};
+use argmin::core::observers::{Observe, ObserverMode};
+use argmin::core::{CostFunction, Error, Executor, KV};
+use std::sync::Arc;
+
+use crate::zwidth::search::Observer;
 use argmin::solver::brent::BrentOpt;
 use argmin::solver::goldensectionsearch::GoldenSectionSearch;
 use argmin::solver::neldermead::NelderMead;
@@ -17,6 +21,36 @@ use rand::{Rng, SeedableRng};
 /// spent, or cancelled).
 pub trait Cost {
     fn cost(&self, u: &[f64]) -> Result<f64, Error>;
+    /// Who to ask after each iteration whether to stop.
+    fn observer(&self) -> Option<Arc<Observer>> {
+        None
+    }
+}
+
+/// An argmin observer that ends the run after any iteration once the
+/// experiment is cancelled (the cost function also refuses to start a new
+/// evaluation then, so a cancel never waits for a whole iteration).
+struct CancelCheck(Arc<Observer>);
+
+impl<I> Observe<I> for CancelCheck {
+    fn observe_iter(&mut self, _state: &I, _kv: &KV) -> Result<(), Error> {
+        if self.0.cancelled() {
+            return Err(Error::msg("cancelled"));
+        }
+        Ok(())
+    }
+}
+
+/// Run an executor with the cancel check attached, if there is an observer.
+macro_rules! run_with_cancel {
+    ($c:expr, $exec:expr) => {{
+        let exec = $exec;
+        let exec = match $c.observer() {
+            Some(o) => exec.add_observer(CancelCheck(o), ObserverMode::Always),
+            None => exec,
+        };
+        let _ = exec.run();
+    }};
 }
 
 struct OneD<'a, C: Cost>(&'a C);
@@ -42,17 +76,19 @@ impl<C: Cost> CostFunction for ManyD<'_, C> {
 /// Brent's method on [lo, hi] (one parameter) to absolute tolerance `tol` in u.
 pub fn brent<C: Cost>(c: &C, lo: f64, hi: f64, tol: f64, max_iters: u64) {
     let solver = BrentOpt::new(lo, hi).set_tolerance(1e-8, tol);
-    let _ = Executor::new(OneD(c), solver)
-        .configure(|s| s.max_iters(max_iters))
-        .run();
+    run_with_cancel!(
+        c,
+        Executor::new(OneD(c), solver).configure(|s| s.max_iters(max_iters))
+    );
 }
 
 /// Golden-section search on [0, 1] to tolerance `tol` in u.
 pub fn golden<C: Cost>(c: &C, tol: f64, max_iters: u64) -> Result<(), Error> {
     let solver = GoldenSectionSearch::new(0.0, 1.0)?.with_tolerance(tol)?;
-    let _ = Executor::new(OneD(c), solver)
-        .configure(|s| s.param(0.5).max_iters(max_iters))
-        .run();
+    run_with_cancel!(
+        c,
+        Executor::new(OneD(c), solver).configure(|s| s.param(0.5).max_iters(max_iters))
+    );
     Ok(())
 }
 
@@ -71,9 +107,10 @@ pub fn nelder_mead<C: Cost>(c: &C, start: &[f64], step: f64, max_iters: u64) -> 
         simplex.push(p);
     }
     let solver = NelderMead::new(simplex).with_sd_tolerance(1e-6)?;
-    let _ = Executor::new(ManyD(c), solver)
-        .configure(|s| s.max_iters(max_iters))
-        .run();
+    run_with_cancel!(
+        c,
+        Executor::new(ManyD(c), solver).configure(|s| s.max_iters(max_iters))
+    );
     Ok(())
 }
 
@@ -81,9 +118,10 @@ pub fn nelder_mead<C: Cost>(c: &C, start: &[f64], step: f64, max_iters: u64) -> 
 pub fn particle_swarm<C: Cost>(c: &C, n: usize, particles: usize, max_iters: u64, seed: u64) {
     let solver = ParticleSwarm::new((vec![0.0; n], vec![1.0; n]), particles)
         .with_rng_generator(rand::rngs::StdRng::seed_from_u64(seed));
-    let _ = Executor::new(ManyD(c), solver)
-        .configure(|s| s.max_iters(max_iters))
-        .run();
+    run_with_cancel!(
+        c,
+        Executor::new(ManyD(c), solver).configure(|s| s.max_iters(max_iters))
+    );
 }
 
 /// `count` evenly spaced points of [0, 1] (both ends), in order.

@@ -65,7 +65,7 @@ fn seed_with(estimator: &str) -> Result<SceneSpec, SpecError> {
 
 fn tune_spec(
     scene: SceneSpec,
-    params: &[(&str, f64, f64, Scale)],
+    params: &[(&str, f64, f64, Scale, Option<f64>)],
     solver: SolverKind,
     evals: usize,
     acc: Preset,
@@ -74,7 +74,17 @@ fn tune_spec(
         scene,
         params: params
             .iter()
-            .map(|&(n, min, max, scale)| (n.to_string(), Bounds { min, max, scale }))
+            .map(|&(n, min, max, scale, step)| {
+                (
+                    n.to_string(),
+                    Bounds {
+                        min,
+                        max,
+                        scale,
+                        step,
+                    },
+                )
+            })
             .collect(),
         objective: Objective::Single(Metric::KWidth),
         method: Method::Auto,
@@ -96,7 +106,8 @@ fn tune_spec(
 /// The Butterworth study at `acc` (`scan_points` = 490 for 1 Hz steps).
 pub fn cutoff(acc: Preset, scan_points: usize) -> Result<CutoffStudy, SpecError> {
     let scene = seed_with(r#"{"kind":"butterworth","cutoff_hz":100,"order":2}"#)?;
-    let p = [("cutoff_hz", 10.0, 499.0, Scale::Linear)];
+    // Whole hertz for both: the scan's resolution.
+    let p = [("cutoff_hz", 10.0, 499.0, Scale::Linear, Some(1.0))];
     let t = Instant::now();
     let scan = tune_spec(scene.clone(), &p, SolverKind::Grid, scan_points, acc)
         .validate()?
@@ -148,8 +159,8 @@ pub fn levant(acc: Preset, evals: usize) -> Result<LevantStudy, SpecError> {
     };
     let t = Instant::now();
     let p = [
-        ("mu1", 1.0, 40.0, Scale::Log),
-        ("mu2", 0.5, 20.0, Scale::Log),
+        ("mu1", 1.0, 40.0, Scale::Log, None),
+        ("mu2", 0.5, 60.0, Scale::Log, None),
     ];
     let tuned = tune_spec(rule.clone(), &p, SolverKind::Auto, evals, acc)
         .validate()?
