@@ -129,6 +129,10 @@ fn identical_evaluations_come_from_the_cache_and_a_resumed_tune_redoes_none() {
     let r = tune.run(Some(obs.clone())).unwrap();
     assert_eq!(r.evaluations, 4, "{r:#?}");
     assert!(r.cache_hits >= 6);
+    // Finalists at the search's own accuracy are cache hits too.
+    let finals: Vec<_> = r.history.iter().filter(|e| e.phase == "final").collect();
+    assert_eq!(finals.len(), 3);
+    assert!(finals.iter().all(|e| e.cached));
     // Resume: an observer holding the stored evaluations makes none anew.
     let stored = obs.take_new_evaluations();
     assert_eq!(stored.len(), 4);

@@ -479,15 +479,14 @@ impl Run<'_> {
         }
     }
 
-    /// Evaluate at unit point u in `phase` ("search" / "final").
-    fn evaluate(&self, u: &[f64], phase: &str) -> Result<Evaluation, Stop> {
+    /// Evaluate at these parameter values in `phase` ("search" / "final").
+    fn evaluate(&self, params: BTreeMap<String, f64>, phase: &str) -> Result<Evaluation, Stop> {
         let spec = &self.tune.spec;
         let acc = if phase == "final" {
             &spec.final_accuracy
         } else {
             &spec.accuracy
         };
-        let params = self.tune.space.values(u);
         let key = self.key(acc, &params);
         let index = self.log.lock().unwrap_or_else(|e| e.into_inner()).len();
         {
@@ -524,7 +523,7 @@ impl Run<'_> {
                 *n += 1;
             }
             let start = Instant::now();
-            let scene = self.tune.space.scene(u).map_err(Stop::Spec)?;
+            let scene = self.tune.space.scene_at(&params).map_err(Stop::Spec)?;
             let violation = self.violation(&scene);
             let (metrics, trials) = if violation > 0.0 {
                 // Infeasible gains: no map is run.
@@ -607,7 +606,7 @@ impl Run<'_> {
 
 impl solvers::Cost for Run<'_> {
     fn cost(&self, u: &[f64]) -> Result<f64, argmin::core::Error> {
-        match self.evaluate(u, "search") {
+        match self.evaluate(self.tune.space.values(u), "search") {
             Ok(e) => Ok(-e.score),
             Err(Stop::Spec(e)) => {
                 *self.failure.lock().unwrap_or_else(|x| x.into_inner()) = Some(e.clone());
@@ -771,7 +770,7 @@ impl Tune {
         let mut finals = Vec::new();
         let t_final = Instant::now();
         for e in &picked {
-            match run.evaluate(&self.space.unit(&e.params), "final") {
+            match run.evaluate(e.params.clone(), "final") {
                 Ok(f) => finals.push(f),
                 Err(Stop::Spec(err)) => return Err(err),
                 Err(_) => break,
@@ -834,7 +833,7 @@ impl Tune {
             .or_else(|| ranked.first().copied())
             .cloned()
             .ok_or_else(|| SpecError::new("tune", "(empty)", "no evaluation"))?;
-        let scene = self.space.scene(&self.space.unit(&best_eval.params))?;
+        let scene = self.space.scene_at(&best_eval.params)?;
         let gains = match &scene.estimator.kind {
             EstimatorKind::Levant(l) => l.gains().ok().map(|g| g.report().to_string()),
             _ => None,

@@ -167,10 +167,14 @@ impl Space {
             .collect()
     }
 
-    /// The base scene with the parameters at u, validated. Tuning Levant
-    /// gains replaces whichever gain form the base scene had.
+    /// The base scene with the parameters at u, validated.
     pub fn scene(&self, u: &[f64]) -> Result<SceneSpec, SpecError> {
-        let values = self.values(u);
+        self.scene_at(&self.values(u))
+    }
+
+    /// The base scene with these parameter values, validated. Tuning Levant
+    /// gains replaces whichever gain form the base scene had.
+    pub fn scene_at(&self, values: &BTreeMap<String, f64>) -> Result<SceneSpec, SpecError> {
         let mut remove: Vec<&str> = Vec::new();
         if matches!(self.base.estimator.kind, EstimatorKind::Levant(_)) {
             let explicit = values.contains_key("alpha") || values.contains_key("lambda");
