@@ -303,7 +303,7 @@ pub enum BenchCommand {
         #[arg(long, default_value = "standard")]
         levant_accuracy: String,
         /// Evaluations the Levant tune may make.
-        #[arg(long, default_value_t = 20)]
+        #[arg(long, default_value_t = 16)]
         levant_evaluations: usize,
         #[arg(long)]
         json: bool,

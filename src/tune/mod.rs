@@ -231,8 +231,9 @@ pub struct CoarseToFine {
     pub mean_search_evaluation_s: f64,
     pub mean_final_evaluation_s: f64,
     /// Time all search evaluations would have taken at the final accuracy,
-    /// minus what the search and the finals took (s).
-    pub saved_s: f64,
+    /// minus what the search and the finals took (s); null when both
+    /// accuracies are the same (nothing to save).
+    pub saved_s: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, utoipa::ToSchema)]
@@ -586,7 +587,8 @@ impl Run<'_> {
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .insert(key, ev.clone());
-        if let Some(o) = &self.observer {
+        if let (Some(o), false) = (&self.observer, ev.cached) {
+            // Progress counts computed evaluations (cache hits are free).
             o.report(index as u32, 1.0);
         }
         let mut log = self.log.lock().unwrap_or_else(|e| e.into_inner());
@@ -824,7 +826,8 @@ impl Tune {
                 final_s,
                 mean_search_evaluation_s: mean_search,
                 mean_final_evaluation_s: mean_final,
-                saved_s: n_search * mean_final - (search_s + final_s),
+                saved_s: (spec.accuracy != spec.final_accuracy)
+                    .then(|| n_search * mean_final - (search_s + final_s)),
             }
         });
         let best_eval = finals
@@ -980,8 +983,9 @@ impl TuneResult {
         ));
         if let Some(c) = &self.coarse_to_fine {
             s.push_str(&format!(
-                "coarse to fine: search at {} ({:.2} s/evaluation), {} finalists at {} ({:.2} s/evaluation); ranking held: {}, best held: {}; saved {:.1} s\n",
-                c.search_accuracy, c.mean_search_evaluation_s, c.finalists.len(), c.final_accuracy, c.mean_final_evaluation_s, c.ranking_held, c.best_held, c.saved_s
+                "coarse to fine: search at {} ({:.2} s/evaluation), {} finalists at {} ({:.2} s/evaluation); ranking held: {}, best held: {}{}\n",
+                c.search_accuracy, c.mean_search_evaluation_s, c.finalists.len(), c.final_accuracy, c.mean_final_evaluation_s, c.ranking_held, c.best_held,
+                c.saved_s.map_or(String::new(), |s| format!("; saved {s:.1} s"))
             ));
         }
         if let Some(f) = &self.pareto_front {
