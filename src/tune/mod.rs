@@ -827,7 +827,7 @@ impl Tune {
                 mean_search_evaluation_s: mean_search,
                 mean_final_evaluation_s: mean_final,
                 saved_s: (spec.accuracy != spec.final_accuracy)
-                    .then(|| n_search * mean_final - (search_s + final_s)),
+                    .then_some(n_search * mean_final - (search_s + final_s)),
             }
         });
         let best_eval = finals
