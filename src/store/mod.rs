@@ -324,20 +324,8 @@ impl Store {
 
     /// Every stored trial of an experiment.
     pub async fn trials(&self, id: &str) -> Result<Vec<StoredTrial>, sqlx::Error> {
-        let rows: Vec<(i64, String)> =
-            sqlx::query_as("SELECT scope, point FROM trials WHERE experiment_id = ?")
-                .bind(id)
-                .fetch_all(&self.pool)
-                .await?;
-        Ok(rows
-            .into_iter()
-            .filter_map(|(scope, p)| {
-                serde_json::from_str(&p).ok().map(|point| StoredTrial {
-                    scope: scope as u32,
-                    point,
-                })
-            })
-            .collect())
+        // LIMIT -1: no limit (SQLite).
+        self.trials_page(id, None, 0, -1).await
     }
 
     /// Stored trials in the order they finished, a page at a time.
