@@ -254,7 +254,7 @@ pub struct ExperimentView {
     /// The rig it runs on.
     pub rig: String,
     /// `trials_done`, `fraction` (0 to 1), a tune's `best` so far, and while
-    /// running `elapsed_s` and `eta_s`.
+    /// running `elapsed_s`, `eta_s` and `trials_total_estimate`.
     pub progress: Value,
     pub spec: Value,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -280,6 +280,8 @@ fn progress(r: &ExperimentRow) -> Value {
             p["elapsed_s"] = json!(elapsed);
             if r.progress >= 0.01 && r.progress < 1.0 {
                 p["eta_s"] = json!(elapsed * (1.0 - r.progress) / r.progress);
+                // Trials left scale like the work left.
+                p["trials_total_estimate"] = json!((r.trials_done as f64 / r.progress).round() as i64);
             }
         }
     }
