@@ -547,6 +547,12 @@ fn rig_ids(st: &AppState) -> String {
         .join(", ")
 }
 
+/// A result with nothing to draw (e.g. every boundary empty) is the
+/// request's problem, not the server's.
+fn no_plot(e: String) -> Problem {
+    Problem::new(StatusCode::UNPROCESSABLE_ENTITY, "Nothing to plot", e)
+}
+
 fn not_found(what: &str, id: &str) -> Problem {
     Problem::new(
         StatusCode::NOT_FOUND,
@@ -757,7 +763,7 @@ async fn finished_maps(
               (status = 409, description = "not succeeded (yet)", body = ProblemBody, content_type = "application/problem+json")))]
 async fn plot(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, Problem> {
     let (spec, result, maps) = finished_maps(&st, &id).await?;
-    let svg = report::svg(&spec, &maps, &result).map_err(Problem::internal)?;
+    let svg = report::svg(&spec, &maps, &result).map_err(no_plot)?;
     Ok(([(header::CONTENT_TYPE, "image/svg+xml")], svg).into_response())
 }
 
@@ -827,7 +833,7 @@ async fn compare_runs(
     Ok(match format {
         "svg" => (
             [(header::CONTENT_TYPE, "image/svg+xml")],
-            c.svg().map_err(Problem::internal)?,
+            c.svg().map_err(no_plot)?,
         )
             .into_response(),
         "text" => (
