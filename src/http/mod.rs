@@ -760,7 +760,8 @@ async fn finished_maps(
 #[utoipa::path(get, path = "/v1/experiments/{id}/plot.svg", params(("id" = String, Path, description = "experiment id")),
     responses((status = 200, description = "one map: Fig. 7 style; a parameter sweep: K-width against the parameter; else every boundary", body = String, content_type = "image/svg+xml"),
               (status = 404, body = ProblemBody, content_type = "application/problem+json"),
-              (status = 409, description = "not succeeded (yet)", body = ProblemBody, content_type = "application/problem+json")))]
+              (status = 409, description = "not succeeded (yet)", body = ProblemBody, content_type = "application/problem+json"),
+              (status = 422, description = "nothing to plot", body = ProblemBody, content_type = "application/problem+json")))]
 async fn plot(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, Problem> {
     let (spec, result, maps) = finished_maps(&st, &id).await?;
     let svg = report::svg(&spec, &maps, &result).map_err(no_plot)?;
