@@ -281,7 +281,8 @@ fn progress(r: &ExperimentRow) -> Value {
             if r.progress >= 0.01 && r.progress < 1.0 {
                 p["eta_s"] = json!(elapsed * (1.0 - r.progress) / r.progress);
                 // Trials left scale like the work left.
-                p["trials_total_estimate"] = json!((r.trials_done as f64 / r.progress).round() as i64);
+                p["trials_total_estimate"] =
+                    json!((r.trials_done as f64 / r.progress).round() as i64);
             }
         }
     }
