@@ -156,6 +156,11 @@ fn bad_inputs_are_problems_naming_the_field() {
             "scene.estimator.cutoff_hz",
         ),
         (r#"{"kind":"nope"}"#, "unknown variant"),
+        (
+            r#"{"kind":"compare","estimators":[{"kind":"fdm"},{"kind":"butterworth","cutoff_hz":99999}]}"#,
+            "estimators[1].cutoff_hz",
+        ),
+        (r#"{"kind":"compare","estimators":[]}"#, "estimators"),
         (r#"not json"#, "not a valid experiment"),
         (
             r#"{"kind":"compare","accuracy":"fast"}"#,
@@ -475,9 +480,28 @@ fn rigs_windows_sweeps_comparison_and_exports() {
     let (code, v, _) = post(&url, &sweep);
     assert_eq!(code, 202, "{v}");
     let sweep_id = v["id"].as_str().unwrap().to_string();
-    for id in [&fdm, &bw, &sweep_id] {
+    // A compare of estimators the caller chose.
+    let chosen = format!(
+        r#"{{"kind":"compare","scene":{{{LINEAR}}},"accuracy":"draft","estimators":[{{"kind":"fdm"}},{{"kind":"kalman","q":1e5}}]}}"#
+    );
+    let (code, v, _) = post(&url, &chosen);
+    assert_eq!(code, 202, "{v}");
+    let chosen_id = v["id"].as_str().unwrap().to_string();
+    for id in [&fdm, &bw, &sweep_id, &chosen_id] {
         assert_eq!(wait_end(&s.base, id, 60)["state"], "succeeded");
     }
+    let rows = get(&format!("{url}/{chosen_id}"))["result"]["rows"].clone();
+    let names: Vec<&str> = rows
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names.len(), 2, "{rows}");
+    assert!(
+        names[0] == "fdm" && names[1].starts_with("kalman"),
+        "{names:?}"
+    );
     let w = get(&format!("{url}/{waiting}"));
     assert_eq!(
         (w["state"].as_str(), w["rig"].as_str()),

@@ -41,6 +41,10 @@ pub struct CompareSpec {
     pub scene: Option<SceneSpec>,
     #[serde(default)]
     pub accuracy: Accuracy,
+    /// The estimators to compare; default the 2018 paper's four with its
+    /// tuned parameters (Levant's C estimated from a wall hit).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimators: Option<Vec<crate::estimators::EstimatorSpec>>,
 }
 
 impl ExperimentSpec {
@@ -80,6 +84,23 @@ impl ExperimentSpec {
             ExperimentSpec::Compare(c) => {
                 let scene = c.scene.clone().unwrap_or_else(compare::seed_2018_scene);
                 let sc = scene.validate().map_err(|e| e.within("scene"))?;
+                if let Some(list) = &c.estimators {
+                    if list.is_empty() || list.len() > 20 {
+                        return Err(SpecError::new(
+                            "estimators",
+                            list.len(),
+                            "give 1 to 20 estimators, or leave it out for the paper's four",
+                        ));
+                    }
+                    for (i, e) in list.iter().enumerate() {
+                        sc.with_estimator(e.clone()).map_err(|err| SpecError {
+                            field: err
+                                .field
+                                .replacen("estimator", &format!("estimators[{i}]"), 1),
+                            ..err
+                        })?;
+                    }
+                }
                 c.accuracy.resolve(&sc).map(|_| ())
             }
             ExperimentSpec::Sweep(s) => s.variants().map(|_| ()),
@@ -95,8 +116,13 @@ impl ExperimentSpec {
                 .map(|r| serde_json::to_value(r).unwrap_or_default()),
             ExperimentSpec::Compare(c) => {
                 let scene = c.scene.clone().unwrap_or_else(compare::seed_2018_scene);
-                compare::compare_observed(&scene, &c.accuracy, Some(observer))
-                    .map(|r| serde_json::to_value(r).unwrap_or_default())
+                compare::compare_observed(
+                    &scene,
+                    &c.accuracy,
+                    c.estimators.as_deref(),
+                    Some(observer),
+                )
+                .map(|r| serde_json::to_value(r).unwrap_or_default())
             }
             ExperimentSpec::Sweep(s) => sweep_observed(s, Some(observer))
                 .map(|r| serde_json::to_value(r).unwrap_or_default()),

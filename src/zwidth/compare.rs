@@ -144,18 +144,26 @@ pub fn paper_estimators(scene: &SceneSpec, c: f64) -> Vec<(String, String, Estim
 }
 
 pub fn compare(scene: &SceneSpec, accuracy: &Accuracy) -> Result<CompareResult, SpecError> {
-    compare_observed(scene, accuracy, None)
+    compare_observed(scene, accuracy, None, None)
 }
 
-/// The same, each estimator's map reporting to `observer` as scope 0, 1, …
+/// The same, each estimator's map reporting to `observer` as scope 0, 1, …;
+/// `estimators` replaces the paper's four (named by their labels).
 pub fn compare_observed(
     scene: &SceneSpec,
     accuracy: &Accuracy,
+    estimators: Option<&[EstimatorSpec]>,
     observer: Option<std::sync::Arc<Observer>>,
 ) -> Result<CompareResult, SpecError> {
     let start = std::time::Instant::now();
     let c = estimate_c(scene)?;
-    let estimators = paper_estimators(scene, c.estimate.lipschitz);
+    let estimators = match estimators {
+        Some(list) => list
+            .iter()
+            .map(|e| (e.label(), e.label(), e.clone()))
+            .collect(),
+        None => paper_estimators(scene, c.estimate.lipschitz),
+    };
     if let Some(o) = &observer {
         o.set_scopes(estimators.len());
     }
