@@ -15,7 +15,7 @@ use crate::plot::{zwidth_map_svg, MapPlotPoint};
 use crate::zwidth::compare;
 use crate::zwidth::hit::{wall_hit, HitKnobs, NoTrace, TraceRow};
 use crate::zwidth::scene::{validate_wall, SceneSpec};
-use crate::zwidth::search::{map, Evaluator, MapResult};
+use crate::zwidth::search::{map_observed, Evaluator, MapResult, Observer};
 use crate::zwidth::settings::{
     Accuracy, AccuracyKnobs, Criterion, MapSpec, Method, Preset, SearchKind,
 };
@@ -637,7 +637,8 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 b_max: 1000.0,
                 k_max: 1e7,
             };
-            let r = map(&spec)?;
+            let observer = std::sync::Arc::new(Observer::default());
+            let r = with_progress(&observer, || map_observed(&spec, Some(observer.clone()), 0))?;
             if let Some(path) = svg {
                 write_file(
                     &path,
@@ -705,7 +706,7 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 k_max: 1e7,
             };
             let tune = spec.validate()?;
-            let observer = std::sync::Arc::new(crate::zwidth::search::Observer::default());
+            let observer = std::sync::Arc::new(Observer::default());
             let r = with_progress(&observer, || tune.run(Some(observer.clone())))?;
             if let Some(p) = svg {
                 write_file(&p, &r.svg().map_err(CliError::Failure)?)?;
@@ -731,7 +732,10 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 None => compare::seed_2018_scene(),
             };
             let acc = Accuracy::Preset(parse_choice("accuracy", &accuracy)?);
-            let r = compare::compare(&spec, &acc)?;
+            let observer = std::sync::Arc::new(Observer::default());
+            let r = with_progress(&observer, || {
+                compare::compare_observed(&spec, &acc, None, Some(observer.clone()))
+            })?;
             if let Some(dir) = svg_dir {
                 std::fs::create_dir_all(&dir).map_err(|e| {
                     CliError::Failure(format!("cannot create {}: {e}", dir.display()))

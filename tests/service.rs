@@ -637,9 +637,10 @@ fn sigterm_interrupts_the_running_experiment_and_restart_resumes_it() {
         std::thread::sleep(Duration::from_millis(10));
     }
     let mut s = s;
-    let pid = s.child.id().to_string();
-    assert!(Command::new("kill")
-        .args(["-TERM", &pid])
+    // The shell's built-in kill: present wherever `sh` is.
+    let pid = s.child.id();
+    assert!(Command::new("sh")
+        .args(["-c", &format!("kill -TERM {pid}")])
         .status()
         .unwrap()
         .success());
