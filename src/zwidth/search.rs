@@ -764,3 +764,38 @@ fn grid(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, 
         .collect();
     (boundary, points)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bp(b: f64, k_max: f64) -> BoundaryPoint {
+        BoundaryPoint { b, k_max }
+    }
+
+    #[test]
+    fn planned_b_extrapolates_the_boundary_to_zero() {
+        // K falls 100 N/m per 10 N·s/m from 900 at B = 10: K = 0 at
+        // B = 10 + 900·10/100 = 100, i.e. 10 steps of 10, plus the three
+        // B values that end an automatic search.
+        let b = [bp(0.0, 1000.0), bp(10.0, 900.0)];
+        assert_eq!(planned_b(&b, 68, 10.0), 13);
+        // Rising or flat boundaries give no estimate: the whole range.
+        assert_eq!(planned_b(&[bp(0.0, 900.0), bp(10.0, 1000.0)], 68, 10.0), 68);
+        // A steep fall: K = 0 at B = 10 + 10·10/990 = 10.1, ceil(1.01) = 2
+        // steps, plus three; never more than the range.
+        assert_eq!(planned_b(&[bp(0.0, 1000.0), bp(10.0, 10.0)], 68, 10.0), 5);
+        assert_eq!(planned_b(&[bp(0.0, 1000.0), bp(10.0, 999.0)], 68, 10.0), 68);
+    }
+
+    #[test]
+    fn observer_fraction_averages_the_maps() {
+        let o = Observer::default();
+        o.set_scopes(4);
+        o.report(0, 1.0);
+        o.report(1, 0.5);
+        assert!((o.fraction() - 0.375).abs() < 1e-12);
+        o.report(2, f64::NAN); // ignored, never NaN out
+        assert!((o.fraction() - 0.375).abs() < 1e-12);
+    }
+}
