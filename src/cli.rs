@@ -436,6 +436,20 @@ fn write_json(out: &mut impl Write, v: &impl serde::Serialize) -> Result<(), Cli
     writeln!(out).map_err(io)
 }
 
+/// The JSON with `--json`, else the text table.
+fn write_either(
+    out: &mut impl Write,
+    json: bool,
+    v: &impl serde::Serialize,
+    text: impl FnOnce() -> String,
+) -> Result<(), CliError> {
+    if json {
+        write_json(out, v)
+    } else {
+        write!(out, "{}", text()).map_err(io)
+    }
+}
+
 fn write_file(path: &std::path::Path, text: &str) -> Result<(), CliError> {
     std::fs::write(path, text)
         .map_err(|e| CliError::Failure(format!("cannot write {}: {e}", path.display())))
@@ -645,11 +659,7 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                     &map_svg(&format!("Z-width: {}", spec.scene.estimator.label()), &r)?,
                 )?;
             }
-            if json {
-                write_json(stdout, &r)
-            } else {
-                write!(stdout, "{}", map_table(&r)).map_err(io)
-            }
+            write_either(stdout, json, &r, || map_table(&r))
         }
         Command::Tune {
             scene,
@@ -712,14 +722,9 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 write_file(&p, &r.svg().map_err(CliError::Failure)?)?;
             }
             if let Some(p) = csv {
-                let v = serde_json::to_value(&r).map_err(|e| CliError::Failure(e.to_string()))?;
-                write_file(&p, &crate::report::tune_csv(&v).map_err(CliError::Failure)?)?;
+                write_file(&p, &r.csv())?;
             }
-            if json {
-                write_json(stdout, &r)
-            } else {
-                write!(stdout, "{}", r.table()).map_err(io)
-            }
+            write_either(stdout, json, &r, || r.table())
         }
         Command::Compare {
             scene,
@@ -761,11 +766,7 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                     )?;
                 }
             }
-            if json {
-                write_json(stdout, &r)
-            } else {
-                write!(stdout, "{}", r.table()).map_err(io)
-            }
+            write_either(stdout, json, &r, || r.table())
         }
         Command::Serve {
             db,
@@ -931,21 +932,13 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                     levant_evaluations,
                 )?,
             };
-            if json {
-                write_json(stdout, &study)
-            } else {
-                write!(stdout, "{}", study.table()).map_err(io)
-            }
+            write_either(stdout, json, &study, || study.table())
         }
         Command::Bench {
             what: BenchCommand::Tradeoff { json },
         } => {
             let rows = tradeoff::run()?;
-            if json {
-                write_json(stdout, &rows)
-            } else {
-                write!(stdout, "{}", tradeoff::table(&rows)).map_err(io)
-            }
+            write_either(stdout, json, &rows, || tradeoff::table(&rows))
         }
         Command::Estimate {
             rate,
@@ -1006,9 +999,7 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 })?;
             }
             if json {
-                serde_json::to_writer_pretty(&mut *stdout, &report)
-                    .map_err(|e| CliError::Failure(e.to_string()))?;
-                writeln!(stdout).map_err(io)
+                write_json(stdout, &report)
             } else {
                 write!(stdout, "{}", report.table()).map_err(io)
             }
@@ -1021,9 +1012,7 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
             let ys = read_samples(stdin)?;
             let est = lipschitz::estimate(&ys, rate, quantization)?;
             if json {
-                serde_json::to_writer_pretty(&mut *stdout, &est)
-                    .map_err(|e| CliError::Failure(e.to_string()))?;
-                writeln!(stdout).map_err(io)
+                write_json(stdout, &est)
             } else {
                 writeln!(
                     stdout,
@@ -1048,9 +1037,7 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
             };
             let report = l.gains()?.report();
             if json {
-                serde_json::to_writer_pretty(&mut *stdout, &report)
-                    .map_err(|e| CliError::Failure(e.to_string()))?;
-                writeln!(stdout).map_err(io)
+                write_json(stdout, &report)
             } else {
                 writeln!(stdout, "{report}").map_err(io)
             }

@@ -90,52 +90,21 @@ pub fn maps(run: &str, spec: &ExperimentSpec, result: &Value) -> Vec<MapSummary>
                 .collect()
         }
         ExperimentSpec::Sweep(s) => {
-            let variants = s.variants().unwrap_or_default();
+            let variants = s.variant_specs().unwrap_or_default();
             rows(result)
                 .iter()
                 .zip(variants)
                 .map(|(r, (label, _, m))| summary(run, label, &m.scene, &r["map"]))
                 .collect()
         }
-        // A tune's evaluations are not maps it keeps (see `tune_csv`).
+        // A tune's evaluations are not maps it keeps (see `TuneResult::csv`).
         ExperimentSpec::Tune(_) => Vec::new(),
     }
 }
 
-/// CSV of a tune's evaluations: index, phase, each parameter, the four
-/// measures, score, feasible, cached, elapsed.
-pub fn tune_csv(result: &Value) -> Result<String, String> {
-    let r: crate::tune::TuneResult =
-        serde_json::from_value(result.clone()).map_err(|e| format!("not a tune result: {e}"))?;
-    let names: Vec<String> = r.best.params.keys().cloned().collect();
-    let mut s = format!(
-        "index,phase,{},k_width,b_width,max_fidelity_error,area,score,feasible,cached,elapsed_s\n",
-        names.join(",")
-    );
-    for e in &r.history {
-        let p: Vec<String> = names
-            .iter()
-            .map(|n| e.params.get(n).map(|x| x.to_string()).unwrap_or_default())
-            .collect();
-        let m = &e.metrics;
-        s.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{}\n",
-            e.index,
-            e.phase,
-            p.join(","),
-            m.k_width,
-            m.b_width,
-            m.max_fidelity_error
-                .map(|f| f.to_string())
-                .unwrap_or_default(),
-            m.area,
-            e.score,
-            e.feasible,
-            e.cached,
-            e.elapsed_s
-        ));
-    }
-    Ok(s)
+/// A stored tune result, read back.
+pub fn tune_result(result: &Value) -> Result<crate::tune::TuneResult, String> {
+    serde_json::from_value(result.clone()).map_err(|e| format!("not a tune result: {e}"))
 }
 
 fn rows(result: &Value) -> &[Value] {
@@ -341,11 +310,7 @@ pub fn points_csv(maps: &[MapSummary]) -> String {
 /// as their boundaries on one chart.
 pub fn svg(spec: &ExperimentSpec, maps: &[MapSummary], result: &Value) -> Result<String, String> {
     match (spec, maps) {
-        (ExperimentSpec::Tune(_), _) => {
-            serde_json::from_value::<crate::tune::TuneResult>(result.clone())
-                .map_err(|e| format!("not a tune result: {e}"))?
-                .svg()
-        }
+        (ExperimentSpec::Tune(_), _) => tune_result(result)?.svg(),
         (ExperimentSpec::Map(_), [m]) => {
             let points: Vec<MapPlotPoint> = m
                 .points

@@ -776,7 +776,9 @@ async fn plot(State(st): State<AppState>, Path(id): Path<String>) -> Result<Resp
 async fn points(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, Problem> {
     let (spec, result, maps) = finished_maps(&st, &id).await?;
     let csv = match spec {
-        ExperimentSpec::Tune(_) => report::tune_csv(&result).map_err(Problem::internal)?,
+        ExperimentSpec::Tune(_) => report::tune_result(&result)
+            .map_err(Problem::internal)?
+            .csv(),
         _ => report::points_csv(&maps),
     };
     Ok(([(header::CONTENT_TYPE, "text/csv")], csv).into_response())

@@ -198,6 +198,20 @@ pub async fn runner(
     }
 }
 
+/// Store the trials and evaluations finished since the last call (and a
+/// tune's best so far); a failed write is logged, the run goes on.
+async fn store_finished(store: &Store, id: &str, observer: &Observer) {
+    if let Err(e) = store.add_trials(id, &observer.take_new()).await {
+        tracing::warn!(error = %e, "storing trials failed");
+    }
+    if let Err(e) = store
+        .add_evaluations(id, &observer.take_new_evaluations(), observer.best())
+        .await
+    {
+        tracing::warn!(error = %e, "storing evaluations failed");
+    }
+}
+
 #[tracing::instrument(skip(store, rig, running, spec, shutdown), fields(rig = %rig.info().id))]
 async fn run_one(
     store: &Store,
@@ -258,12 +272,7 @@ async fn run_one(
         tokio::select! {
             r = &mut task => break r,
             _ = tokio::time::sleep(Duration::from_millis(100)) => {
-                if let Err(e) = store.add_trials(&id, &observer.take_new()).await {
-                    tracing::warn!(error = %e, "storing trials failed");
-                }
-                if let Err(e) = store.add_evaluations(&id, &observer.take_new_evaluations(), observer.best()).await {
-                    tracing::warn!(error = %e, "storing evaluations failed");
-                }
+                store_finished(store, &id, &observer).await;
                 let trials = observer.trials.load(Ordering::Relaxed) as i64;
                 let dt = rate_mark.0.elapsed().as_secs_f64();
                 if dt >= 1.0 {
@@ -290,15 +299,7 @@ async fn run_one(
         .lock()
         .unwrap_or_else(|e| e.into_inner())
         .remove(&id);
-    if let Err(e) = store.add_trials(&id, &observer.take_new()).await {
-        tracing::warn!(error = %e, "storing trials failed");
-    }
-    if let Err(e) = store
-        .add_evaluations(&id, &observer.take_new_evaluations(), observer.best())
-        .await
-    {
-        tracing::warn!(error = %e, "storing evaluations failed");
-    }
+    store_finished(store, &id, &observer).await;
     TRIALS_PER_SECOND.store(0, Ordering::Relaxed);
     let trials = observer.trials.load(Ordering::Relaxed) as i64;
     let res = if interrupted {

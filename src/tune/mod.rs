@@ -430,8 +430,9 @@ struct Run<'a> {
     observer: Option<Arc<Observer>>,
     log: Mutex<Vec<Evaluation>>,
     cache: Mutex<HashMap<String, Evaluation>>,
-    computed: Mutex<usize>,
-    calls: Mutex<usize>,
+    /// Solver calls, cache hits included (a guard against a solver that
+    /// keeps asking for cached points).
+    calls: std::sync::atomic::AtomicUsize,
     failure: Mutex<Option<SpecError>>,
 }
 
@@ -480,6 +481,16 @@ impl Run<'_> {
         }
     }
 
+    /// Search evaluations computed so far (not from the cache).
+    fn computed(&self) -> usize {
+        self.log
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .iter()
+            .filter(|e| e.phase == "search" && !e.cached)
+            .count()
+    }
+
     /// Evaluate at these parameter values in `phase` ("search" / "final").
     fn evaluate(&self, params: BTreeMap<String, f64>, phase: &str) -> Result<Evaluation, Stop> {
         let spec = &self.tune.spec;
@@ -490,12 +501,12 @@ impl Run<'_> {
         };
         let key = self.key(acc, &params);
         let index = self.log.lock().unwrap_or_else(|e| e.into_inner()).len();
-        {
-            let mut calls = self.calls.lock().unwrap_or_else(|e| e.into_inner());
-            *calls += 1;
-            if *calls > 20 * spec.max_evaluations + 100 {
-                return Err(Stop::Budget);
-            }
+        let calls = self
+            .calls
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+            + 1;
+        if calls > 20 * spec.max_evaluations + 100 {
+            return Err(Stop::Budget);
         }
         let cached = self
             .cache
@@ -516,12 +527,8 @@ impl Run<'_> {
             if self.observer.as_ref().is_some_and(|o| o.cancelled()) {
                 return Err(Stop::Cancelled);
             }
-            if phase == "search" {
-                let mut n = self.computed.lock().unwrap_or_else(|e| e.into_inner());
-                if *n >= spec.max_evaluations {
-                    return Err(Stop::Budget);
-                }
-                *n += 1;
+            if phase == "search" && self.computed() >= spec.max_evaluations {
+                return Err(Stop::Budget);
             }
             let start = Instant::now();
             let scene = self.tune.space.scene_at(&params).map_err(Stop::Spec)?;
@@ -640,8 +647,7 @@ impl Tune {
             observer,
             log: Mutex::new(Vec::new()),
             cache: Mutex::new(HashMap::new()),
-            computed: Mutex::new(0),
-            calls: Mutex::new(0),
+            calls: Default::default(),
             failure: Mutex::new(None),
         };
         let n = self.space.dim();
@@ -709,8 +715,7 @@ impl Tune {
                 if !stopped {
                     solvers::brent(&run, lo, hi, tolerance(budget), iters);
                 }
-                let spent = *run.computed.lock().unwrap_or_else(|e| e.into_inner());
-                let left = budget.saturating_sub(spent);
+                let left = budget.saturating_sub(run.computed());
                 if !stopped && left > 0 && !run.observer.as_ref().is_some_and(|o| o.cancelled()) {
                     // Points on a lattice (`step`) repeat: those are cache hits.
                     for u in solvers::grid(4 * left + 1) {
@@ -954,6 +959,40 @@ impl TuneResult {
                 },
             ],
         )
+    }
+
+    /// Every evaluation as CSV: index, phase, each parameter, the four
+    /// measures, score, feasible, cached, elapsed.
+    pub fn csv(&self) -> String {
+        let names: Vec<&String> = self.best.params.keys().collect();
+        let mut s = format!(
+            "index,phase,{},k_width,b_width,max_fidelity_error,area,score,feasible,cached,elapsed_s\n",
+            names.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(",")
+        );
+        for e in &self.history {
+            let p: Vec<String> = names
+                .iter()
+                .map(|n| e.params.get(*n).map(|x| x.to_string()).unwrap_or_default())
+                .collect();
+            let m = &e.metrics;
+            s.push_str(&format!(
+                "{},{},{},{},{},{},{},{},{},{},{}\n",
+                e.index,
+                e.phase,
+                p.join(","),
+                m.k_width,
+                m.b_width,
+                m.max_fidelity_error
+                    .map(|f| f.to_string())
+                    .unwrap_or_default(),
+                m.area,
+                e.score,
+                e.feasible,
+                e.cached,
+                e.elapsed_s
+            ));
+        }
+        s
     }
 
     /// A short text report.

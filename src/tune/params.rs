@@ -153,20 +153,6 @@ impl Space {
             .collect()
     }
 
-    /// u for given values (inverse of `values`, for reporting and seeding).
-    pub fn unit(&self, values: &BTreeMap<String, f64>) -> Vec<f64> {
-        self.params
-            .iter()
-            .map(|(name, b, _)| {
-                let x = values.get(name).copied().unwrap_or(b.min);
-                match b.scale {
-                    Scale::Linear => (x - b.min) / (b.max - b.min),
-                    Scale::Log => (x / b.min).ln() / (b.max / b.min).ln(),
-                }
-            })
-            .collect()
-    }
-
     /// The base scene with the parameters at u, validated.
     pub fn scene(&self, u: &[f64]) -> Result<SceneSpec, SpecError> {
         self.scene_at(&self.values(u))
@@ -231,7 +217,6 @@ mod tests {
         .unwrap();
         // log: 1e2·(1e6)^0.5 = 1e5.
         assert!((s.values(&[0.5])["q"] - 1e5).abs() < 1e-6);
-        assert!((s.unit(&s.values(&[0.25]))[0] - 0.25).abs() < 1e-12);
         let s = space(
             r#"{"kind":"foaw","fit":"best","max_window":15}"#,
             r#"{"max_window":{"min":2,"max":32}}"#,

@@ -136,6 +136,27 @@ impl ParameterRange {
 impl SweepSpec {
     /// Every variant as (label, value, map spec), validated.
     pub fn variants(&self) -> Result<Vec<(String, Option<f64>, MapSpec)>, SpecError> {
+        let out = self.variant_specs()?;
+        for (i, (_, _, m)) in out.iter().enumerate() {
+            let field = if self.scenes.is_some() {
+                format!("scenes[{i}]")
+            } else {
+                "map".into()
+            };
+            super::search::validate(m).map_err(|e| match self.scenes {
+                Some(_) => SpecError {
+                    field: e.field.replacen("scene", &field, 1),
+                    ..e
+                },
+                None => e.within(&field),
+            })?;
+        }
+        Ok(out)
+    }
+
+    /// The variants' labels, values and map specs without building their
+    /// engines (for reading a stored result; `variants` checks them fully).
+    pub fn variant_specs(&self) -> Result<Vec<(String, Option<f64>, MapSpec)>, SpecError> {
         let with_scene = |scene: SceneSpec| MapSpec {
             scene,
             ..self.map.clone()
@@ -177,20 +198,6 @@ impl SweepSpec {
                 ))
             }
         };
-        for (i, (_, _, m)) in out.iter().enumerate() {
-            let field = if self.scenes.is_some() {
-                format!("scenes[{i}]")
-            } else {
-                "map".into()
-            };
-            super::search::validate(m).map_err(|e| match self.scenes {
-                Some(_) => SpecError {
-                    field: e.field.replacen("scene", &field, 1),
-                    ..e
-                },
-                None => e.within(&field),
-            })?;
-        }
         Ok(out)
     }
 }
