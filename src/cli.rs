@@ -217,6 +217,18 @@ pub enum Command {
             hide_env_values = true
         )]
         tokens: Vec<String>,
+        /// A file with the bearer tokens, one per line (keeps them out of `ps`
+        /// and the shell history; prefer this or ZWIDTH_TOKENS to --token).
+        #[arg(long, env = "ZWIDTH_TOKEN_FILE")]
+        token_file: Option<PathBuf>,
+        /// Another origin that may write (e.g. a dashboard behind a proxy:
+        /// https://lab.example); the server's own origin always may.
+        #[arg(
+            long = "allow-origin",
+            env = "ZWIDTH_ALLOW_ORIGINS",
+            value_delimiter = ','
+        )]
+        allow_origins: Vec<String>,
         /// Simulated rigs, NAME[:THREADS] comma-separated (0 threads: one per core); the first is the default.
         #[arg(long, env = "ZWIDTH_RIGS", default_value = "sim:0")]
         rigs: String,
@@ -772,9 +784,18 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
             db,
             bind,
             tokens,
+            token_file,
+            allow_origins,
             rigs,
             request_timeout_s,
         } => {
+            let mut tokens = tokens;
+            if let Some(f) = &token_file {
+                let text = std::fs::read_to_string(f).map_err(|e| {
+                    CliError::Input(format!("--token-file {} cannot be read: {e}", f.display()))
+                })?;
+                tokens.extend(text.lines().map(str::to_owned));
+            }
             let rigs: Vec<std::sync::Arc<dyn crate::rig::Rig>> =
                 crate::rig::SimulatedRig::parse_list(&rigs)
                     .map_err(|e| CliError::Input(format!("--rigs: {e}")))?
@@ -803,6 +824,7 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
                 db,
                 bind,
                 tokens,
+                allow_origins,
                 rigs,
                 request_timeout_s,
             }))

@@ -68,3 +68,23 @@ pub fn require_non_negative(field: &str, value: f64, unit: &str) -> Result<(), S
         ))
     }
 }
+
+/// `Ok(())` when `lo <= value <= hi` (finite). Bounds inputs whose products
+/// and quotients must stay finite.
+pub fn require_range(
+    field: &str,
+    value: f64,
+    lo: f64,
+    hi: f64,
+    unit: &str,
+) -> Result<(), SpecError> {
+    if value.is_finite() && (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(SpecError::new(
+            field,
+            value,
+            format!("must be {lo:e} to {hi:e} ({unit})"),
+        ))
+    }
+}

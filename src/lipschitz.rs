@@ -60,6 +60,9 @@ fn second_derivatives(y: &[f64], m: usize, t: f64) -> (Vec<f64>, f64, f64) {
     (acc, s, (resid2 / count.max(1) as f64).sqrt())
 }
 
+/// Largest |position| accepted (m).
+pub const POSITION_MAX: f64 = 1e6;
+
 /// Estimate C from positions `y` (m) sampled at `rate_hz`; `quantization` (m) if known.
 pub fn estimate(
     y: &[f64],
@@ -77,12 +80,20 @@ pub fn estimate(
             "need at least 5 samples",
         ));
     }
-    if let Some(k) = y.iter().position(|v| !v.is_finite()) {
+    // |y| ≤ 1e6 m and rate ≤ 1e9 Hz keep the second differences (y/T²)
+    // finite: C is then at most ~1e25 m/s².
+    if let Some(k) = y
+        .iter()
+        .position(|v| !(v.is_finite() && v.abs() <= POSITION_MAX))
+    {
         return Err(SpecError::new(
             format!("positions[{k}]"),
             y[k],
-            "every sample must be a finite number (m)",
+            format!("every sample must be a finite position within ±{POSITION_MAX:e} m"),
         ));
+    }
+    if rate_hz > 1e9 {
+        return Err(SpecError::new("rate", rate_hz, "must be at most 1e9 Hz"));
     }
     let t = 1.0 / rate_hz;
     let mut m = 2usize;

@@ -133,15 +133,115 @@ fn identical_evaluations_come_from_the_cache_and_a_resumed_tune_redoes_none() {
     let finals: Vec<_> = r.history.iter().filter(|e| e.phase == "final").collect();
     assert_eq!(finals.len(), 3);
     assert!(finals.iter().all(|e| e.cached));
-    // Resume: an observer holding the stored evaluations makes none anew.
+    // Resume: an observer holding the stored evaluations makes none anew,
+    // and reports what the first run computed (they count as computed).
     let stored = obs.take_new_evaluations();
     assert_eq!(stored.len(), 4);
-    let again = tune
-        .run(Some(Arc::new(Observer::default().with_evaluations(stored))))
-        .unwrap();
-    assert_eq!(again.evaluations, 0);
+    let resumed = Arc::new(Observer::default().with_evaluations(stored));
+    let again = tune.run(Some(resumed.clone())).unwrap();
+    assert!(resumed.take_new_evaluations().is_empty());
+    assert_eq!(again.evaluations, 4);
+    assert_eq!(again.cache_hits, r.cache_hits);
     assert_eq!(again.best.params, r.best.params);
     assert_eq!(again.best.objectives, r.best.objectives);
+}
+
+/// What must not differ between an uninterrupted tune and a resumed one:
+/// every evaluation's parameters, phase, score and origin, and the best.
+fn path_of(r: &zwidth::tune::TuneResult) -> Vec<(String, Vec<(String, u64)>, u64, bool)> {
+    r.history
+        .iter()
+        .map(|e| {
+            (
+                e.phase.clone(),
+                e.params
+                    .iter()
+                    .map(|(k, v)| (k.clone(), v.to_bits()))
+                    .collect(),
+                e.score.to_bits(),
+                e.cached,
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_tune_killed_at_any_point_resumes_to_the_uninterrupted_result_with_every_solver() {
+    // A kill after n stored evaluations leaves exactly the first n of the
+    // uninterrupted run's evaluations (the path is deterministic) and the
+    // trials of the one under way; resuming from them must take the same
+    // path: replayed evaluations count toward the budget as the first time.
+    let one_d = [("cutoff_hz", 20.0, 400.0)];
+    let two_d = [("cutoff_hz", 20.0, 400.0), ("order", 1.0, 4.0)];
+    let cases: [(SolverKind, &[(&str, f64, f64)]); 9] = [
+        (SolverKind::Auto, &one_d),
+        (SolverKind::Auto, &two_d),
+        (SolverKind::Brent, &one_d),
+        (SolverKind::Golden, &one_d),
+        (SolverKind::Grid, &one_d),
+        (SolverKind::NelderMead, &two_d),
+        (SolverKind::ParticleSwarm, &two_d),
+        (SolverKind::Halton, &two_d),
+        (SolverKind::Halton, &one_d),
+    ];
+    for (solver, params) in cases {
+        let mut s = spec(
+            linear(r#"{"kind":"butterworth","cutoff_hz":100}"#),
+            params,
+            Objective::Single(Metric::KWidth),
+            solver,
+            8,
+        );
+        s.finalists = 2;
+        s.final_accuracy = Accuracy::Preset(Preset::Draft);
+        s.seed = 3;
+        let tune = s.validate().unwrap();
+        let obs = Arc::new(Observer::default());
+        let full = tune.run(Some(obs.clone())).unwrap();
+        let evals = obs.take_new_evaluations();
+        let trials = obs.take_new();
+        let total_trials = obs.trials.load(std::sync::atomic::Ordering::Relaxed);
+        assert!(evals.len() >= 4, "{solver:?}: {} evaluations", evals.len());
+        for cut in [1, evals.len() / 2, evals.len() - 1] {
+            // The evaluation under way at the kill: its scope is its index.
+            let under_way = evals[cut].record["index"].as_u64().unwrap() as u32;
+            let done_before: Vec<_> = evals[..cut]
+                .iter()
+                .map(|e| e.record["index"].as_u64().unwrap() as u32)
+                .collect();
+            let mut partial: Vec<_> = trials
+                .iter()
+                .filter(|t| done_before.contains(&t.scope))
+                .cloned()
+                .collect();
+            let of_current: Vec<_> = trials.iter().filter(|t| t.scope == under_way).collect();
+            partial.extend(
+                of_current[..of_current.len() / 2]
+                    .iter()
+                    .map(|t| (*t).clone()),
+            );
+            let resumed =
+                Arc::new(Observer::resuming(partial).with_evaluations(evals[..cut].to_vec()));
+            let again = tune.run(Some(resumed.clone())).unwrap();
+            assert_eq!(path_of(&again), path_of(&full), "{solver:?} cut at {cut}");
+            assert_eq!(
+                again.best.params, full.best.params,
+                "{solver:?} cut at {cut}"
+            );
+            assert_eq!(
+                again.evaluations, full.evaluations,
+                "{solver:?} cut at {cut}"
+            );
+            // trials_done counts the replayed ones too (defect 16).
+            assert_eq!(
+                resumed.trials.load(std::sync::atomic::Ordering::Relaxed),
+                total_trials,
+                "{solver:?} cut at {cut}"
+            );
+            // Only the evaluations after the cut were computed anew.
+            assert_eq!(resumed.take_new_evaluations().len(), evals.len() - cut);
+        }
+    }
 }
 
 #[test]

@@ -23,7 +23,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::VelocityEstimator;
-use crate::error::{require_positive, SpecError};
+use crate::error::{require_positive, require_range, SpecError};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
@@ -124,8 +124,16 @@ impl LevantSpec {
 
     /// Resolve and validate the gains from whichever form was given.
     pub fn gains(&self) -> Result<LevantGains, SpecError> {
+        // Gains and C within 1e-12 … 1e12 keep every quantity of the
+        // conditions below (α/C, λ², 4C(α+C)/(α−C)) finite.
         if let Some(c) = self.lipschitz {
-            require_positive("lipschitz", c, "m/s², a bound on |acceleration|")?;
+            require_range(
+                "lipschitz",
+                c,
+                GAIN_MIN,
+                GAIN_MAX,
+                "m/s², a bound on |acceleration|",
+            )?;
         }
         let explicit = self.alpha.is_some() || self.lambda.is_some();
         let normalized = self.mu1.is_some() || self.mu2.is_some();
@@ -173,8 +181,8 @@ impl LevantSpec {
             let c = need_c("mu1/mu2")?;
             (m1 * c, m2 * c.sqrt())
         };
-        require_positive("alpha", alpha, "m/s²")?;
-        require_positive("lambda", lambda, "m^½/s")?;
+        require_range("alpha", alpha, GAIN_MIN, GAIN_MAX, "m/s²")?;
+        require_range("lambda", lambda, GAIN_MIN, GAIN_MAX, "m^½/s")?;
         Ok(LevantGains {
             alpha,
             lambda,
@@ -182,6 +190,10 @@ impl LevantSpec {
         })
     }
 }
+
+/// Range of α, λ and C accepted.
+pub const GAIN_MIN: f64 = 1e-12;
+pub const GAIN_MAX: f64 = 1e12;
 
 /// Which sufficient convergence conditions a gain pair meets.
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -16,8 +16,9 @@ use crate::rig::Rig;
 use crate::store::Store;
 use crate::tune::TuneSpec;
 use crate::zwidth::compare;
+use crate::zwidth::cost::Cost;
 use crate::zwidth::scene::SceneSpec;
-use crate::zwidth::search::{self, map_observed, Observer};
+use crate::zwidth::search::{self, map_observed, Observer, StoredEvaluation, StoredTrial};
 use crate::zwidth::settings::{Accuracy, MapSpec};
 use crate::zwidth::sweep::{sweep_observed, SweepSpec};
 
@@ -77,8 +78,9 @@ impl ExperimentSpec {
         }
     }
 
-    /// The engines' own validation, without running anything.
-    pub fn validate(&self) -> Result<(), SpecError> {
+    /// The engines' own validation, without running anything; what the
+    /// experiment will cost (refused beyond the limits in `zwidth::cost`).
+    pub fn validate(&self) -> Result<Cost, SpecError> {
         match self {
             ExperimentSpec::Map(m) => search::validate(m),
             ExperimentSpec::Compare(c) => {
@@ -101,10 +103,12 @@ impl ExperimentSpec {
                         })?;
                     }
                 }
-                c.accuracy.resolve(&sc).map(|_| ())
+                let one = search::validate(&compare::map_spec(scene, &c.accuracy))?;
+                let n = c.estimators.as_ref().map_or(4, Vec::len) as u64;
+                one.times(n).check("estimators")
             }
-            ExperimentSpec::Sweep(s) => s.variants().map(|_| ()),
-            ExperimentSpec::Tune(t) => t.validate().map(|_| ()),
+            ExperimentSpec::Sweep(s) => s.checked().map(|(_, cost)| cost),
+            ExperimentSpec::Tune(t) => t.validate().map(|t| t.cost),
         }
     }
 
@@ -198,17 +202,91 @@ pub async fn runner(
     }
 }
 
-/// Store the trials and evaluations finished since the last call (and a
-/// tune's best so far); a failed write is logged, the run goes on.
-async fn store_finished(store: &Store, id: &str, observer: &Observer) {
-    if let Err(e) = store.add_trials(id, &observer.take_new()).await {
-        tracing::warn!(error = %e, "storing trials failed");
+/// Trials and evaluations finished but not yet stored. A write that fails
+/// (disk full, a writer holding the lock) keeps them for the next try; while
+/// they cannot be written the simulation is held (it waits between trials),
+/// and the experiment shows why in its progress.
+#[derive(Default)]
+struct Unstored {
+    trials: Vec<StoredTrial>,
+    evals: Vec<StoredEvaluation>,
+    failing_since: Option<std::time::Instant>,
+}
+
+/// Trials kept in memory while the store is failing before the simulation
+/// is held.
+const HOLD_AFTER_UNSTORED: usize = 10_000;
+
+impl Unstored {
+    /// Store what finished since the last call (and a tune's best so far);
+    /// true when everything is stored.
+    async fn flush(&mut self, store: &Store, id: &str, observer: &Observer) -> bool {
+        self.trials.extend(observer.take_new());
+        self.evals.extend(observer.take_new_evaluations());
+        let r = match store.add_trials(id, &self.trials).await {
+            Ok(()) => {
+                self.trials.clear();
+                store
+                    .add_evaluations(id, &self.evals, observer.best())
+                    .await
+                    .map(|_| self.evals.clear())
+            }
+            Err(e) => Err(e),
+        };
+        match r {
+            Ok(()) => {
+                if self.failing_since.take().is_some() {
+                    tracing::info!("storing works again: the run goes on");
+                }
+                observer.hold(None);
+                true
+            }
+            Err(e) => {
+                store.observe(&e);
+                if self.failing_since.is_none() {
+                    tracing::error!(error = %e, unstored = self.trials.len(), "storing trials failed; retrying");
+                    self.failing_since = Some(std::time::Instant::now());
+                }
+                if self.trials.len() >= HOLD_AFTER_UNSTORED || !self.evals.is_empty() {
+                    observer.hold(Some(format!(
+                        "held: {} finished trials cannot be stored ({e}); retrying",
+                        self.trials.len()
+                    )));
+                }
+                false
+            }
+        }
     }
-    if let Err(e) = store
-        .add_evaluations(id, &observer.take_new_evaluations(), observer.best())
-        .await
-    {
-        tracing::warn!(error = %e, "storing evaluations failed");
+}
+
+/// Retry a write until it succeeds or the service shuts down (then the
+/// experiment is requeued at the next start and resumes from its trials).
+async fn until_written<F, Fut>(
+    what: &str,
+    shutdown: &tokio::sync::watch::Receiver<bool>,
+    store: &Store,
+    mut f: F,
+) where
+    F: FnMut() -> Fut,
+    Fut: std::future::Future<Output = Result<bool, sqlx::Error>>,
+{
+    let mut wait = Duration::from_millis(100);
+    loop {
+        match f().await {
+            Ok(_) => return,
+            Err(e) => {
+                store.observe(&e);
+                tracing::error!(error = %e, "{what} failed; retrying in {wait:?}");
+                if *shutdown.borrow() {
+                    tracing::error!(
+                        "{what}: giving up at shutdown; the experiment resumes at the next start"
+                    );
+                    return;
+                }
+                tokio::time::sleep(wait).await;
+                wait = (wait * 2).min(Duration::from_secs(5));
+            }
+        }
     }
 }
 
@@ -221,18 +299,21 @@ async fn run_one(
     spec: String,
     shutdown: tokio::sync::watch::Receiver<bool>,
 ) {
-    let parsed: ExperimentSpec = match serde_json::from_str(&spec) {
-        Ok(s) => s,
+    // A stored spec is checked again: one stored by an older version may
+    // not pass today's limits, and must fail here, not take the server down.
+    let checked = serde_json::from_str::<ExperimentSpec>(&spec)
+        .map_err(|e| format!("stored spec unreadable: {e}"))
+        .and_then(|s| match s.validate() {
+            Ok(cost) => Ok((s, cost)),
+            Err(e) => Err(e.to_string()),
+        });
+    let (parsed, cost) = match checked {
+        Ok(x) => x,
         Err(e) => {
-            let _ = store
-                .finish(
-                    &id,
-                    "failed",
-                    0,
-                    None,
-                    Some(&format!("stored spec unreadable: {e}")),
-                )
-                .await;
+            until_written("recording a failed spec", &shutdown, store, || {
+                store.finish(&id, "failed", 0, None, Some(&e))
+            })
+            .await;
             return;
         }
     };
@@ -258,6 +339,7 @@ async fn run_one(
         tracing::info!(stored = evals.len(), "resuming from stored evaluations");
     }
     let observer = Arc::new(Observer::resuming(done).with_evaluations(evals));
+    observer.limit_trials(usize::try_from(cost.trial_limit()).unwrap_or(usize::MAX));
     running
         .lock()
         .unwrap_or_else(|e| e.into_inner())
@@ -268,11 +350,12 @@ async fn run_one(
     // progress, and look for a cancel request or shutdown.
     let mut rate_mark = (std::time::Instant::now(), 0usize);
     let mut interrupted = false;
+    let mut unstored = Unstored::default();
     let outcome = loop {
         tokio::select! {
             r = &mut task => break r,
             _ = tokio::time::sleep(Duration::from_millis(100)) => {
-                store_finished(store, &id, &observer).await;
+                unstored.flush(store, &id, &observer).await;
                 let trials = observer.trials.load(Ordering::Relaxed) as i64;
                 let dt = rate_mark.0.elapsed().as_secs_f64();
                 if dt >= 1.0 {
@@ -280,7 +363,7 @@ async fn run_one(
                     rate_mark = (std::time::Instant::now(), trials as usize);
                 }
                 if let Err(e) = store.set_progress(&id, trials, observer.fraction()).await {
-                    tracing::warn!(error = %e, "progress write failed");
+                    tracing::debug!(error = %e, "progress write failed");
                 }
                 if let Ok(Some(state)) = store.state(&id).await {
                     if state == "cancelled" {
@@ -299,39 +382,30 @@ async fn run_one(
         .lock()
         .unwrap_or_else(|e| e.into_inner())
         .remove(&id);
-    store_finished(store, &id, &observer).await;
     TRIALS_PER_SECOND.store(0, Ordering::Relaxed);
-    let trials = observer.trials.load(Ordering::Relaxed) as i64;
-    let res = if interrupted {
-        store.interrupt(&id, trials).await
-    } else if observer.cancelled() {
-        store.finish(&id, "cancelled", trials, None, None).await
-    } else {
-        match outcome {
-            Ok(Ok(v)) => {
-                store
-                    .finish(&id, "succeeded", trials, Some(&v.to_string()), None)
-                    .await
-            }
-            Ok(Err(e)) => {
-                store
-                    .finish(&id, "failed", trials, None, Some(&e.to_string()))
-                    .await
-            }
-            Err(e) => {
-                store
-                    .finish(
-                        &id,
-                        "failed",
-                        trials,
-                        None,
-                        Some(&format!("the run panicked: {e}")),
-                    )
-                    .await
-            }
-        }
-    };
-    if let Err(e) = res {
-        tracing::error!(error = %e, "recording the end of a run failed");
+    // Every finished trial is stored before the end is recorded.
+    let mut wait = Duration::from_millis(100);
+    while !unstored.flush(store, &id, &observer).await && !*shutdown.borrow() {
+        tokio::time::sleep(wait).await;
+        wait = (wait * 2).min(Duration::from_secs(5));
     }
+    let trials = observer.trials.load(Ordering::Relaxed) as i64;
+    if interrupted {
+        until_written("recording an interrupted run", &shutdown, store, || async {
+            store.interrupt(&id, trials).await.map(|_| true)
+        })
+        .await;
+        return;
+    }
+    let (state, result, error) = match (observer.runaway(), observer.cancelled(), outcome) {
+        (Some(why), _, _) => ("failed", None, Some(why)),
+        (None, true, _) => ("cancelled", None, None),
+        (None, false, Ok(Ok(v))) => ("succeeded", Some(v.to_string()), None),
+        (None, false, Ok(Err(e))) => ("failed", None, Some(e.to_string())),
+        (None, false, Err(e)) => ("failed", None, Some(format!("the run panicked: {e}"))),
+    };
+    until_written("recording the end of a run", &shutdown, store, || {
+        store.finish(&id, state, trials, result.as_deref(), error.as_deref())
+    })
+    .await;
 }

@@ -1,6 +1,15 @@
 //! The SQLite store (sqlx): experiments and their results. Queries only; no
 //! HTTP types. WAL and `synchronous = NORMAL`; the queue is claimed with one
 //! `UPDATE … RETURNING`, so two runners never take the same experiment.
+//!
+//! Every statement runs to completion before its answer is used: with
+//! `RETURNING`, SQLite hands out the rows before the implicit commit, so a
+//! query that stops after the first row never sees a commit that failed
+//! (disk full) and leaves its transaction open ("database is locked" for
+//! everyone after). Hence `fetch_all`, never `fetch_one`, on writes.
+
+pub mod fault;
+pub use fault::{Fault, Health};
 
 use serde::Serialize;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
@@ -16,6 +25,19 @@ static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
 #[derive(Debug, Clone)]
 pub struct Store {
     pool: SqlitePool,
+    /// What the last integrity check found; a corrupt database refuses writes.
+    health: std::sync::Arc<std::sync::Mutex<Health>>,
+}
+
+/// How a submission went into the store.
+#[derive(Debug)]
+pub enum Inserted {
+    /// Stored (committed) now.
+    New(ExperimentRow),
+    /// The idempotency key was used before with the same request.
+    Earlier(ExperimentRow),
+    /// The idempotency key was used before with a different request.
+    KeyReused(ExperimentRow),
 }
 
 /// One experiment row.
@@ -77,12 +99,83 @@ impl Store {
             .connect_with(opts)
             .await?;
         MIGRATOR.run(&pool).await?;
-        Ok(Self { pool })
+        let store = Self {
+            pool,
+            health: Default::default(),
+        };
+        store.check().await?;
+        Ok(store)
     }
 
-    /// Insert a queued experiment; with an idempotency key already used,
-    /// return the existing row instead (`false`).
-    pub async fn insert(&self, e: NewExperiment<'_>) -> Result<(ExperimentRow, bool), sqlx::Error> {
+    /// `PRAGMA quick_check` (O(pages), no index cross-check): remember and
+    /// return what it found. Run at start and on `GET /healthz?check=true`.
+    pub async fn check(&self) -> Result<Health, sqlx::Error> {
+        let rows: Result<Vec<String>, sqlx::Error> = sqlx::query_scalar("PRAGMA quick_check")
+            .fetch_all(&self.pool)
+            .await;
+        let h = match rows {
+            Ok(r) if r.len() == 1 && r[0] == "ok" => Health::ok(),
+            Ok(r) => Health::corrupt(r.join("; ")),
+            Err(e) if Fault::of(&e) == Fault::Corrupt => Health::corrupt(e.to_string()),
+            Err(e) => return Err(e),
+        };
+        *self.health.lock().unwrap_or_else(|e| e.into_inner()) = h.clone();
+        Ok(h)
+    }
+
+    /// What the last integrity check (or a corrupt read since) found.
+    pub fn health(&self) -> Health {
+        self.health
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
+    }
+
+    /// Note an error: a corrupt database is remembered (writes refused).
+    pub fn observe(&self, e: &sqlx::Error) {
+        if Fault::of(e) == Fault::Corrupt {
+            *self.health.lock().unwrap_or_else(|x| x.into_inner()) = Health::corrupt(e.to_string());
+        }
+    }
+
+    /// Refuse writes to a database known to be corrupt.
+    fn writable(&self) -> Result<(), sqlx::Error> {
+        match self.health().corrupt {
+            None => Ok(()),
+            Some(why) => Err(sqlx::Error::Protocol(format!(
+                "{}: {why}",
+                fault::CORRUPT_PREFIX
+            ))),
+        }
+    }
+
+    /// Write everything in the WAL into the database file and close every
+    /// connection, so the `.db` file alone is a complete copy (clean shutdown).
+    pub async fn close(&self) -> Result<(), sqlx::Error> {
+        let r = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+            .execute(&self.pool)
+            .await
+            .map(|_| ());
+        self.pool.close().await;
+        r
+    }
+
+    /// A consistent copy of the whole database in one file (`VACUUM INTO`),
+    /// safe while the service runs. `to` must not exist.
+    pub async fn backup(&self, to: &Path) -> Result<(), sqlx::Error> {
+        sqlx::query("VACUUM INTO ?")
+            .bind(to.to_string_lossy().into_owned())
+            .execute(&self.pool)
+            .await
+            .map(|_| ())
+    }
+
+    /// Insert a queued experiment and commit it. With an idempotency key
+    /// used before, nothing is inserted and the earlier row is returned
+    /// (one `INSERT … ON CONFLICT DO NOTHING`: concurrent submissions with
+    /// one key store one experiment).
+    pub async fn insert(&self, e: NewExperiment<'_>) -> Result<Inserted, sqlx::Error> {
+        self.writable()?;
         let NewExperiment {
             id,
             kind,
@@ -92,20 +185,9 @@ impl Store {
             not_before_ms,
             rig,
         } = e;
-        if let Some(k) = key {
-            if let Some(row) = sqlx::query_as::<_, ExperimentRow>(
-                "SELECT * FROM experiments WHERE idempotency_key = ?",
-            )
-            .bind(k)
-            .fetch_optional(&self.pool)
-            .await?
-            {
-                return Ok((row, false));
-            }
-        }
-        let row = sqlx::query_as::<_, ExperimentRow>(
+        let r = sqlx::query(
             "INSERT INTO experiments (id, kind, spec, state, priority, created_ms, idempotency_key, not_before_ms, rig)
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) RETURNING *",
+             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (idempotency_key) DO NOTHING",
         )
         .bind(id)
         .bind(kind)
@@ -116,9 +198,27 @@ impl Store {
         .bind(key)
         .bind(not_before_ms)
         .bind(rig)
+        .execute(&self.pool)
+        .await?;
+        if r.rows_affected() == 1 {
+            let row = self.get(id).await?.ok_or(sqlx::Error::RowNotFound)?;
+            return Ok(Inserted::New(row));
+        }
+        let row = sqlx::query_as::<_, ExperimentRow>(
+            "SELECT * FROM experiments WHERE idempotency_key = ?",
+        )
+        .bind(key)
         .fetch_one(&self.pool)
         .await?;
-        Ok((row, true))
+        let same = row.spec == spec
+            && row.priority == priority
+            && row.rig == rig
+            && row.not_before_ms == not_before_ms;
+        Ok(if same {
+            Inserted::Earlier(row)
+        } else {
+            Inserted::KeyReused(row)
+        })
     }
 
     pub async fn get(&self, id: &str) -> Result<Option<ExperimentRow>, sqlx::Error> {
@@ -128,19 +228,40 @@ impl Store {
             .await
     }
 
-    pub async fn list(&self, limit: i64) -> Result<Vec<ExperimentRow>, sqlx::Error> {
-        sqlx::query_as::<_, ExperimentRow>(
-            "SELECT * FROM experiments ORDER BY created_ms DESC, id DESC LIMIT ?",
-        )
-        .bind(limit)
-        .fetch_all(&self.pool)
-        .await
+    /// A page of experiments, newest first, after `cursor` (the last page's
+    /// last `(created_ms, id)`), without their results unless `results`.
+    pub async fn list(
+        &self,
+        limit: i64,
+        cursor: Option<(i64, &str)>,
+        results: bool,
+    ) -> Result<Vec<ExperimentRow>, sqlx::Error> {
+        // Two fixed statements (sqlx takes no SQL built at run time).
+        let sql = if results {
+            "SELECT * FROM experiments
+             WHERE ?1 = '' OR created_ms < ?2 OR (created_ms = ?2 AND id < ?1)
+             ORDER BY created_ms DESC, id DESC LIMIT ?3"
+        } else {
+            "SELECT id, kind, spec, state, priority, created_ms, started_ms, finished_ms, trials_done,
+                    NULL AS result, error, idempotency_key, not_before_ms, rig, progress, best
+             FROM experiments
+             WHERE ?1 = '' OR created_ms < ?2 OR (created_ms = ?2 AND id < ?1)
+             ORDER BY created_ms DESC, id DESC LIMIT ?3"
+        };
+        let (t, id) = cursor.unwrap_or((i64::MAX, ""));
+        sqlx::query_as::<_, ExperimentRow>(sql)
+            .bind(id)
+            .bind(t)
+            .bind(limit)
+            .fetch_all(&self.pool)
+            .await
     }
 
     /// Claim `rig`'s next experiment that may start now (highest priority,
     /// oldest first), unless the queue is paused. Scheduled experiments whose
     /// time has come count as queued.
     pub async fn claim_next(&self, rig: &str) -> Result<Option<ExperimentRow>, sqlx::Error> {
+        self.writable()?;
         let now = now_ms();
         sqlx::query_as::<_, ExperimentRow>(
             "UPDATE experiments SET state = 'running', started_ms = ?1
@@ -152,8 +273,9 @@ impl Store {
         )
         .bind(now)
         .bind(rig)
-        .fetch_optional(&self.pool)
+        .fetch_all(&self.pool)
         .await
+        .map(|mut rows| rows.pop())
     }
 
     /// The rig's window, if it has one.
@@ -167,6 +289,7 @@ impl Store {
 
     /// Set (Some) or clear (None) the rig's window.
     pub async fn set_rig_window(&self, rig: &str, w: Option<&Window>) -> Result<(), sqlx::Error> {
+        self.writable()?;
         match w {
             Some(w) => sqlx::query("INSERT INTO rig_windows (rig, window) VALUES (?, ?) ON CONFLICT (rig) DO UPDATE SET window = excluded.window")
                 .bind(rig)
@@ -200,6 +323,7 @@ impl Store {
     }
 
     pub async fn set_paused(&self, paused: bool) -> Result<(), sqlx::Error> {
+        self.writable()?;
         sqlx::query("UPDATE queue_control SET paused = ? WHERE id = 1")
             .bind(paused as i64)
             .execute(&self.pool)
@@ -233,6 +357,7 @@ impl Store {
         trials: i64,
         fraction: f64,
     ) -> Result<(), sqlx::Error> {
+        self.writable()?;
         sqlx::query("UPDATE experiments SET trials_done = ?, progress = ? WHERE id = ? AND state = 'running'")
             .bind(trials)
             .bind(if fraction.is_finite() { fraction.clamp(0.0, 1.0) } else { 0.0 })
@@ -243,6 +368,9 @@ impl Store {
     }
 
     /// Record the end of a run: `state` is succeeded, failed or cancelled.
+    /// Only a running experiment ends succeeded or failed; a cancelled one
+    /// stays cancelled (its trial count is still recorded). False when
+    /// nothing changed (it was cancelled, or is not running here).
     pub async fn finish(
         &self,
         id: &str,
@@ -250,9 +378,12 @@ impl Store {
         trials: i64,
         result: Option<&str>,
         error: Option<&str>,
-    ) -> Result<(), sqlx::Error> {
-        sqlx::query("UPDATE experiments SET state = ?1, trials_done = ?2, result = ?3, error = ?4, finished_ms = ?5,
-                     progress = CASE WHEN ?1 = 'succeeded' THEN 1 ELSE progress END WHERE id = ?6")
+    ) -> Result<bool, sqlx::Error> {
+        self.writable()?;
+        let r = sqlx::query("UPDATE experiments SET state = ?1, trials_done = ?2, result = ?3, error = ?4,
+                     finished_ms = COALESCE(CASE WHEN state = 'cancelled' THEN finished_ms END, ?5),
+                     progress = CASE WHEN ?1 = 'succeeded' THEN 1 ELSE progress END
+                     WHERE id = ?6 AND (state = 'running' OR (state = 'cancelled' AND ?1 = 'cancelled'))")
             .bind(state)
             .bind(trials)
             .bind(result)
@@ -260,12 +391,13 @@ impl Store {
             .bind(now_ms())
             .bind(id)
             .execute(&self.pool)
-            .await
-            .map(|_| ())
+            .await?;
+        Ok(r.rows_affected() == 1)
     }
 
     /// Ask a queued or running experiment to stop; true if it was either.
     pub async fn cancel(&self, id: &str) -> Result<bool, sqlx::Error> {
+        self.writable()?;
         let r = sqlx::query("UPDATE experiments SET state = 'cancelled', finished_ms = ? WHERE id = ? AND state IN ('queued', 'scheduled', 'running')")
             .bind(now_ms())
             .bind(id)
@@ -276,6 +408,7 @@ impl Store {
 
     /// A running experiment stopped by shutdown (its trials are stored).
     pub async fn interrupt(&self, id: &str, trials: i64) -> Result<(), sqlx::Error> {
+        self.writable()?;
         sqlx::query("UPDATE experiments SET state = 'interrupted', trials_done = ? WHERE id = ? AND state = 'running'")
             .bind(trials)
             .bind(id)
@@ -287,6 +420,7 @@ impl Store {
     /// After a restart: anything left running (killed) or interrupted
     /// (shut down) is queued again; it resumes from its stored trials.
     pub async fn requeue_interrupted(&self) -> Result<u64, sqlx::Error> {
+        self.writable()?;
         let r = sqlx::query(
             "UPDATE experiments SET state = 'queued', started_ms = NULL WHERE state IN ('running', 'interrupted')",
         )
@@ -304,6 +438,7 @@ impl Store {
 
     /// Store finished trials in one transaction (already stored ones are kept).
     pub async fn add_trials(&self, id: &str, trials: &[StoredTrial]) -> Result<(), sqlx::Error> {
+        self.writable()?;
         if trials.is_empty() {
             return Ok(());
         }
@@ -364,6 +499,7 @@ impl Store {
         evals: &[StoredEvaluation],
         best: Option<serde_json::Value>,
     ) -> Result<(), sqlx::Error> {
+        self.writable()?;
         if evals.is_empty() {
             return Ok(());
         }

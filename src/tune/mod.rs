@@ -18,6 +18,7 @@ use std::time::Instant;
 
 use crate::error::SpecError;
 use crate::estimators::EstimatorKind;
+use crate::zwidth::cost::Cost;
 use crate::zwidth::scene::SceneSpec;
 use crate::zwidth::search::{map_observed, Observer};
 use crate::zwidth::settings::{Accuracy, Criterion, MapSpec, Method, Preset, SearchKind};
@@ -147,6 +148,9 @@ fn d_k_max() -> f64 {
     1e7
 }
 
+/// Largest |weight| of a weighted objective.
+pub const WEIGHT_MAX: f64 = 1e6;
+
 /// Most evaluations one tune may make.
 pub const MAX_EVALUATIONS: usize = 5000;
 
@@ -273,6 +277,8 @@ pub struct Tune {
     space: Space,
     metrics: Vec<Metric>,
     lipschitz: Option<f64>,
+    /// What every evaluation and finalist together may cost.
+    pub cost: Cost,
 }
 
 impl TuneSpec {
@@ -289,12 +295,14 @@ impl TuneSpec {
                         "give at least one metric with its weight",
                     ));
                 }
+                // |w| ≤ 1e6 with every metric bounded (K ≤ 1e9 N/m, area ≤
+                // 1e15, fidelity stand-in 1e12) keeps the weighted sum finite.
                 for (m, x) in w {
-                    if !x.is_finite() {
+                    if !(x.is_finite() && x.abs() <= WEIGHT_MAX) {
                         return Err(SpecError::new(
                             format!("objective.weighted.{}", metric_name(*m)),
                             x,
-                            "weights must be finite",
+                            format!("weights must be finite, within ±{WEIGHT_MAX:e}"),
                         ));
                     }
                 }
@@ -371,15 +379,22 @@ impl TuneSpec {
                 ));
             }
         };
-        // The engines' own checks, on the base scene at both accuracies.
-        for acc in [&self.accuracy, &self.final_accuracy] {
-            crate::zwidth::search::validate(&self.map_spec(self.scene.clone(), acc.clone()))?;
+        // The engines' own checks, on the base scene at both accuracies;
+        // every evaluation costs what one map does.
+        let mut costs = [Cost::default(); 2];
+        for (c, acc) in costs.iter_mut().zip([&self.accuracy, &self.final_accuracy]) {
+            *c = crate::zwidth::search::validate(&self.map_spec(self.scene.clone(), acc.clone()))?;
         }
+        let cost = costs[0]
+            .times(self.max_evaluations as u64)
+            .plus(costs[1].times(self.finalists as u64))
+            .check("max_evaluations")?;
         Ok(Tune {
             spec: self.clone(),
             space,
             metrics,
             lipschitz,
+            cost,
         })
     }
 
@@ -513,15 +528,31 @@ impl Run<'_> {
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .get(&key)
-            .cloned()
-            .or_else(|| {
-                let o = self.observer.as_ref()?;
-                serde_json::from_value::<Evaluation>(o.stored_evaluation(&key)?).ok()
-            });
+            .cloned();
+        // Stored by an earlier, interrupted run of this tune: the evaluation
+        // as it was made then (computed, so it counts toward the budget, and
+        // its trials count as done), so the resumed run takes the same path.
+        let replayed = match (&cached, &self.observer) {
+            (None, Some(o)) => o
+                .stored_evaluation(&key)
+                .and_then(|v| serde_json::from_value::<Evaluation>(v).ok())
+                .filter(|e| !e.cached && e.phase == phase),
+            _ => None,
+        };
         let ev = if let Some(mut e) = cached {
             e.index = index;
             e.cached = true;
             e.phase = phase.into();
+            e
+        } else if let Some(mut e) = replayed {
+            if phase == "search" && self.computed() >= spec.max_evaluations {
+                return Err(Stop::Budget);
+            }
+            e.index = index;
+            if let Some(o) = &self.observer {
+                o.trials
+                    .fetch_add(e.trials, std::sync::atomic::Ordering::Relaxed);
+            }
             e
         } else {
             if self.observer.as_ref().is_some_and(|o| o.cancelled()) {

@@ -143,6 +143,21 @@ pub fn paper_estimators(scene: &SceneSpec, c: f64) -> Vec<(String, String, Estim
     ]
 }
 
+/// The map a comparison runs for each estimator: the paper's impedance
+/// test, bisection over B = 0 … 1000 N·s/m.
+pub fn map_spec(scene: SceneSpec, accuracy: &Accuracy) -> MapSpec {
+    MapSpec {
+        scene,
+        method: Method::Auto,
+        criterion: Criterion::Impedance,
+        search: SearchKind::Bisect,
+        accuracy: accuracy.clone(),
+        b: None,
+        b_max: 1000.0,
+        k_max: 1e7,
+    }
+}
+
 pub fn compare(scene: &SceneSpec, accuracy: &Accuracy) -> Result<CompareResult, SpecError> {
     compare_observed(scene, accuracy, None, None)
 }
@@ -171,19 +186,13 @@ pub fn compare_observed(
         .into_par_iter()
         .enumerate()
         .map(|(scope, (name, parameters, estimator))| {
-            let spec = MapSpec {
-                scene: SceneSpec {
+            let spec = map_spec(
+                SceneSpec {
                     estimator: estimator.clone(),
                     ..scene.clone()
                 },
-                method: Method::Auto,
-                criterion: Criterion::Impedance,
-                search: SearchKind::Bisect,
-                accuracy: accuracy.clone(),
-                b: None,
-                b_max: 1000.0,
-                k_max: 1e7,
-            };
+                accuracy,
+            );
             Ok(CompareRow {
                 name,
                 parameters,

@@ -4,6 +4,7 @@
 pub mod analytic;
 pub mod compare;
 pub mod controller;
+pub mod cost;
 pub mod hit;
 pub mod poly;
 pub mod probe;

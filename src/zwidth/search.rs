@@ -16,6 +16,7 @@ use serde::Serialize;
 use std::time::Instant;
 
 use super::analytic::{ImpedanceCurve, LinearModel};
+use super::cost::Cost;
 use super::hit::{wall_hit, NoTrace};
 use super::probe::{probe_with, ProbeSetup};
 use super::scene::{validate_wall, Scene};
@@ -100,6 +101,13 @@ pub struct Observer {
     evals_done: std::collections::HashMap<String, serde_json::Value>,
     evals_new: std::sync::Mutex<Vec<StoredEvaluation>>,
     best: std::sync::Mutex<Option<serde_json::Value>>,
+    /// Trials after which the run is stopped as runaway (0: no limit), and
+    /// why it was, once it is.
+    trial_limit: std::sync::atomic::AtomicUsize,
+    runaway: std::sync::Mutex<Option<String>>,
+    /// Set while finished trials cannot be stored: the searches wait
+    /// between trials, and the reason is shown with the progress.
+    held: std::sync::Mutex<Option<String>>,
 }
 
 /// A finished evaluation of a tune (the record is the tune's own JSON).
@@ -126,6 +134,51 @@ impl Observer {
     pub fn with_evaluations(mut self, evals: Vec<StoredEvaluation>) -> Self {
         self.evals_done = evals.into_iter().map(|e| (e.key, e.record)).collect();
         self
+    }
+
+    /// Stop the run once it has done more than `limit` trials (a runaway:
+    /// far beyond what its spec was estimated to cost).
+    pub fn limit_trials(&self, limit: usize) {
+        self.trial_limit
+            .store(limit, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Why the run was stopped as a runaway, if it was.
+    pub fn runaway(&self) -> Option<String> {
+        self.runaway
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
+    }
+
+    /// Hold the run (Some(why)) until released (None).
+    pub fn hold(&self, why: Option<String>) {
+        *self.held.lock().unwrap_or_else(|e| e.into_inner()) = why;
+    }
+
+    /// Why the run is held, if it is.
+    pub fn held(&self) -> Option<String> {
+        self.held.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    /// Wait (between trials) while the run is held and not cancelled.
+    fn wait_while_held(&self) {
+        while self.held().is_some() && !self.cancelled() {
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+    }
+
+    /// Count one trial; past the limit, stop the run and say why.
+    fn count_trial(&self) {
+        use std::sync::atomic::Ordering::Relaxed;
+        let n = self.trials.fetch_add(1, Relaxed) + 1;
+        let limit = self.trial_limit.load(Relaxed);
+        if limit > 0 && n > limit && !self.cancelled() {
+            *self.runaway.lock().unwrap_or_else(|e| e.into_inner()) = Some(format!(
+                "stopped after {n} trials: more than {limit}, four times what the spec was estimated to cost (plus 1000); the scene may not have a boundary the search can find"
+            ));
+            self.cancel.store(true, Relaxed);
+        }
     }
 
     /// An evaluation stored by an earlier run.
@@ -341,7 +394,8 @@ impl Evaluator {
                 p.passive = Some(false);
                 return p;
             }
-            o.trials.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            o.wait_while_held();
+            o.count_trial();
             if let Some(done) = o.replay(self.scope, k, b) {
                 return done;
             }
@@ -434,6 +488,9 @@ impl Evaluator {
     fn bisect_between(&self, b: f64, mut lo: f64, mut hi: f64, points: &mut Vec<Point>) -> f64 {
         while (hi - lo) > self.res.k_rel_tol * hi {
             let mid = 0.5 * (lo + hi);
+            if !(mid > lo && mid < hi) {
+                break; // no f64 between them: as fine as it gets
+            }
             let p = self.classify(mid, b);
             let ok = p.ok();
             points.push(p);
@@ -491,19 +548,19 @@ pub fn map(spec: &MapSpec) -> Result<MapResult, SpecError> {
     map_observed(spec, None, 0)
 }
 
-/// Validate a map request completely without running it.
-pub fn validate(spec: &MapSpec) -> Result<(), SpecError> {
-    prepare(spec).map(|_| ())
+/// Validate a map request completely without running it; what it will cost.
+pub fn validate(spec: &MapSpec) -> Result<Cost, SpecError> {
+    prepare(spec).map(|(_, cost)| cost)
 }
 
-fn prepare(spec: &MapSpec) -> Result<Evaluator, SpecError> {
+fn prepare(spec: &MapSpec) -> Result<(Evaluator, Cost), SpecError> {
     let scene = spec.scene.validate().map_err(|e| e.within("scene"))?;
     let res = spec.accuracy.resolve(&scene)?;
-    if !(spec.b_max.is_finite() && spec.b_max > 0.0) {
+    if !(spec.b_max.is_finite() && spec.b_max > 0.0 && spec.b_max <= 1e6) {
         return Err(SpecError::new(
             "b_max",
             spec.b_max,
-            "must be a finite damping > 0 (N·s/m)",
+            "must be a damping > 0 and at most 1e6 N·s/m",
         ));
     }
     if !(spec.k_max.is_finite() && spec.k_max > 0.0 && spec.k_max <= 1e9) {
@@ -525,7 +582,10 @@ fn prepare(spec: &MapSpec) -> Result<Evaluator, SpecError> {
             validate_wall(0.0, b)?;
         }
     }
-    Evaluator::new(scene, spec.method, spec.criterion, res)
+    let ev = Evaluator::new(scene, spec.method, spec.criterion, res)?;
+    let exact = ev.criterion == Criterion::StrictPassivity && ev.model.is_some();
+    let cost = super::cost::of_map(spec, &ev.res, exact)?;
+    Ok((ev, cost))
 }
 
 /// Run a map, reporting trials to and honouring cancellation from
@@ -536,7 +596,7 @@ pub fn map_observed(
     scope: u32,
 ) -> Result<MapResult, SpecError> {
     let start = Instant::now();
-    let mut ev = prepare(spec)?;
+    let (mut ev, _) = prepare(spec)?;
     ev.observer = observer;
     ev.scope = scope;
     let res = ev.res;

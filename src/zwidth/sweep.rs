@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
+use super::cost::Cost;
 use super::scene::SceneSpec;
 use super::search::{map_observed, MapResult, Observer};
 use super::settings::MapSpec;
@@ -136,22 +137,34 @@ impl ParameterRange {
 impl SweepSpec {
     /// Every variant as (label, value, map spec), validated.
     pub fn variants(&self) -> Result<Vec<(String, Option<f64>, MapSpec)>, SpecError> {
+        self.checked().map(|(v, _)| v)
+    }
+
+    /// Every variant, validated, and what they cost together.
+    pub fn checked(&self) -> Result<(Vec<(String, Option<f64>, MapSpec)>, Cost), SpecError> {
         let out = self.variant_specs()?;
+        let mut cost = Cost::default();
         for (i, (_, _, m)) in out.iter().enumerate() {
             let field = if self.scenes.is_some() {
                 format!("scenes[{i}]")
             } else {
                 "map".into()
             };
-            super::search::validate(m).map_err(|e| match self.scenes {
+            let c = super::search::validate(m).map_err(|e| match self.scenes {
                 Some(_) => SpecError {
                     field: e.field.replacen("scene", &field, 1),
                     ..e
                 },
                 None => e.within(&field),
             })?;
+            cost = cost.plus(c);
         }
-        Ok(out)
+        let field = if self.scenes.is_some() {
+            "scenes"
+        } else {
+            "parameter"
+        };
+        Ok((out, cost.check(field)?))
     }
 
     /// The variants' labels, values and map specs without building their

@@ -1,0 +1,77 @@
+//! `/v1/compare`: K-width, B-width, fidelity and area of finished runs on
+//! one scene, side by side.
+
+use axum::extract::{RawQuery, State};
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+
+use super::experiments::{finished_maps, no_plot};
+use super::problem::{Problem, ProblemBody, QueryArgs};
+use super::AppState;
+use crate::error::SpecError;
+use crate::report::{self, Comparison};
+
+/// Most runs one comparison takes.
+pub const COMPARE_MAX_RUNS: usize = 50;
+
+#[utoipa::path(get, path = "/v1/compare",
+    params(("runs" = String, Query, description = "comma-separated ids of succeeded experiments on one scene"),
+           ("format" = Option<String>, Query, description = "json (default), svg (every boundary on one chart) or text (a table)")),
+    responses((status = 200, description = "K-width, B-width, max fidelity error and area per map, with differences from the first", body = Comparison),
+              (status = 404, description = "no such experiment", body = ProblemBody, content_type = "application/problem+json"),
+              (status = 409, description = "a run has not succeeded", body = ProblemBody, content_type = "application/problem+json"),
+              (status = 422, description = "bad runs or format, or different scenes", body = ProblemBody, content_type = "application/problem+json")))]
+pub async fn compare_runs(
+    State(st): State<AppState>,
+    RawQuery(query): RawQuery,
+) -> Result<Response, Problem> {
+    let q = QueryArgs::parse(query.as_deref(), &["runs", "format"])?;
+    let format = q.str("format").unwrap_or("json");
+    if !["json", "svg", "text"].contains(&format) {
+        return Err(
+            SpecError::new("format", format!("{format:?}"), "must be json, svg or text").into(),
+        );
+    }
+    let runs = q.str("runs").unwrap_or("");
+    let ids: Vec<String> = runs
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(str::to_owned)
+        .collect();
+    if ids.is_empty() || ids.len() > COMPARE_MAX_RUNS {
+        return Err(SpecError::new(
+            "runs",
+            if runs.len() > 80 {
+                format!(
+                    "{}… ({} characters)",
+                    &runs[..runs.char_indices().nth(60).map_or(runs.len(), |(i, _)| i)],
+                    runs.len()
+                )
+            } else {
+                runs.to_string()
+            },
+            format!("give 1 to {COMPARE_MAX_RUNS} experiment ids, comma-separated"),
+        )
+        .into());
+    }
+    let mut all = Vec::new();
+    for id in &ids {
+        all.extend(finished_maps(&st, id).await?.2);
+    }
+    let c = report::compare(ids, all)?;
+    Ok(match format {
+        "svg" => (
+            [(header::CONTENT_TYPE, "image/svg+xml")],
+            c.svg().map_err(no_plot)?,
+        )
+            .into_response(),
+        "text" => (
+            [(header::CONTENT_TYPE, "text/plain; charset=utf-8")],
+            c.table(),
+        )
+            .into_response(),
+        _ => Json(c).into_response(),
+    })
+}

@@ -1,0 +1,184 @@
+//! Who may write, and from where. Mutating requests need the bearer token
+//! when tokens are configured (compared in constant time), must come from
+//! this server's own origin (a page elsewhere cannot make the operator's
+//! browser write: `Origin`, `Sec-Fetch-Site` and, without a token, `Host`
+//! are checked), and send JSON bodies as `application/json`.
+
+use axum::extract::{Request, State};
+use axum::http::{header, HeaderMap, Method, StatusCode};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+
+use super::problem::Problem;
+use super::AppState;
+
+/// Equal without revealing where two secrets differ (time independent of
+/// the content; the length of the configured token is not secret).
+pub fn same_secret(a: &[u8], b: &[u8]) -> bool {
+    if a.len() != b.len() {
+        return false;
+    }
+    a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// Mutating endpoints need `Authorization: Bearer <token>` when tokens are
+/// configured: 401 without one, 403 with a wrong one.
+pub fn authorize(st: &AppState, headers: &HeaderMap) -> Result<(), Problem> {
+    if st.tokens.is_empty() {
+        return Ok(());
+    }
+    let given = headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "));
+    match given {
+        None => Err(Problem::new(
+            StatusCode::UNAUTHORIZED,
+            "Unauthorized",
+            "this endpoint needs Authorization: Bearer <token>",
+        )
+        .with_field("Authorization")),
+        Some(t) => {
+            // Every configured token is compared (no early exit).
+            let ok = st.tokens.iter().fold(false, |acc, k| {
+                acc | same_secret(k.as_bytes(), t.as_bytes())
+            });
+            if ok {
+                Ok(())
+            } else {
+                Err(Problem::new(
+                    StatusCode::FORBIDDEN,
+                    "Forbidden",
+                    "the bearer token is not accepted",
+                )
+                .with_field("Authorization"))
+            }
+        }
+    }
+}
+
+/// A JSON body must say so (a form post from another site cannot).
+pub fn require_json(headers: &HeaderMap) -> Result<(), Problem> {
+    let ct = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("");
+    let mime = ct
+        .split(';')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .to_ascii_lowercase();
+    if mime == "application/json" {
+        Ok(())
+    } else {
+        Err(Problem::new(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            "Unsupported media type",
+            format!(
+                "Content-Type = {:?} is not allowed: send the body as application/json",
+                ct
+            ),
+        )
+        .with_field("Content-Type"))
+    }
+}
+
+/// Host names that are this machine.
+fn loopback_host(host: &str) -> bool {
+    let name = match host.strip_prefix('[') {
+        Some(v6) => v6.split(']').next().unwrap_or(""),
+        None => host.rsplit_once(':').map_or(host, |(h, _)| h),
+    };
+    name.eq_ignore_ascii_case("localhost")
+        || name
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
+}
+
+/// Where writes may come from: no cross-site browser request, an `Origin`
+/// that is this server's (or one of `--allow-origin`), and without tokens
+/// a loopback `Host` (a DNS-rebinding page names its own host).
+pub async fn same_origin_writes(State(st): State<AppState>, req: Request, next: Next) -> Response {
+    if matches!(*req.method(), Method::GET | Method::HEAD | Method::OPTIONS) {
+        return next.run(req).await;
+    }
+    match check_origin(&st, req.headers()) {
+        Ok(()) => next.run(req).await,
+        Err(p) => p.into_response(),
+    }
+}
+
+fn check_origin(st: &AppState, h: &HeaderMap) -> Result<(), Problem> {
+    let text = |name: header::HeaderName| h.get(name).and_then(|v| v.to_str().ok());
+    let refuse = |field: &str, why: String| {
+        Err(
+            Problem::new(StatusCode::FORBIDDEN, "Cross-origin write refused", why)
+                .with_field(field),
+        )
+    };
+    let host = text(header::HOST).unwrap_or("");
+    if st.tokens.is_empty() && !loopback_host(host) {
+        return refuse(
+            "Host",
+            format!("Host = {host:?} is not allowed: without a token this server takes writes addressed to localhost only"),
+        );
+    }
+    if let Some(site) = h.get("sec-fetch-site").and_then(|v| v.to_str().ok()) {
+        if site == "cross-site" || site == "same-site" {
+            return refuse(
+                "Sec-Fetch-Site",
+                format!("Sec-Fetch-Site = {site:?}: a page of another site may not write here"),
+            );
+        }
+    }
+    if let Some(origin) = text(header::ORIGIN) {
+        let own = format!("http://{host}");
+        let allowed = origin == own || st.allow_origins.iter().any(|o| o == origin);
+        if !allowed {
+            return refuse(
+                "Origin",
+                format!(
+                    "Origin = {origin:?} is not allowed: writes come from {own} or an origin given with --allow-origin"
+                ),
+            );
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn secrets_compare_by_content_and_length() {
+        assert!(same_secret(b"s3cret", b"s3cret"));
+        assert!(!same_secret(b"s3cret", b"s3creT"));
+        assert!(!same_secret(b"s3cret", b"s3cre"));
+        assert!(!same_secret(b"", b"x"));
+        assert!(same_secret(b"", b""));
+    }
+
+    #[test]
+    fn loopback_hosts() {
+        for h in [
+            "127.0.0.1:8080",
+            "localhost:1",
+            "LOCALHOST",
+            "[::1]:80",
+            "127.9.9.9",
+        ] {
+            assert!(loopback_host(h), "{h}");
+        }
+        for h in [
+            "evil.example:8080",
+            "10.0.0.1:80",
+            "[2001:db8::1]:80",
+            "",
+            "localhost.evil:80",
+        ] {
+            assert!(!loopback_host(h), "{h}");
+        }
+    }
+}

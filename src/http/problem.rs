@@ -1,0 +1,315 @@
+//! Errors as RFC 9457 `application/problem+json`, naming the field where
+//! one is to blame; JSON bodies and query strings parsed so that every
+//! rejection says which field, which value and what is allowed; and a
+//! last layer that turns any other error response (the framework's own:
+//! unknown route, wrong method, body too large, timeout) into a problem.
+
+use axum::http::{header, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+use serde_json::{json, Value};
+use std::collections::BTreeMap;
+
+use crate::error::SpecError;
+use crate::store::Fault;
+
+/// The body of every error response (RFC 9457 problem details).
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct ProblemBody {
+    #[serde(rename = "type")]
+    pub kind: String,
+    pub title: String,
+    pub status: u16,
+    pub detail: String,
+    /// The offending field, when one is to blame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+}
+
+pub const PROBLEM_JSON: &str = "application/problem+json";
+
+/// An RFC 9457 problem.
+#[derive(Debug)]
+pub struct Problem {
+    pub status: StatusCode,
+    pub title: &'static str,
+    pub detail: String,
+    pub field: Option<String>,
+    /// Seconds after which a retry may succeed (503).
+    pub retry_after_s: Option<u32>,
+}
+
+impl Problem {
+    pub fn new(status: StatusCode, title: &'static str, detail: impl Into<String>) -> Self {
+        Self {
+            status,
+            title,
+            detail: detail.into(),
+            field: None,
+            retry_after_s: None,
+        }
+    }
+
+    pub fn with_field(mut self, field: impl Into<String>) -> Self {
+        self.field = Some(field.into());
+        self
+    }
+
+    pub fn internal(e: impl std::fmt::Display) -> Self {
+        tracing::error!(error = %e, "internal error");
+        Self::new(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "Internal error",
+            "the server could not complete the request",
+        )
+    }
+
+    /// A storage error, as the client can act on it: 507 when the disk is
+    /// full (nothing was stored), 503 with Retry-After when the database is
+    /// busy or corrupt, else 500.
+    pub fn store(e: sqlx::Error) -> Self {
+        match Fault::of(&e) {
+            Fault::Full => {
+                tracing::error!(error = %e, "storage full");
+                Self::new(
+                    StatusCode::INSUFFICIENT_STORAGE,
+                    "Insufficient storage",
+                    "the database could not be written (no space left on its disk?): nothing was stored; retry once space is freed",
+                )
+            }
+            Fault::Busy => {
+                tracing::warn!(error = %e, "database busy");
+                let mut p = Self::new(
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    "Storage busy",
+                    "the database is locked by another writer: nothing was stored; retry",
+                );
+                p.retry_after_s = Some(1);
+                p
+            }
+            Fault::Corrupt => {
+                tracing::error!(error = %e, "database corrupt");
+                Self::new(
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    "Database corrupt",
+                    format!("{e}; restore a backup (zwidth backup) and restart"),
+                )
+            }
+            Fault::Other => Self::internal(e),
+        }
+    }
+
+    pub fn not_found(what: &str, id: &str) -> Self {
+        Self::new(
+            StatusCode::NOT_FOUND,
+            "Not found",
+            format!("no {what} {id}"),
+        )
+    }
+}
+
+impl From<SpecError> for Problem {
+    fn from(e: SpecError) -> Self {
+        Self::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "Invalid request",
+            e.to_string(),
+        )
+        .with_field(e.field)
+    }
+}
+
+impl IntoResponse for Problem {
+    fn into_response(self) -> Response {
+        let mut body = json!({
+            "type": "about:blank",
+            "title": self.title,
+            "status": self.status.as_u16(),
+            "detail": self.detail,
+        });
+        if let Some(f) = self.field {
+            body["field"] = Value::String(f);
+        }
+        let mut r = (
+            self.status,
+            [(header::CONTENT_TYPE, PROBLEM_JSON)],
+            body.to_string(),
+        )
+            .into_response();
+        if let Some(s) = self.retry_after_s {
+            r.headers_mut()
+                .insert(header::RETRY_AFTER, HeaderValue::from(s));
+        }
+        r
+    }
+}
+
+/// Parse a JSON body into `T`, naming the field a parse error is in
+/// (`scene.device.mass`), or `body` when it is the whole document.
+pub fn json_body<T: serde::de::DeserializeOwned>(bytes: &[u8], what: &str) -> Result<T, Problem> {
+    let de = &mut serde_json::Deserializer::from_slice(bytes);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let inner = e.inner().to_string();
+        let mut field = e.path().to_string();
+        if field.is_empty() || field == "." || field == "?" {
+            field = named_in(&inner).unwrap_or_else(|| "body".into());
+        }
+        Problem::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "Invalid request",
+            format!("the body is not a valid {what}: {field}: {inner}"),
+        )
+        .with_field(field)
+    })
+}
+
+/// The field serde names in "unknown field `x`" / "missing field `x`".
+fn named_in(msg: &str) -> Option<String> {
+    for pre in ["unknown field `", "missing field `", "unknown variant `"] {
+        if let Some(rest) = msg.split(pre).nth(1) {
+            let name = rest.split('`').next()?;
+            return Some(if pre == "unknown variant `" {
+                "kind".into()
+            } else {
+                name.to_string()
+            });
+        }
+    }
+    None
+}
+
+/// A query string as named values; a name not in `allowed`, a repeated
+/// one, or a string that is not `a=b&c=d` is a 422 naming it.
+pub struct QueryArgs(BTreeMap<String, String>);
+
+impl QueryArgs {
+    pub fn parse(raw: Option<&str>, allowed: &[&str]) -> Result<Self, Problem> {
+        let pairs: Vec<(String, String)> =
+            serde_urlencoded::from_str(raw.unwrap_or("")).map_err(|e| {
+                Problem::new(
+                    StatusCode::UNPROCESSABLE_ENTITY,
+                    "Invalid query",
+                    format!("the query string cannot be read: {e}"),
+                )
+                .with_field("query")
+            })?;
+        let mut map = BTreeMap::new();
+        for (k, v) in pairs {
+            if !allowed.contains(&k.as_str()) {
+                return Err(SpecError::new(
+                    k.clone(),
+                    format!("{v:?}"),
+                    format!(
+                        "is not a parameter here; allowed: {}",
+                        if allowed.is_empty() {
+                            "none".into()
+                        } else {
+                            allowed.join(", ")
+                        }
+                    ),
+                )
+                .into());
+            }
+            if map.insert(k.clone(), v).is_some() {
+                return Err(SpecError::new(k, "(repeated)", "give it once").into());
+            }
+        }
+        Ok(Self(map))
+    }
+
+    pub fn str(&self, name: &str) -> Option<&str> {
+        self.0.get(name).map(String::as_str)
+    }
+
+    /// An integer in `range`, or `None` when absent.
+    pub fn int(
+        &self,
+        name: &str,
+        range: std::ops::RangeInclusive<i64>,
+    ) -> Result<Option<i64>, Problem> {
+        let Some(v) = self.str(name) else {
+            return Ok(None);
+        };
+        match v.parse::<i64>() {
+            Ok(n) if range.contains(&n) => Ok(Some(n)),
+            _ => Err(SpecError::new(
+                name,
+                format!("{v:?}"),
+                format!(
+                    "must be a whole number {} to {}",
+                    range.start(),
+                    range.end()
+                ),
+            )
+            .into()),
+        }
+    }
+
+    /// `true`/`false` (also 1/0), or `None` when absent.
+    pub fn flag(&self, name: &str) -> Result<Option<bool>, Problem> {
+        match self.str(name) {
+            None => Ok(None),
+            Some("true" | "1") => Ok(Some(true)),
+            Some("false" | "0") => Ok(Some(false)),
+            Some(v) => Err(SpecError::new(name, format!("{v:?}"), "must be true or false").into()),
+        }
+    }
+}
+
+/// Most bytes of a framework error's text kept as the problem's detail.
+const DETAIL_MAX: usize = 500;
+
+/// Turn every error response that is not already a problem (axum's and
+/// tower-http's own rejections) into one, keeping status and text.
+pub async fn problems_everywhere(resp: Response) -> Response {
+    let status = resp.status();
+    let is_problem = resp
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|ct| ct.starts_with(PROBLEM_JSON));
+    if !(status.is_client_error() || status.is_server_error()) || is_problem {
+        return resp;
+    }
+    let (parts, body) = resp.into_parts();
+    let text = axum::body::to_bytes(body, 64 * 1024)
+        .await
+        .map(|b| String::from_utf8_lossy(&b).into_owned())
+        .unwrap_or_default();
+    let mut detail: String = text.trim().chars().take(DETAIL_MAX).collect();
+    let (title, field) = match status {
+        StatusCode::PAYLOAD_TOO_LARGE => ("Body too large", Some("body")),
+        StatusCode::NOT_FOUND => ("Not found", None),
+        StatusCode::METHOD_NOT_ALLOWED => ("Method not allowed", None),
+        StatusCode::SERVICE_UNAVAILABLE => ("Unavailable", None),
+        StatusCode::BAD_REQUEST if detail.contains("path") || detail.contains("Path") => {
+            ("Invalid path", Some("id"))
+        }
+        StatusCode::URI_TOO_LONG => ("URI too long", Some("query")),
+        _ => ("Request failed", None),
+    };
+    if detail.is_empty() {
+        detail = match status {
+            StatusCode::PAYLOAD_TOO_LARGE => {
+                format!("the body is over {} bytes", super::BODY_LIMIT)
+            }
+            StatusCode::NOT_FOUND => "no such resource".into(),
+            StatusCode::METHOD_NOT_ALLOWED => "this resource does not take that method".into(),
+            StatusCode::SERVICE_UNAVAILABLE => "the request took too long (timeout); retry".into(),
+            s => s.canonical_reason().unwrap_or("error").into(),
+        };
+    }
+    let mut p = Problem::new(status, title, detail);
+    p.field = field.map(str::to_owned);
+    if status == StatusCode::SERVICE_UNAVAILABLE {
+        p.retry_after_s = Some(1);
+    }
+    let mut r = p.into_response();
+    // Keep the framework's other headers (Allow on a 405, the request id).
+    for (k, v) in parts.headers.iter() {
+        if k != header::CONTENT_TYPE && k != header::CONTENT_LENGTH {
+            r.headers_mut().entry(k).or_insert(v.clone());
+        }
+    }
+    r
+}

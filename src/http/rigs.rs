@@ -1,0 +1,113 @@
+//! `/v1/rigs`: what each rig can do, its window, its load.
+
+use axum::body::Bytes;
+use axum::extract::{Path, State};
+use axum::http::HeaderMap;
+use axum::Json;
+use serde::Serialize;
+use std::sync::Arc;
+
+use super::guard::{authorize, require_json};
+use super::problem::{json_body, Problem, ProblemBody};
+use super::AppState;
+use crate::jobs::window::Window;
+use crate::rig::{Rig, RigInfo};
+
+/// A rig: what it can do, its window, and its load.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct RigView {
+    #[serde(flatten)]
+    pub info: RigInfo,
+    /// Recurring window outside which it starts nothing new; null: any time.
+    pub window: Option<Window>,
+    /// Whether it may start an experiment now.
+    pub open_now: bool,
+    /// When it may next start one (unix ms; now when open).
+    pub next_start_ms: i64,
+    /// Experiments waiting for it (queued or scheduled).
+    pub waiting: i64,
+    /// The experiment it is running, if any.
+    pub running: Option<String>,
+}
+
+pub async fn rig_view(st: &AppState, rig: &Arc<dyn Rig>) -> Result<RigView, Problem> {
+    let id = &rig.info().id;
+    let window = st.store.rig_window(id).await.map_err(Problem::store)?;
+    let now = jiff::Timestamp::now();
+    let next = match window.as_ref().and_then(|w| w.validate().ok()) {
+        Some(h) => h.next_open(now),
+        None => now,
+    };
+    let (waiting, running) = st.store.rig_load(id).await.map_err(Problem::store)?;
+    Ok(RigView {
+        info: rig.info().clone(),
+        open_now: next == now,
+        next_start_ms: next.as_millisecond(),
+        window,
+        waiting,
+        running,
+    })
+}
+
+#[utoipa::path(get, path = "/v1/rigs", responses((status = 200, description = "the rigs, the first is the default", body = Vec<RigView>)))]
+pub async fn rigs(State(st): State<AppState>) -> Result<Json<Vec<RigView>>, Problem> {
+    let mut out = Vec::new();
+    for r in st.rigs.iter() {
+        out.push(rig_view(&st, r).await?);
+    }
+    Ok(Json(out))
+}
+
+#[utoipa::path(put, path = "/v1/rigs/{id}/window", request_body = Window, params(("id" = String, Path, description = "rig id")),
+    responses((status = 200, body = RigView),
+              (status = 401, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 403, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 422, description = "invalid window", body = ProblemBody, content_type = "application/problem+json")),
+    security((), ("bearer" = [])))]
+pub async fn set_window(
+    State(st): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+    body: Bytes,
+) -> Result<Json<RigView>, Problem> {
+    authorize(&st, &headers)?;
+    let rig = st
+        .rig(&id)
+        .cloned()
+        .ok_or_else(|| Problem::not_found("rig", &id))?;
+    require_json(&headers)?;
+    let w: Window = json_body(
+        &body,
+        r#"window {"start":"HH:MM","end":"HH:MM","tz":"Europe/Berlin"}"#,
+    )?;
+    w.validate()?;
+    st.store
+        .set_rig_window(&id, Some(&w))
+        .await
+        .map_err(Problem::store)?;
+    Ok(Json(rig_view(&st, &rig).await?))
+}
+
+#[utoipa::path(delete, path = "/v1/rigs/{id}/window", params(("id" = String, Path, description = "rig id")),
+    responses((status = 200, body = RigView),
+              (status = 401, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 403, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json")),
+    security((), ("bearer" = [])))]
+pub async fn clear_window(
+    State(st): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> Result<Json<RigView>, Problem> {
+    authorize(&st, &headers)?;
+    let rig = st
+        .rig(&id)
+        .cloned()
+        .ok_or_else(|| Problem::not_found("rig", &id))?;
+    st.store
+        .set_rig_window(&id, None)
+        .await
+        .map_err(Problem::store)?;
+    Ok(Json(rig_view(&st, &rig).await?))
+}

@@ -1,0 +1,182 @@
+//! What a map will cost before it runs: damping columns, stiffness steps,
+//! trials, stored rows and bytes, from the search's own arithmetic. Every
+//! request is checked against the limits below when it is validated, so an
+//! accepted request never builds an unbounded range or runs without end;
+//! a run that overshoots its estimate by a wide margin is stopped (see
+//! [`Cost::trial_limit`]).
+
+use serde::Serialize;
+
+use super::settings::{MapSpec, Resolved, SearchKind};
+use crate::error::SpecError;
+
+/// Most damping values (B columns) one map visits.
+pub const MAX_B_COLUMNS: u64 = 2_000;
+/// Most stiffness steps (`k_max / accuracy.k_step`) a trace or grid walks.
+pub const MAX_K_STEPS: u64 = 100_000;
+/// Finest relative K resolution a bisection may ask for (f64 has ~1e-16;
+/// below 1e-6 each halving buys nothing a haptic device can show).
+pub const MIN_K_REL_TOL: f64 = 1e-6;
+/// Most trials one experiment may plan (each is a stored row).
+pub const MAX_TRIALS: u64 = 2_000_000;
+/// Bytes one stored trial takes, measured: the `trials` table with its
+/// primary-key index over 10 000 bisection trials (docs/service.md).
+pub const BYTES_PER_TRIAL: u64 = 180;
+
+/// The planned work of one map or a whole experiment.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, utoipa::ToSchema)]
+pub struct Cost {
+    /// Maps (Z-width searches) the experiment runs.
+    pub maps: u64,
+    /// Damping values searched, over all maps.
+    pub b_columns: u64,
+    /// Trials expected at most, over all maps (a bisection's count is a
+    /// bound; a trace's assumes a boundary that falls with B).
+    pub trials: u64,
+    /// Rows stored: one per trial.
+    pub stored_rows: u64,
+    /// Bytes those rows take in the database (estimate).
+    pub stored_bytes: u64,
+}
+
+impl Cost {
+    fn of_trials(b_columns: u64, trials: u64) -> Self {
+        Self {
+            maps: 1,
+            b_columns,
+            trials,
+            stored_rows: trials,
+            stored_bytes: trials.saturating_mul(BYTES_PER_TRIAL),
+        }
+    }
+
+    /// `n` copies of this work (a tune's evaluations, a compare's estimators).
+    pub fn times(self, n: u64) -> Self {
+        Self {
+            maps: self.maps.saturating_mul(n),
+            b_columns: self.b_columns.saturating_mul(n),
+            trials: self.trials.saturating_mul(n),
+            stored_rows: self.stored_rows.saturating_mul(n),
+            stored_bytes: self.stored_bytes.saturating_mul(n),
+        }
+    }
+
+    pub fn plus(self, o: Self) -> Self {
+        Self {
+            maps: self.maps.saturating_add(o.maps),
+            b_columns: self.b_columns.saturating_add(o.b_columns),
+            trials: self.trials.saturating_add(o.trials),
+            stored_rows: self.stored_rows.saturating_add(o.stored_rows),
+            stored_bytes: self.stored_bytes.saturating_add(o.stored_bytes),
+        }
+    }
+
+    /// Refuse a plan over [`MAX_TRIALS`], naming `field`.
+    pub fn check(self, field: &str) -> Result<Self, SpecError> {
+        if self.trials > MAX_TRIALS {
+            return Err(SpecError::new(
+                field,
+                format!("{} trials planned", self.trials),
+                format!(
+                    "an experiment may plan at most {MAX_TRIALS} trials (~{} MB stored): use fewer damping values (b, b_max, accuracy.b_step), a coarser accuracy, or fewer maps",
+                    MAX_TRIALS * BYTES_PER_TRIAL / 1_000_000
+                ),
+            ));
+        }
+        Ok(self)
+    }
+
+    /// Trials after which a run is stopped as runaway: four times the
+    /// estimate, plus slack for tiny plans.
+    pub fn trial_limit(self) -> u64 {
+        self.trials.saturating_mul(4).saturating_add(1_000)
+    }
+}
+
+/// Trials one bisection at one B may take: bracketing by doubling from
+/// `k_step` up to `k_max` (or halving down ten times), then halving the
+/// bracket until it is within `k_rel_tol`.
+fn bisect_trials(res: &Resolved, k_max: f64, robust: bool) -> u64 {
+    let up = (k_max / res.k_step).log2().max(0.0).ceil() as u64 + 1;
+    let bracket = up.max(11) + 1;
+    let halvings = (1.0 / res.k_rel_tol).log2().ceil() as u64 + 1;
+    // Robust: at most 8 rounds of 5 checks below and a new bisection.
+    let checks = if robust { 8 * (5 + halvings) } else { 0 };
+    bracket + halvings + checks
+}
+
+/// The cost of one map, checked against the per-map limits. `exact` is
+/// true when the analytic engine solves the boundary per B directly.
+pub fn of_map(spec: &MapSpec, res: &Resolved, exact: bool) -> Result<Cost, SpecError> {
+    let b_columns = match &spec.b {
+        Some(bs) => {
+            let n = bs.len() as u64;
+            if n > MAX_B_COLUMNS {
+                return Err(SpecError::new(
+                    "b",
+                    format!("{n} values"),
+                    format!("give at most {MAX_B_COLUMNS} damping values"),
+                ));
+            }
+            n
+        }
+        None => {
+            let n = (spec.b_max / res.b_step).floor();
+            if !(n < MAX_B_COLUMNS as f64) {
+                let (field, value) = if spec.b_max > 1000.0 {
+                    ("b_max", spec.b_max)
+                } else {
+                    ("accuracy.b_step", res.b_step)
+                };
+                return Err(SpecError::new(
+                    field,
+                    value,
+                    format!(
+                        "b_max / accuracy.b_step = {n:.3e} damping columns; at most {MAX_B_COLUMNS}: lower b_max or raise accuracy.b_step"
+                    ),
+                ));
+            }
+            n as u64 + 1
+        }
+    };
+    if res.k_rel_tol < MIN_K_REL_TOL {
+        return Err(SpecError::new(
+            "accuracy.k_rel_tol",
+            res.k_rel_tol,
+            format!("must be {MIN_K_REL_TOL:e} to 0.5"),
+        ));
+    }
+    let k_steps = (spec.k_max / res.k_step).ceil();
+    let walks_k = matches!(spec.search, SearchKind::Trace | SearchKind::Grid) && !exact;
+    if walks_k && !(k_steps <= MAX_K_STEPS as f64) {
+        return Err(SpecError::new(
+            "accuracy.k_step",
+            res.k_step,
+            format!(
+                "k_max / accuracy.k_step = {k_steps:.3e} stiffness steps; a {} walks at most {MAX_K_STEPS}: raise accuracy.k_step or lower k_max",
+                if spec.search == SearchKind::Trace { "trace" } else { "grid" }
+            ),
+        ));
+    }
+    let k_steps = k_steps as u64;
+    let trials = if exact {
+        b_columns
+    } else {
+        match spec.search {
+            SearchKind::Bisect | SearchKind::RobustBisect => {
+                b_columns * bisect_trials(res, spec.k_max, spec.search == SearchKind::RobustBisect)
+            }
+            // Up the boundary once, then a step or two per B (2011 paper §2.4).
+            SearchKind::Trace => 2 * k_steps + 3 * b_columns,
+            SearchKind::Grid => {
+                let nb = if spec.b.is_some() {
+                    b_columns
+                } else {
+                    b_columns.min(60)
+                };
+                nb * k_steps.clamp(1, 60)
+            }
+        }
+    };
+    Cost::of_trials(b_columns, trials).check("accuracy")
+}

@@ -1,0 +1,111 @@
+//! The service as users run it: the real binary on 127.0.0.1:0 with a
+//! fresh database in a temporary directory (removed when the server is
+//! dropped), driven over HTTP.
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+pub struct Server {
+    pub child: Child,
+    pub base: String,
+    pub _dir: std::path::PathBuf,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        // Tests that restart on the same directory `forget` the first server.
+        let _ = std::fs::remove_dir_all(&self._dir);
+    }
+}
+
+pub fn start() -> Server {
+    let dir =
+        std::env::temp_dir().join(format!("zwidth-svc-{}-{}", std::process::id(), uuid_like()));
+    std::fs::create_dir_all(&dir).unwrap();
+    start_in(dir)
+}
+
+pub fn start_in(dir: std::path::PathBuf) -> Server {
+    start_with(dir, &[])
+}
+
+pub fn start_with(dir: std::path::PathBuf, extra: &[&str]) -> Server {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+        .args(["serve", "--bind", "127.0.0.1:0"])
+        .args(extra)
+        .arg("--db")
+        .arg(dir.join("test.db"))
+        .env("RUST_LOG", "warn")
+        .env_remove("ZWIDTH_TOKENS")
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(dir.join("serve.err")).unwrap())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let base = line.trim().rsplit(' ').next().unwrap().to_string();
+    assert!(base.starts_with("http://127.0.0.1:"), "{line}");
+    Server {
+        child,
+        base,
+        _dir: dir,
+    }
+}
+
+pub fn uuid_like() -> u128 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos()
+}
+
+pub fn post(url: &str, body: &str) -> (u16, serde_json::Value, String) {
+    match ureq::post(url)
+        .set("content-type", "application/json")
+        .send_string(body)
+    {
+        Ok(r) => {
+            let ct = r.content_type().to_string();
+            (r.status(), r.into_json().unwrap(), ct)
+        }
+        Err(ureq::Error::Status(code, r)) => {
+            let ct = r.content_type().to_string();
+            (code, r.into_json().unwrap(), ct)
+        }
+        Err(e) => panic!("{e}"),
+    }
+}
+
+pub fn get(url: &str) -> serde_json::Value {
+    ureq::get(url).call().unwrap().into_json().unwrap()
+}
+
+/// Status, content type and body text of any request.
+pub fn fetch(r: Result<ureq::Response, ureq::Error>) -> (u16, String, String) {
+    match r {
+        Ok(r) | Err(ureq::Error::Status(_, r)) => {
+            let (code, ct) = (r.status(), r.content_type().to_string());
+            (code, ct, r.into_string().unwrap())
+        }
+        Err(e) => panic!("{e}"),
+    }
+}
+
+/// Poll an experiment until it ends; panics after `secs`.
+pub fn wait_end(base: &str, id: &str, secs: u64) -> serde_json::Value {
+    let deadline = Instant::now() + Duration::from_secs(secs);
+    loop {
+        let v = get(&format!("{base}/v1/experiments/{id}"));
+        if ["succeeded", "failed", "cancelled"].contains(&v["state"].as_str().unwrap()) {
+            return v;
+        }
+        assert!(Instant::now() < deadline, "still {v}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
