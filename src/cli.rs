@@ -275,6 +275,17 @@ pub enum Command {
     },
     /// Print the service's OpenAPI 3.1 description (what api/openapi.json holds).
     Openapi,
+    /// A consistent copy of a service's database in one file (SQLite
+    /// `VACUUM INTO`), safe while the service runs; restore by starting
+    /// `zwidth serve --db` on the copy.
+    Backup {
+        /// The database to copy.
+        #[arg(long, env = "ZWIDTH_DB", default_value = "zwidth.db")]
+        db: PathBuf,
+        /// The copy to write (must not exist).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Measurements: `zwidth bench tradeoff`.
     Bench {
         #[command(subcommand)]
@@ -865,6 +876,33 @@ pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(),
             }
         }
         Command::Openapi => writeln!(stdout, "{}", crate::http::openapi_json()).map_err(io),
+        Command::Backup { db, out } => {
+            if !db.is_file() {
+                return Err(CliError::Input(format!(
+                    "--db {} is not a database file",
+                    db.display()
+                )));
+            }
+            if out.exists() {
+                return Err(CliError::Input(format!(
+                    "--out {} exists: give a new file",
+                    out.display()
+                )));
+            }
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .map_err(|e| CliError::Failure(format!("cannot start the runtime: {e}")))?;
+            rt.block_on(async {
+                let store = crate::store::Store::open(&db)
+                    .await
+                    .map_err(|e| CliError::Failure(format!("cannot open {}: {e}", db.display())))?;
+                let r = store.backup(&out).await;
+                let _ = store.close().await;
+                r.map_err(|e| CliError::Failure(format!("backup to {} failed: {e}", out.display())))
+            })?;
+            writeln!(stdout, "{} -> {}", db.display(), out.display()).map_err(io)
+        }
         Command::Status { id, server } => write_json(stdout, &client(server).status(&id)?),
         Command::Watch { id, server } => {
             let v = client(server).watch(&id)?;

@@ -1,7 +1,7 @@
 //! The service as users run it: the real binary on 127.0.0.1:0 with a fresh
 //! database, driven over HTTP.
 
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 mod common;

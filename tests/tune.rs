@@ -148,7 +148,12 @@ fn identical_evaluations_come_from_the_cache_and_a_resumed_tune_redoes_none() {
 
 /// What must not differ between an uninterrupted tune and a resumed one:
 /// every evaluation's parameters, phase, score and origin, and the best.
-fn path_of(r: &zwidth::tune::TuneResult) -> Vec<(String, Vec<(String, u64)>, u64, bool)> {
+/// One evaluation as (phase, parameter bits, score bits, cached).
+type Step = (String, Vec<(String, u64)>, u64, bool);
+/// A parameter with its bounds.
+type Param<'a> = (&'a str, f64, f64);
+
+fn path_of(r: &zwidth::tune::TuneResult) -> Vec<Step> {
     r.history
         .iter()
         .map(|e| {
@@ -173,7 +178,7 @@ fn a_tune_killed_at_any_point_resumes_to_the_uninterrupted_result_with_every_sol
     // path: replayed evaluations count toward the budget as the first time.
     let one_d = [("cutoff_hz", 20.0, 400.0)];
     let two_d = [("cutoff_hz", 20.0, 400.0), ("order", 1.0, 4.0)];
-    let cases: [(SolverKind, &[(&str, f64, f64)]); 9] = [
+    let cases: [(SolverKind, &[Param]); 9] = [
         (SolverKind::Auto, &one_d),
         (SolverKind::Auto, &two_d),
         (SolverKind::Brent, &one_d),

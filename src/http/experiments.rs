@@ -11,7 +11,7 @@ use serde::Serialize;
 use serde_json::{json, Value};
 
 use super::guard::{authorize, require_json};
-use super::problem::{json_body, Problem, ProblemBody, QueryArgs};
+use super::problem::{from_value, json_body, Problem, ProblemBody, QueryArgs};
 use super::AppState;
 use crate::error::SpecError;
 use crate::jobs::ExperimentSpec;
@@ -117,6 +117,35 @@ impl AppState {
     }
 }
 
+/// The experiment in a body. The kind is read first, then the body as that
+/// kind, so a parse error names its field (`scene.device.mass`), which
+/// serde's internally tagged enums lose.
+fn experiment_body(bytes: &[u8]) -> Result<ExperimentSpec, Problem> {
+    let mut v: Value = json_body(bytes, "experiment")?;
+    let kinds = "must be one of map, compare, sweep, tune";
+    let Some(obj) = v.as_object_mut() else {
+        return Err(SpecError::new(
+            "body",
+            "(not an object)",
+            "must be a JSON object with a kind",
+        )
+        .into());
+    };
+    let kind = match obj.remove("kind") {
+        Some(Value::String(k)) => k,
+        Some(other) => return Err(SpecError::new("kind", other, kinds).into()),
+        None => return Err(SpecError::new("kind", "missing", kinds).into()),
+    };
+    let what = "experiment";
+    Ok(match kind.as_str() {
+        "map" => ExperimentSpec::Map(from_value(v, what, "")?),
+        "compare" => ExperimentSpec::Compare(from_value(v, what, "")?),
+        "sweep" => ExperimentSpec::Sweep(from_value(v, what, "")?),
+        "tune" => ExperimentSpec::Tune(from_value(v, what, "")?),
+        other => return Err(SpecError::new("kind", format!("{other:?}"), kinds).into()),
+    })
+}
+
 /// Longest Idempotency-Key accepted (characters).
 const KEY_MAX: usize = 200;
 
@@ -145,7 +174,7 @@ pub async fn submit(
     authorize(&st, &headers)?;
     let q = QueryArgs::parse(query.as_deref(), &["priority", "not_before_ms", "rig"])?;
     require_json(&headers)?;
-    let spec: ExperimentSpec = json_body(&body, "experiment")?;
+    let spec = experiment_body(&body)?;
     let estimate = spec.validate()?;
     let rig = match q.str("rig") {
         None => st.rigs[0].clone(),

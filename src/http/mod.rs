@@ -208,15 +208,21 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     let store = Store::open(db)
         .await
         .map_err(|e| format!("cannot open database {}: {e}", db.display()))?;
-    let requeued = store
-        .requeue_interrupted()
-        .await
-        .map_err(|e| e.to_string())?;
-    if requeued > 0 {
-        tracing::info!(
-            requeued,
-            "requeued experiments interrupted by the last shutdown"
-        );
+    // A corrupt database is served read-only: /healthz says so, writes are
+    // refused with the reason, nothing is requeued or run.
+    if let Some(why) = store.health().corrupt {
+        tracing::error!(%why, "the database failed its integrity check: serving it read-only; restore a backup");
+    } else {
+        let requeued = store
+            .requeue_interrupted()
+            .await
+            .map_err(|e| e.to_string())?;
+        if requeued > 0 {
+            tracing::info!(
+                requeued,
+                "requeued experiments interrupted by the last shutdown"
+            );
+        }
     }
     let listener = tokio::net::TcpListener::bind(addrs.as_slice())
         .await

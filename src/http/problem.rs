@@ -148,19 +148,40 @@ impl IntoResponse for Problem {
 /// (`scene.device.mass`), or `body` when it is the whole document.
 pub fn json_body<T: serde::de::DeserializeOwned>(bytes: &[u8], what: &str) -> Result<T, Problem> {
     let de = &mut serde_json::Deserializer::from_slice(bytes);
-    serde_path_to_error::deserialize(de).map_err(|e| {
-        let inner = e.inner().to_string();
-        let mut field = e.path().to_string();
-        if field.is_empty() || field == "." || field == "?" {
-            field = named_in(&inner).unwrap_or_else(|| "body".into());
+    serde_path_to_error::deserialize(de).map_err(|e| parse_problem(e, what, ""))
+}
+
+/// `T` from a parsed value, naming fields below `prefix` (`""` or `a.`).
+pub fn from_value<T: serde::de::DeserializeOwned>(
+    v: Value,
+    what: &str,
+    prefix: &str,
+) -> Result<T, Problem> {
+    serde_path_to_error::deserialize(v).map_err(|e| parse_problem(e, what, prefix))
+}
+
+fn parse_problem<E: std::fmt::Display>(
+    e: serde_path_to_error::Error<E>,
+    what: &str,
+    prefix: &str,
+) -> Problem {
+    let inner = e.inner().to_string();
+    let path = e.path().to_string();
+    let field = if path.is_empty() || path == "." || path == "?" {
+        match named_in(&inner) {
+            Some(n) => format!("{prefix}{n}"),
+            None if prefix.is_empty() => "body".into(),
+            None => prefix.trim_end_matches('.').to_string(),
         }
-        Problem::new(
-            StatusCode::UNPROCESSABLE_ENTITY,
-            "Invalid request",
-            format!("the body is not a valid {what}: {field}: {inner}"),
-        )
-        .with_field(field)
-    })
+    } else {
+        format!("{prefix}{path}")
+    };
+    Problem::new(
+        StatusCode::UNPROCESSABLE_ENTITY,
+        "Invalid request",
+        format!("the body is not a valid {what}: {field}: {inner}"),
+    )
+    .with_field(field)
 }
 
 /// The field serde names in "unknown field `x`" / "missing field `x`".
@@ -263,12 +284,13 @@ const DETAIL_MAX: usize = 500;
 /// tower-http's own rejections) into one, keeping status and text.
 pub async fn problems_everywhere(resp: Response) -> Response {
     let status = resp.status();
-    let is_problem = resp
+    // Ours are problem+json already (or, /healthz's 503, a JSON report).
+    let ours = resp
         .headers()
         .get(header::CONTENT_TYPE)
         .and_then(|v| v.to_str().ok())
-        .is_some_and(|ct| ct.starts_with(PROBLEM_JSON));
-    if !(status.is_client_error() || status.is_server_error()) || is_problem {
+        .is_some_and(|ct| ct.starts_with(PROBLEM_JSON) || ct.starts_with("application/json"));
+    if !(status.is_client_error() || status.is_server_error()) || ours {
         return resp;
     }
     let (parts, body) = resp.into_parts();

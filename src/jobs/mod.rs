@@ -169,6 +169,10 @@ pub async fn runner(
 ) {
     let id = rig.info().id.clone();
     while !*shutdown.borrow() {
+        if store.health().corrupt.is_some() {
+            tokio::time::sleep(Duration::from_secs(1)).await;
+            continue;
+        }
         match store.rig_window(&id).await {
             Ok(Some(w)) => {
                 if let Ok(hours) = w.validate() {
@@ -213,10 +217,6 @@ struct Unstored {
     failing_since: Option<std::time::Instant>,
 }
 
-/// Trials kept in memory while the store is failing before the simulation
-/// is held.
-const HOLD_AFTER_UNSTORED: usize = 10_000;
-
 impl Unstored {
     /// Store what finished since the last call (and a tune's best so far);
     /// true when everything is stored.
@@ -247,12 +247,11 @@ impl Unstored {
                     tracing::error!(error = %e, unstored = self.trials.len(), "storing trials failed; retrying");
                     self.failing_since = Some(std::time::Instant::now());
                 }
-                if self.trials.len() >= HOLD_AFTER_UNSTORED || !self.evals.is_empty() {
-                    observer.hold(Some(format!(
-                        "held: {} finished trials cannot be stored ({e}); retrying",
-                        self.trials.len()
-                    )));
-                }
+                // Nothing more is computed until what is done is stored.
+                observer.hold(Some(format!(
+                    "held: {} finished trials cannot be stored ({e}); retrying",
+                    self.trials.len()
+                )));
                 false
             }
         }
@@ -378,12 +377,9 @@ async fn run_one(
             }
         }
     };
-    running
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .remove(&id);
     TRIALS_PER_SECOND.store(0, Ordering::Relaxed);
-    // Every finished trial is stored before the end is recorded.
+    // Every finished trial is stored before the end is recorded (the
+    // experiment stays in `running` meanwhile, so its `held` reason shows).
     let mut wait = Duration::from_millis(100);
     while !unstored.flush(store, &id, &observer).await && !*shutdown.borrow() {
         tokio::time::sleep(wait).await;
@@ -395,6 +391,10 @@ async fn run_one(
             store.interrupt(&id, trials).await.map(|_| true)
         })
         .await;
+        running
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .remove(&id);
         return;
     }
     let (state, result, error) = match (observer.runaway(), observer.cancelled(), outcome) {
@@ -408,4 +408,8 @@ async fn run_one(
         store.finish(&id, state, trials, result.as_deref(), error.as_deref())
     })
     .await;
+    running
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .remove(&id);
 }

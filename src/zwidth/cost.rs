@@ -122,7 +122,7 @@ pub fn of_map(spec: &MapSpec, res: &Resolved, exact: bool) -> Result<Cost, SpecE
         }
         None => {
             let n = (spec.b_max / res.b_step).floor();
-            if !(n < MAX_B_COLUMNS as f64) {
+            if n.is_nan() || n >= MAX_B_COLUMNS as f64 {
                 let (field, value) = if spec.b_max > 1000.0 {
                     ("b_max", spec.b_max)
                 } else {
@@ -148,7 +148,7 @@ pub fn of_map(spec: &MapSpec, res: &Resolved, exact: bool) -> Result<Cost, SpecE
     }
     let k_steps = (spec.k_max / res.k_step).ceil();
     let walks_k = matches!(spec.search, SearchKind::Trace | SearchKind::Grid) && !exact;
-    if walks_k && !(k_steps <= MAX_K_STEPS as f64) {
+    if walks_k && (k_steps.is_nan() || k_steps > MAX_K_STEPS as f64) {
         return Err(SpecError::new(
             "accuracy.k_step",
             res.k_step,

@@ -134,14 +134,17 @@ impl ParameterRange {
     }
 }
 
+/// One variant of a sweep: its label, the swept value (if any), its map.
+pub type Variant = (String, Option<f64>, MapSpec);
+
 impl SweepSpec {
     /// Every variant as (label, value, map spec), validated.
-    pub fn variants(&self) -> Result<Vec<(String, Option<f64>, MapSpec)>, SpecError> {
+    pub fn variants(&self) -> Result<Vec<Variant>, SpecError> {
         self.checked().map(|(v, _)| v)
     }
 
     /// Every variant, validated, and what they cost together.
-    pub fn checked(&self) -> Result<(Vec<(String, Option<f64>, MapSpec)>, Cost), SpecError> {
+    pub fn checked(&self) -> Result<(Vec<Variant>, Cost), SpecError> {
         let out = self.variant_specs()?;
         let mut cost = Cost::default();
         for (i, (_, _, m)) in out.iter().enumerate() {

@@ -1,0 +1,719 @@
+//! Reliability under attack and faults (issue 9): each test names the
+//! defect it guards against, and fails on the code that had it.
+
+mod common;
+use common::*;
+
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+fn temp_dir(tag: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "zwidth-rel-{tag}-{}-{}",
+        std::process::id(),
+        uuid_like()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Any request: status, content type, body as JSON (Null when not JSON).
+fn call(r: Result<ureq::Response, ureq::Error>) -> (u16, String, serde_json::Value) {
+    let (code, ct, text) = fetch(r);
+    (code, ct, serde_json::from_str(&text).unwrap_or_default())
+}
+
+fn post_json(url: &str) -> ureq::Request {
+    ureq::post(url).set("content-type", "application/json")
+}
+
+fn assert_problem(code: u16, ct: &str, v: &serde_json::Value, want: u16, field: Option<&str>) {
+    assert_eq!(code, want, "{v}");
+    assert_eq!(ct, "application/problem+json", "{v}");
+    assert_eq!(v["status"], want, "{v}");
+    if let Some(f) = field {
+        assert_eq!(v["field"], f, "{v}");
+    }
+}
+
+const LINEAR: &str = include_str!("../examples/linear_1khz.json");
+
+/// Defects 1 and 5: accepted specs whose cost has no bound. Each is a 422
+/// naming the field now; before, 202 and a server that aborted (b_max) or
+/// ran without end (k_rel_tol, k_step).
+#[test]
+fn specs_beyond_the_cost_limits_are_refused_naming_the_field() {
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    let scene: serde_json::Value = serde_json::from_str(LINEAR).unwrap();
+    let map = |extra: serde_json::Value| {
+        let mut m = serde_json::json!({"kind": "map", "scene": scene.clone()});
+        for (k, v) in extra.as_object().unwrap() {
+            m[k] = v.clone();
+        }
+        m.to_string()
+    };
+    for (body, field) in [
+        (map(serde_json::json!({"b_max": 1e15})), "b_max"),
+        (
+            map(serde_json::json!({"accuracy": {"b_step": 1e-9}})),
+            "accuracy.b_step",
+        ),
+        (
+            map(serde_json::json!({"accuracy": {"k_rel_tol": 1e-300}})),
+            "accuracy.k_rel_tol",
+        ),
+        (
+            map(serde_json::json!({"search": "trace", "accuracy": {"k_step": 1e-3}})),
+            "accuracy.k_step",
+        ),
+        (map(serde_json::json!({"b": vec![1.0; 2001]})), "b"),
+    ] {
+        let (code, ct, v) = call(post_json(&url).send_string(&body));
+        assert_problem(code, &ct, &v, 422, Some(field));
+    }
+    // A tune whose maps together plan too many trials names its budget.
+    let mut bw = scene.clone();
+    bw["estimator"] = serde_json::json!({"kind": "butterworth", "cutoff_hz": 100});
+    let tune = serde_json::json!({"kind": "tune", "scene": bw, "params": {"cutoff_hz": {"min": 10, "max": 400}},
+        "objective": "k_width", "search": "trace", "accuracy": "reference", "max_evaluations": 5000}).to_string();
+    let (code, ct, v) = call(post_json(&url).send_string(&tune));
+    assert_problem(code, &ct, &v, 422, Some("max_evaluations"));
+    // Accepted requests say what they will cost.
+    let ok = map(serde_json::json!({"b": [0, 5], "criterion": "strict_passivity"}));
+    let (code, _, v) = call(post_json(&url).send_string(&ok));
+    assert_eq!(code, 202, "{v}");
+    assert_eq!(v["estimate"]["trials"], 2, "{v}");
+    assert_eq!(v["estimate"]["b_columns"], 2, "{v}");
+    // Nothing but the good one was stored.
+    let all = get(&url);
+    assert_eq!(all["experiments"].as_array().unwrap().len(), 1, "{all}");
+}
+
+/// Defect 1, the crash loop: a spec stored by an older version that today's
+/// limits refuse fails with the reason when its turn comes; the server runs on.
+#[test]
+fn a_stored_spec_beyond_the_limits_fails_instead_of_taking_the_server_down() {
+    let dir = temp_dir("stored");
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let spec = format!(r#"{{"kind":"map","scene":{LINEAR},"b_max":1e15}}"#).replace('\n', "");
+    rt.block_on(async {
+        let st = zwidth::store::Store::open(&dir.join("test.db"))
+            .await
+            .unwrap();
+        st.insert(zwidth::store::NewExperiment {
+            id: "old-1",
+            kind: "map",
+            spec: &spec,
+            priority: 0,
+            key: None,
+            not_before_ms: None,
+            rig: "sim",
+        })
+        .await
+        .unwrap();
+        st.close().await.unwrap();
+    });
+    let s = start_in(dir);
+    let done = wait_end(&s.base, "old-1", 30);
+    assert_eq!(done["state"], "failed", "{done}");
+    assert!(done["error"].as_str().unwrap().contains("b_max"), "{done}");
+    assert_eq!(get(&format!("{}/healthz", s.base))["status"], "ok");
+}
+
+/// Defect 7: one Idempotency-Key, many concurrent submissions: one
+/// experiment, every answer names it, no 500. A different body under the
+/// same key is a 422 naming the key.
+#[test]
+fn concurrent_submissions_with_one_key_store_one_experiment() {
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    // Pause so nothing runs while we count.
+    call(ureq::post(&format!("{}/v1/queue/pause", s.base)).call());
+    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    let answers: Vec<(u16, serde_json::Value)> = std::thread::scope(|sc| {
+        let hs: Vec<_> = (0..32)
+            .map(|_| {
+                sc.spawn(|| {
+                    let (c, _, v) = call(
+                        post_json(&url)
+                            .set("idempotency-key", "same-key")
+                            .send_string(body),
+                    );
+                    (c, v)
+                })
+            })
+            .collect();
+        hs.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    let created = answers.iter().filter(|(c, _)| *c == 202).count();
+    assert_eq!(created, 1, "{answers:?}");
+    assert!(
+        answers.iter().all(|(c, _)| *c == 202 || *c == 200),
+        "{answers:?}"
+    );
+    let id = &answers[0].1["id"];
+    assert!(answers.iter().all(|(_, v)| &v["id"] == id), "{answers:?}");
+    assert_eq!(get(&url)["experiments"].as_array().unwrap().len(), 1);
+    let other = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[5]}"#;
+    let (code, ct, v) = call(
+        post_json(&url)
+            .set("idempotency-key", "same-key")
+            .send_string(other),
+    );
+    assert_problem(code, &ct, &v, 422, Some("Idempotency-Key"));
+}
+
+/// Defect 8: a cancel answered `cancelled` stays cancelled, even when the
+/// run was finishing at that moment (the store's end-of-run write is
+/// guarded by the state).
+#[test]
+fn a_cancelled_experiment_never_ends_succeeded() {
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let dir = temp_dir("cancel");
+    rt.block_on(async {
+        let st = zwidth::store::Store::open(&dir.join("t.db")).await.unwrap();
+        st.insert(zwidth::store::NewExperiment {
+            id: "e1",
+            kind: "map",
+            spec: "{}",
+            priority: 0,
+            key: None,
+            not_before_ms: None,
+            rig: "sim",
+        })
+        .await
+        .unwrap();
+        let claimed = st.claim_next("sim").await.unwrap().unwrap();
+        assert_eq!(claimed.id, "e1");
+        assert!(st.cancel("e1").await.unwrap());
+        // The run ends a moment later with a result: it must not overwrite.
+        let changed = st
+            .finish("e1", "succeeded", 10, Some("{}"), None)
+            .await
+            .unwrap();
+        assert!(!changed);
+        let row = st.get("e1").await.unwrap().unwrap();
+        assert_eq!(row.state, "cancelled");
+        assert!(row.result.is_none());
+        // Its own cancelled record still lands (trial count).
+        assert!(st.finish("e1", "cancelled", 7, None, None).await.unwrap());
+        assert_eq!(st.get("e1").await.unwrap().unwrap().trials_done, 7);
+        st.close().await.unwrap();
+    });
+    std::fs::remove_dir_all(dir).unwrap();
+    // And through the service: cancels racing quick maps' ends.
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"b":[0,10,20]}"#;
+    let mut answered = Vec::new();
+    for _ in 0..20 {
+        let (_, _, v) = call(post_json(&url).send_string(body));
+        let id = v["id"].as_str().unwrap().to_string();
+        let (code, _, _) = call(ureq::post(&format!("{url}/{id}/cancel")).call());
+        if code == 200 {
+            answered.push(id);
+        }
+    }
+    assert!(!answered.is_empty());
+    std::thread::sleep(Duration::from_millis(500));
+    for id in answered {
+        let v = wait_end(&s.base, &id, 30);
+        assert_eq!(v["state"], "cancelled", "{v}");
+    }
+}
+
+/// Defect 9: a finish that cannot be written while another writer holds
+/// the lock is retried; the experiment ends once the lock is released,
+/// with every trial stored.
+#[test]
+fn a_finish_blocked_by_a_held_lock_is_retried() {
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    // A time-domain map of about a second.
+    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"method":"time","criterion":"stability","b":[0,20],"accuracy":"draft"}"#;
+    let (code, _, v) = call(post_json(&url).send_string(body));
+    assert_eq!(code, 202, "{v}");
+    let id = v["id"].as_str().unwrap().to_string();
+    let db = s._dir.join("test.db");
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let hold = Duration::from_secs(7); // longer than the 5 s busy timeout
+    let held_at = Instant::now();
+    rt.block_on(async {
+        use sqlx::Connection;
+        let mut c = sqlx::SqliteConnection::connect(&format!("sqlite://{}", db.display()))
+            .await
+            .unwrap();
+        sqlx::query("BEGIN IMMEDIATE")
+            .execute(&mut c)
+            .await
+            .unwrap();
+        tokio::time::sleep(hold).await;
+        // Reads go on meanwhile (WAL).
+        sqlx::query("ROLLBACK").execute(&mut c).await.unwrap();
+    });
+    assert!(held_at.elapsed() >= hold);
+    let done = wait_end(&s.base, &id, 30);
+    assert_eq!(done["state"], "succeeded", "{done}");
+    let stored = get(&format!("{url}/{id}/trials?limit=10000"));
+    assert_eq!(
+        stored.as_array().unwrap().len() as u64,
+        done["result"]["trials"].as_u64().unwrap()
+    );
+}
+
+/// Defect 4: the list is paged and leaves results out unless asked.
+#[test]
+fn the_list_is_paged_with_a_cursor() {
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    call(ureq::post(&format!("{}/v1/queue/pause", s.base)).call());
+    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    let mut ids = Vec::new();
+    for _ in 0..5 {
+        let (_, _, v) = call(post_json(&url).send_string(body));
+        ids.push(v["id"].as_str().unwrap().to_string());
+    }
+    let mut seen = Vec::new();
+    let mut next = format!("{url}?limit=2");
+    loop {
+        let page = get(&next);
+        for e in page["experiments"].as_array().unwrap() {
+            assert!(e.get("spec").is_none() && e.get("result").is_none(), "{e}");
+            seen.push(e["id"].as_str().unwrap().to_string());
+        }
+        match page["next_cursor"].as_str() {
+            Some(c) => next = format!("{url}?limit=2&cursor={c}"),
+            None => break,
+        }
+    }
+    ids.reverse(); // newest first
+    assert_eq!(seen, ids);
+    let with_spec = get(&format!("{url}?limit=1&include=spec"));
+    assert_eq!(with_spec["experiments"][0]["spec"]["kind"], "map");
+    for (q, field) in [
+        ("limit=0", "limit"),
+        ("limit=201", "limit"),
+        ("limit=21&include=result", "limit"),
+        ("include=everything", "include"),
+        ("cursor=zzz", "cursor"),
+        ("page=2", "page"),
+    ] {
+        let (code, ct, v) = call(ureq::get(&format!("{url}?{q}")).call());
+        assert_problem(code, &ct, &v, 422, Some(field));
+    }
+}
+
+/// Defect 6: a page on another site cannot make the operator's browser
+/// write: form-encoded bodies are 415; a foreign Origin, a cross-site fetch
+/// and (without a token) a foreign Host are 403, for every write.
+#[test]
+fn writes_from_other_sites_are_refused() {
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    let (code, ct, v) = call(
+        ureq::post(&url)
+            .set("content-type", "text/plain")
+            .send_string(body),
+    );
+    assert_problem(code, &ct, &v, 415, Some("Content-Type"));
+    let (code, ct, v) = call(ureq::post(&url).send_string(body));
+    assert_problem(code, &ct, &v, 415, Some("Content-Type"));
+    let pause = format!("{}/v1/queue/pause", s.base);
+    for (header, value, field) in [
+        ("origin", "http://evil.example", "Origin"),
+        ("origin", "null", "Origin"),
+        ("host", "evil.example", "Host"),
+        ("sec-fetch-site", "cross-site", "Sec-Fetch-Site"),
+    ] {
+        let (code, ct, v) = call(post_json(&url).set(header, value).send_string(body));
+        assert_problem(code, &ct, &v, 403, Some(field));
+        let (code, ct, v) = call(ureq::post(&pause).set(header, value).call());
+        assert_problem(code, &ct, &v, 403, Some(field));
+    }
+    assert_eq!(get(&format!("{}/v1/queue", s.base))["paused"], false);
+    assert_eq!(get(&url)["experiments"].as_array().unwrap().len(), 0);
+    // The server's own origin may write.
+    let own = s.base.clone();
+    let (code, _, v) = call(post_json(&url).set("origin", &own).send_string(body));
+    assert_eq!(code, 202, "{v}");
+}
+
+/// Defect 11: every error is problem+json, with the field where there is
+/// one, including the framework's own rejections.
+#[test]
+fn every_error_is_a_problem_naming_the_field() {
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    let good = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    // Bad query values.
+    let (code, ct, v) = call(post_json(&format!("{url}?priority=abc")).send_string(good));
+    assert_problem(code, &ct, &v, 422, Some("priority"));
+    let (code, ct, v) = call(ureq::get(&format!("{url}/x/trials?limit=abc")).call());
+    assert_problem(code, &ct, &v, 422, Some("limit"));
+    // A body over 1 MiB.
+    let big = format!(r#"{{"kind":"map","pad":"{}"}}"#, "x".repeat(1 << 20));
+    let (code, ct, v) = call(post_json(&url).send_string(&big));
+    assert_problem(code, &ct, &v, 413, Some("body"));
+    // JSON errors name the path.
+    let bad = r#"{"kind":"map","scene":{"device":{"mass":"heavy"}}}"#;
+    let (code, ct, v) = call(post_json(&url).send_string(bad));
+    assert_problem(code, &ct, &v, 422, Some("scene.device.mass"));
+    let bad = r#"{"kind":"map","scene":{},"bogus":1}"#;
+    let (code, ct, v) = call(post_json(&url).send_string(bad));
+    assert_problem(code, &ct, &v, 422, Some("bogus"));
+    let (code, ct, v) = call(post_json(&url).send_string("{"));
+    assert_problem(code, &ct, &v, 422, Some("body"));
+    // A bad escape in the path, a very long query, unknown routes and methods.
+    let (code, ct, v) = call(ureq::get(&format!("{url}/%FF%FE")).call());
+    assert!(code == 400 || code == 404, "{code} {v}");
+    assert_eq!(ct, "application/problem+json");
+    let long = format!("{}/v1/compare?runs={}", s.base, "a,".repeat(10_000));
+    let (code, ct, v) = call(ureq::get(&long).call());
+    assert_problem(code, &ct, &v, 414, Some("query"));
+    let (code, ct, _) = call(ureq::get(&format!("{}/v1/nothing", s.base)).call());
+    assert_eq!((code, ct.as_str()), (404, "application/problem+json"));
+    let (code, ct, _) = call(ureq::delete(&url).call());
+    assert_eq!((code, ct.as_str()), (405, "application/problem+json"));
+}
+
+/// Defect 10: inputs that would overflow are refused naming the field;
+/// the CLI exits 2 instead of printing inf or NaN.
+#[test]
+fn overflowing_inputs_are_refused() {
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    let tune = r#"{"kind":"tune","scene":{"device":{"coulomb":0,"quantization":0},"estimator":{"kind":"butterworth","cutoff_hz":100}},
+        "params":{"cutoff_hz":{"min":20,"max":400}},"objective":{"weighted":{"k_width":1e308}},"b":[0]}"#;
+    let (code, ct, v) = call(post_json(&url).send_string(tune));
+    assert_problem(code, &ct, &v, 422, Some("objective.weighted.k_width"));
+    let zw = |args: &[&str], stdin: &str| {
+        use std::io::Write;
+        let mut c = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+            .args(args)
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        c.stdin.take().unwrap().write_all(stdin.as_bytes()).unwrap();
+        let o = c.wait_with_output().unwrap();
+        (
+            o.status.code(),
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (code, out, err) = zw(
+        &["lipschitz", "--rate", "1000"],
+        "0\n1e308\n-1e308\n0\n0\n0\n",
+    );
+    assert_eq!(code, Some(2), "{out}{err}");
+    assert!(err.contains("positions[1]"), "{err}");
+    let (code, out, err) = zw(
+        &[
+            "gains",
+            "--estimator",
+            r#"{"kind":"levant","alpha":1e308,"lambda":1e308,"lipschitz":1e-308}"#,
+        ],
+        "",
+    );
+    assert_eq!(code, Some(2), "{out}{err}");
+    assert!(!out.contains("inf") && !out.contains("NaN"), "{out}");
+}
+
+/// Defect 12: a corrupt database is reported by /healthz and refuses
+/// writes with a clear error, instead of "ok" and 500s.
+#[test]
+fn a_corrupt_database_is_reported_and_refuses_writes() {
+    let dir = temp_dir("corrupt");
+    let db = dir.join("test.db");
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let (page, root) = rt.block_on(async {
+        let st = zwidth::store::Store::open(&db).await.unwrap();
+        for i in 0..50 {
+            st.insert(zwidth::store::NewExperiment {
+                id: &format!("e{i}"),
+                kind: "map",
+                spec: &"x".repeat(500),
+                priority: 0,
+                key: None,
+                not_before_ms: None,
+                rig: "sim",
+            })
+            .await
+            .unwrap();
+        }
+        st.close().await.unwrap();
+        let pool = sqlx::SqlitePool::connect(&format!("sqlite://{}", db.display()))
+            .await
+            .unwrap();
+        let page: i64 = sqlx::query_scalar("PRAGMA page_size")
+            .fetch_one(&pool)
+            .await
+            .unwrap();
+        let root: i64 =
+            sqlx::query_scalar("SELECT rootpage FROM sqlite_schema WHERE name = 'experiments'")
+                .fetch_one(&pool)
+                .await
+                .unwrap();
+        pool.close().await;
+        (page as u64, root as u64)
+    });
+    // Garble the experiments table's root page (not the schema, page 1).
+    {
+        use std::io::{Seek, SeekFrom, Write};
+        let mut f = std::fs::OpenOptions::new().write(true).open(&db).unwrap();
+        f.seek(SeekFrom::Start((root - 1) * page + 8)).unwrap();
+        f.write_all(&vec![0xA5u8; page as usize - 8]).unwrap();
+    }
+    let s = start_in(dir);
+    let (code, _, v) = call(ureq::get(&format!("{}/healthz", s.base)).call());
+    assert_eq!(code, 503, "{v}");
+    assert_eq!(v["status"], "corrupt", "{v}");
+    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    let url = format!("{}/v1/experiments", s.base);
+    let (code, ct, v) = call(post_json(&url).send_string(body));
+    assert_problem(code, &ct, &v, 503, None);
+    assert!(v["detail"].as_str().unwrap().contains("corrupt"), "{v}");
+}
+
+/// Defect 14: a cleanly stopped server leaves a complete `.db` (no data
+/// left in the WAL), and `zwidth backup` copies a live database.
+#[test]
+fn shutdown_checkpoints_and_backup_copies_a_live_database() {
+    let s = start();
+    let dir = s._dir.clone();
+    let url = format!("{}/v1/experiments", s.base);
+    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0,5]}"#;
+    let (_, _, v) = call(post_json(&url).send_string(body));
+    let id = v["id"].as_str().unwrap().to_string();
+    wait_end(&s.base, &id, 30);
+    // Backup while it serves.
+    let copy = dir.join("copy.db");
+    let o = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+        .args(["backup", "--db"])
+        .arg(dir.join("test.db"))
+        .arg("--out")
+        .arg(&copy)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Backing up onto an existing file is bad input.
+    let o = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+        .args(["backup", "--db"])
+        .arg(dir.join("test.db"))
+        .arg("--out")
+        .arg(&copy)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    // SIGTERM, then the .db alone (copied without its -wal) has the run.
+    let mut s = s;
+    assert!(Command::new("sh")
+        .args(["-c", &format!("kill -TERM {}", s.child.id())])
+        .status()
+        .unwrap()
+        .success());
+    assert!(s.child.wait().unwrap().success());
+    std::mem::forget(s);
+    let alone = temp_dir("alone");
+    std::fs::copy(dir.join("test.db"), alone.join("only.db")).unwrap();
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    for db in [alone.join("only.db"), copy] {
+        let state = rt.block_on(async {
+            let pool = sqlx::SqlitePool::connect(&format!("sqlite://{}?mode=ro", db.display()))
+                .await
+                .unwrap();
+            let st: String = sqlx::query_scalar("SELECT state FROM experiments WHERE id = ?")
+                .bind(&id)
+                .fetch_one(&pool)
+                .await
+                .unwrap();
+            pool.close().await;
+            st
+        });
+        assert_eq!(state, "succeeded", "{}", db.display());
+    }
+    std::fs::remove_dir_all(alone).unwrap();
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// Defect 16: a token sent in the query string never reaches the logs;
+/// tokens can come from a file (not `ps`).
+#[test]
+fn tokens_stay_out_of_logs_and_can_come_from_a_file() {
+    let dir = temp_dir("token");
+    std::fs::write(dir.join("tokens"), "file-secret\n").unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+        .args(["serve", "--bind", "127.0.0.1:0", "--token-file"])
+        .arg(dir.join("tokens"))
+        .arg("--db")
+        .arg(dir.join("t.db"))
+        .env("RUST_LOG", "debug")
+        .env_remove("ZWIDTH_TOKENS")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::fs::File::create(dir.join("err.log")).unwrap())
+        .spawn()
+        .unwrap();
+    let mut s = Server {
+        child,
+        base: String::new(),
+        _dir: dir.clone(),
+    };
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(s.child.stdout.take().unwrap()),
+        &mut line,
+    )
+    .unwrap();
+    s.base = line.trim().rsplit(' ').next().unwrap().to_string();
+    let _ = ureq::get(&format!("{}/healthz?access_token=query-secret", s.base)).call();
+    let pause = format!("{}/v1/queue/pause", s.base);
+    let (code, _, _) = call(ureq::post(&pause).call());
+    assert_eq!(code, 401);
+    let (code, _, v) = call(
+        ureq::post(&pause)
+            .set("authorization", "Bearer file-secret")
+            .call(),
+    );
+    assert_eq!(code, 200, "{v}");
+    std::thread::sleep(Duration::from_millis(200));
+    let log = std::fs::read_to_string(dir.join("err.log")).unwrap();
+    assert!(log.contains("healthz"), "the request was logged: {log}");
+    assert!(!log.contains("query-secret"), "{log}");
+    assert!(!log.contains("file-secret"), "{log}");
+}
+
+/// A small tmpfs, unmounted (and its directory removed) when dropped.
+struct Tmpfs(std::path::PathBuf);
+
+impl Tmpfs {
+    /// Mount one (root only). `None` where this machine cannot; CI runs as
+    /// root, so there the test fails rather than skips.
+    fn mount(size: &str) -> Option<Tmpfs> {
+        let dir = temp_dir("tmpfs");
+        let ok = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
+            .arg(&dir)
+            .status()
+            .is_ok_and(|s| s.success());
+        if ok {
+            Some(Tmpfs(dir))
+        } else {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI must be able to mount a tmpfs (runs as root) for the disk-full test"
+            );
+            eprintln!("disk-full test not run: cannot mount a tmpfs here (not root)");
+            let _ = std::fs::remove_dir_all(dir);
+            None
+        }
+    }
+
+    /// Fill it: a file grown until the disk says no.
+    fn fill(&self) -> std::path::PathBuf {
+        use std::io::Write;
+        let p = self.0.join("filler");
+        let mut f = std::fs::File::create(&p).unwrap();
+        let chunk = vec![0u8; 16 * 1024];
+        while f.write_all(&chunk).is_ok() {}
+        let _ = f.flush();
+        let _ = f.sync_all();
+        p
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(&self.0).status();
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Defect 2: on a full disk a submission is acknowledged only when stored
+/// (507 otherwise, and nothing half-written), a running experiment is held
+/// rather than losing trials, and the store recovers without a restart
+/// once space returns.
+#[test]
+fn a_full_disk_loses_no_acknowledged_submission_and_recovers() {
+    let Some(fs) = Tmpfs::mount("6m") else { return };
+    let data = fs.0.join("data");
+    std::fs::create_dir_all(&data).unwrap();
+    let s = start_in(data.clone());
+    let url = format!("{}/v1/experiments", s.base);
+    // A running experiment of a few seconds (time-domain, 10 kHz).
+    let long = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":10000,"render_hz":1000}},"method":"time","criterion":"stability","b":[0,10,20,30],"accuracy":"draft"}"#;
+    let (code, _, v) = call(post_json(&url).send_string(long));
+    assert_eq!(code, 202, "{v}");
+    let running = v["id"].as_str().unwrap().to_string();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while get(&format!("{url}/{running}"))["state"] != "running" {
+        assert!(Instant::now() < deadline);
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let filler = fs.fill();
+    // Submissions of ~20 kB each until the store refuses.
+    let b: Vec<f64> = (0..1500).map(|i| i as f64 * 0.5).collect();
+    let body = serde_json::json!({"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b": b}).to_string();
+    let mut acked = Vec::new();
+    let mut refused = 0;
+    for _ in 0..400 {
+        let (code, ct, v) = call(post_json(&url).send_string(&body));
+        match code {
+            202 => acked.push(v["id"].as_str().unwrap().to_string()),
+            507 | 503 => {
+                assert_eq!(ct, "application/problem+json", "{v}");
+                refused += 1;
+                if refused >= 3 {
+                    break;
+                }
+            }
+            _ => panic!("{code} {v}"),
+        }
+    }
+    assert!(
+        refused >= 3,
+        "the disk never filled ({} stored)",
+        acked.len()
+    );
+    // Every acknowledged submission is there; reads work on a full disk.
+    for id in &acked {
+        let (code, _, v) = call(ureq::get(&format!("{url}/{id}")).call());
+        assert_eq!(code, 200, "{id}: {v}");
+    }
+    // The running experiment is held (its trials cannot be stored), not
+    // silently "running" with trials lost.
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let v = get(&format!("{url}/{running}"));
+        if v["progress"]["held"].is_string() || v["state"] != "running" {
+            break;
+        }
+        assert!(Instant::now() < deadline, "{v}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Space returns: writes work again without a restart.
+    std::fs::remove_file(filler).unwrap();
+    let small = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let id = loop {
+        let (code, _, v) = call(post_json(&url).send_string(small));
+        if code == 202 {
+            break v["id"].as_str().unwrap().to_string();
+        }
+        assert!(Instant::now() < deadline, "{code} {v}");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    let done = wait_end(&s.base, &running, 120);
+    assert_eq!(done["state"], "succeeded", "{done}");
+    let stored = get(&format!("{url}/{running}/trials?limit=10000"));
+    assert_eq!(
+        stored.as_array().unwrap().len() as u64,
+        done["result"]["trials"].as_u64().unwrap(),
+        "every trial stored"
+    );
+    assert_eq!(get(&format!("{url}/{id}"))["id"], id.as_str());
+    drop(s);
+}
