@@ -600,10 +600,15 @@ pub fn map_observed(
     ev.observer = observer;
     ev.scope = scope;
     let res = ev.res;
-    let b_auto: Vec<f64> = (0..)
-        .map(|i| i as f64 * res.b_step)
-        .take_while(|&b| b <= spec.b_max + 1e-9)
-        .collect();
+    // The automatic B range, only when no list is given (its length was
+    // checked against the limits in `prepare`).
+    let b_auto: Vec<f64> = match spec.b {
+        Some(_) => Vec::new(),
+        None => (0..)
+            .map(|i| i as f64 * res.b_step)
+            .take_while(|&b| b <= spec.b_max + 1e-9)
+            .collect(),
+    };
     let (boundary, points) = match (spec.search, ev.criterion, &ev.model) {
         (_, Criterion::StrictPassivity, Some(m)) => {
             // Exact per B: no search needed.
