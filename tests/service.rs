@@ -57,7 +57,7 @@ fn bad_inputs_are_problems_naming_the_field() {
             r#"{"kind":"map","scene":{"estimator":{"kind":"butterworth","cutoff_hz":99999}}}"#,
             "scene.estimator.cutoff_hz",
         ),
-        (r#"{"kind":"nope"}"#, "unknown variant"),
+        (r#"{"kind":"nope"}"#, r#""field":"kind""#),
         (
             r#"{"kind":"compare","estimators":[{"kind":"fdm"},{"kind":"butterworth","cutoff_hz":99999}]}"#,
             "estimators[1].cutoff_hz",
