@@ -8,7 +8,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
-use zwidth::rig::Plant;
+use zwidth::plant::Plant;
 use zwidth::zwidth::hit::{wall_hit, HitKnobs, NoTrace};
 use zwidth::zwidth::scene::SceneSpec;
 use zwidth::zwidth::search::map;

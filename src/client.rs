@@ -6,7 +6,7 @@ use serde_json::Value;
 use std::io::Write;
 use std::time::{Duration, Instant};
 
-use crate::cli::CliError;
+use crate::error::CliError;
 
 pub struct Client {
     pub server: String,

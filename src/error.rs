@@ -88,3 +88,37 @@ pub fn require_range(
         ))
     }
 }
+
+/// What went wrong on the command line, and so the exit code: bad input
+/// exits 2, anything else 1. (Here, not in `cli`, so the HTTP client and
+/// the CLI both use it without importing each other.)
+#[derive(Debug)]
+pub enum CliError {
+    /// Bad input: exit 2.
+    Input(String),
+    /// I/O or internal failure: exit 1.
+    Failure(String),
+}
+
+impl CliError {
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            CliError::Input(_) => 2,
+            CliError::Failure(_) => 1,
+        }
+    }
+}
+
+impl std::fmt::Display for CliError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            CliError::Input(m) | CliError::Failure(m) => f.write_str(m),
+        }
+    }
+}
+
+impl From<SpecError> for CliError {
+    fn from(e: SpecError) -> Self {
+        CliError::Input(e.to_string())
+    }
+}

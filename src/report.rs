@@ -6,7 +6,7 @@ use serde::Serialize;
 use serde_json::Value;
 
 use crate::error::SpecError;
-use crate::jobs::ExperimentSpec;
+use crate::experiment::ExperimentSpec;
 use crate::plot::{lines_svg, zwidth_map_svg, MapPlotPoint, Series};
 use crate::zwidth::compare::seed_2018_scene;
 use crate::zwidth::scene::SceneSpec;

@@ -4,7 +4,7 @@
 use proptest::prelude::*;
 use std::sync::Arc;
 
-use zwidth::jobs::ExperimentSpec;
+use zwidth::experiment::ExperimentSpec;
 use zwidth::zwidth::cost::{Cost, MAX_B_COLUMNS, MAX_TRIALS};
 use zwidth::zwidth::search::{map_observed, Observer};
 

@@ -162,8 +162,8 @@ fn killed_mid_run_resumes_from_stored_trials_with_the_same_result() {
     };
     assert_eq!(done["state"], "succeeded", "{done}");
     // The same result as an uninterrupted run (the library, in this process).
-    let spec: zwidth::jobs::ExperimentSpec = serde_json::from_str(spec).unwrap();
-    let zwidth::jobs::ExperimentSpec::Map(m) = spec else {
+    let spec: zwidth::experiment::ExperimentSpec = serde_json::from_str(spec).unwrap();
+    let zwidth::experiment::ExperimentSpec::Map(m) = spec else {
         unreachable!()
     };
     let want = zwidth::zwidth::search::map(&m).unwrap();
@@ -572,8 +572,8 @@ fn sigterm_interrupts_the_running_experiment_and_restart_resumes_it() {
     let s2 = start_in(dir);
     let done = wait_end(&s2.base, &id, 120);
     assert_eq!(done["state"], "succeeded", "{done}");
-    let spec: zwidth::jobs::ExperimentSpec = serde_json::from_str(spec).unwrap();
-    let zwidth::jobs::ExperimentSpec::Map(m) = spec else {
+    let spec: zwidth::experiment::ExperimentSpec = serde_json::from_str(spec).unwrap();
+    let zwidth::experiment::ExperimentSpec::Map(m) = spec else {
         unreachable!()
     };
     let want = zwidth::zwidth::search::map(&m).unwrap();
@@ -662,7 +662,7 @@ fn a_killed_tune_resumes_from_its_stored_evaluations() {
     );
     // The same path and result as an uninterrupted run in this process:
     // replayed evaluations counted toward the budget as the first time.
-    let zwidth::jobs::ExperimentSpec::Tune(t) = serde_json::from_str(spec).unwrap() else {
+    let zwidth::experiment::ExperimentSpec::Tune(t) = serde_json::from_str(spec).unwrap() else {
         unreachable!()
     };
     let want = t.validate().unwrap().run(None).unwrap();

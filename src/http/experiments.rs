@@ -14,7 +14,7 @@ use super::guard::{authorize, require_json};
 use super::problem::{from_value, json_body, Problem, ProblemBody, QueryArgs};
 use super::AppState;
 use crate::error::SpecError;
-use crate::jobs::ExperimentSpec;
+use crate::experiment::ExperimentSpec;
 use crate::report::{self, MapSummary};
 use crate::store::{now_ms, ExperimentRow, Inserted, NewExperiment};
 use crate::zwidth::cost::Cost;

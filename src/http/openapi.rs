@@ -10,9 +10,9 @@ use super::experiments::*;
 use super::problem::ProblemBody;
 use super::queue::*;
 use super::rigs::*;
-use crate::jobs::window::Window;
-use crate::jobs::ExperimentSpec;
+use crate::experiment::ExperimentSpec;
 use crate::report::Comparison;
+use crate::rig::window::Window;
 use crate::zwidth::search::StoredTrial;
 
 #[derive(utoipa::OpenApi)]

@@ -10,7 +10,7 @@ use std::sync::Arc;
 use super::guard::{authorize, require_json};
 use super::problem::{json_body, Problem, ProblemBody};
 use super::AppState;
-use crate::jobs::window::Window;
+use crate::rig::window::Window;
 use crate::rig::{Rig, RigInfo};
 
 /// A rig: what it can do, its window, and its load.

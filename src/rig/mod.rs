@@ -1,18 +1,17 @@
 //! Rigs: what runs an experiment. The simulated device (the plant between
-//! force updates) lives in `plant`; a [`Rig`] is anything that can run a
+//! force updates) lives in `crate::plant`; a [`Rig`] is anything that can run a
 //! whole experiment: today the simulator, later attached hardware.
 
-pub mod plant;
 pub mod simulator;
+pub mod window;
 
 use serde::Serialize;
 use std::sync::Arc;
 
 use crate::error::SpecError;
-use crate::jobs::ExperimentSpec;
+use crate::experiment::ExperimentSpec;
 use crate::zwidth::scene::SceneSpec;
 use crate::zwidth::search::Observer;
-pub use plant::{Plant, PlantState};
 pub use simulator::SimulatedRig;
 
 /// What a rig can do, as the API lists it.

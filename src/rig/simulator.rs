@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use super::{Rig, RigInfo};
 use crate::error::SpecError;
-use crate::jobs::ExperimentSpec;
+use crate::experiment::ExperimentSpec;
 use crate::zwidth::search::Observer;
 
 pub struct SimulatedRig {

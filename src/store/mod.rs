@@ -17,7 +17,7 @@ use sqlx::{FromRow, SqlitePool};
 use std::path::Path;
 use std::time::Duration;
 
-use crate::jobs::window::Window;
+use crate::rig::window::Window;
 use crate::zwidth::search::{StoredEvaluation, StoredTrial};
 
 static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");

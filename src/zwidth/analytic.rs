@@ -29,7 +29,7 @@ use super::scene::Scene;
 use crate::error::SpecError;
 use crate::estimators::butterworth::design_lowpass;
 use crate::estimators::{EstimatorKind, QModel};
-use crate::rig::Plant;
+use crate::plant::Plant;
 
 #[derive(Debug, Clone)]
 pub struct LinearModel {

@@ -26,7 +26,7 @@ use serde::Serialize;
 
 use super::controller::Controller;
 use super::scene::Scene;
-use crate::rig::{Plant, PlantState};
+use crate::plant::{Plant, PlantState};
 use crate::signals::quantize;
 
 /// Time-domain knobs the accuracy setting may override.

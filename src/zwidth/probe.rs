@@ -39,7 +39,7 @@ use serde::Serialize;
 use super::analytic::ImpedanceCurve;
 use super::controller::Controller;
 use super::scene::Scene;
-use crate::rig::{Plant, PlantState};
+use crate::plant::{Plant, PlantState};
 use crate::signals::quantize;
 use crate::spectral::{LineAnalyzer, Multisine};
 

@@ -1,0 +1,174 @@
+//! Helpers the commands share: reading inputs, writing outputs, progress.
+
+use std::io::{BufRead, Write};
+
+use crate::plot::{zwidth_map_svg, MapPlotPoint};
+use crate::zwidth::scene::SceneSpec;
+use crate::zwidth::search::MapResult;
+use crate::zwidth::settings::Criterion;
+
+use super::CliError;
+
+pub(super) fn io(e: std::io::Error) -> CliError {
+    CliError::Failure(format!("i/o error: {e}"))
+}
+
+/// Read one finite number per non-blank line; the error names the line.
+pub fn read_samples(input: impl BufRead) -> Result<Vec<f64>, CliError> {
+    let mut out = Vec::new();
+    for (i, line) in input.lines().enumerate() {
+        let line = line.map_err(io)?;
+        let s = line.trim();
+        if s.is_empty() {
+            continue;
+        }
+        match s.parse::<f64>() {
+            Ok(v) if v.is_finite() => out.push(v),
+            _ => {
+                return Err(CliError::Input(format!(
+                    "stdin line {} = {s:?} is not allowed: each line must be one finite position in metres",
+                    i + 1
+                )))
+            }
+        }
+    }
+    Ok(out)
+}
+
+pub(super) fn client(server: String) -> crate::client::Client {
+    crate::client::Client {
+        server: server.trim_end_matches('/').to_string(),
+        token: std::env::var("ZWIDTH_TOKEN").ok().filter(|t| !t.is_empty()),
+    }
+}
+
+pub(super) fn read_scene(path: &std::path::Path) -> Result<SceneSpec, CliError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| CliError::Input(format!("--scene {} cannot be read: {e}", path.display())))?;
+    SceneSpec::from_json(&text).map_err(|e| CliError::Input(format!("{}: {e}", path.display())))
+}
+
+/// A snake_case enum value from a flag, with serde's message naming the choices.
+/// Run `work` while drawing a progress bar on stderr from `observer` (only
+/// when stderr is a terminal).
+pub(super) fn with_progress<T>(
+    observer: &std::sync::Arc<crate::zwidth::search::Observer>,
+    work: impl FnOnce() -> T,
+) -> T {
+    use std::io::IsTerminal;
+    if !std::io::stderr().is_terminal() {
+        return work();
+    }
+    let done = std::sync::atomic::AtomicBool::new(false);
+    std::thread::scope(|s| {
+        s.spawn(|| {
+            let start = std::time::Instant::now();
+            while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                let f = observer.fraction();
+                let t = start.elapsed().as_secs_f64();
+                let eta = if f > 0.01 {
+                    format!("ETA {:>5.0} s", t * (1.0 - f) / f)
+                } else {
+                    String::new()
+                };
+                let filled = (f * 30.0).round() as usize;
+                eprint!(
+                    "\r[{}{}] {:>3.0} % {t:>6.1} s {eta}  ",
+                    "#".repeat(filled),
+                    ".".repeat(30 - filled.min(30)),
+                    100.0 * f
+                );
+                std::thread::sleep(std::time::Duration::from_millis(200));
+            }
+            eprintln!();
+        });
+        let r = work();
+        done.store(true, std::sync::atomic::Ordering::Relaxed);
+        r
+    })
+}
+
+pub(super) fn parse_choice<T: serde::de::DeserializeOwned>(
+    flag: &str,
+    value: &str,
+) -> Result<T, CliError> {
+    serde_json::from_value(serde_json::Value::String(value.to_string()))
+        .map_err(|e| CliError::Input(format!("--{flag} = {value:?} is not allowed: {e}")))
+}
+
+pub(super) fn write_json(out: &mut impl Write, v: &impl serde::Serialize) -> Result<(), CliError> {
+    serde_json::to_writer_pretty(&mut *out, v).map_err(|e| CliError::Failure(e.to_string()))?;
+    writeln!(out).map_err(io)
+}
+
+/// The JSON with `--json`, else the text table.
+pub(super) fn write_either(
+    out: &mut impl Write,
+    json: bool,
+    v: &impl serde::Serialize,
+    text: impl FnOnce() -> String,
+) -> Result<(), CliError> {
+    if json {
+        write_json(out, v)
+    } else {
+        write!(out, "{}", text()).map_err(io)
+    }
+}
+
+pub(super) fn write_file(path: &std::path::Path, text: &str) -> Result<(), CliError> {
+    std::fs::write(path, text)
+        .map_err(|e| CliError::Failure(format!("cannot write {}: {e}", path.display())))
+}
+
+/// The Fig. 7-style plot of a map.
+pub fn map_svg(title: &str, r: &MapResult) -> Result<String, CliError> {
+    let points: Vec<MapPlotPoint> = r
+        .points
+        .iter()
+        .map(|p| MapPlotPoint {
+            b: p.b,
+            k: p.k,
+            ok: p.ok(),
+            fidelity: p.fidelity,
+        })
+        .collect();
+    let boundary: Vec<(f64, f64)> = r.boundary.iter().map(|p| (p.b, p.k_max)).collect();
+    let label = if r.criterion == Criterion::Stability {
+        "stable"
+    } else {
+        "passive"
+    };
+    zwidth_map_svg(title, &points, &boundary, label).map_err(CliError::Failure)
+}
+
+/// A text summary of a map.
+pub fn map_table(r: &MapResult) -> String {
+    let mut s = format!(
+        "model: {}
+criterion: {:?}, search: {:?}, resolution: {}
+{:>14} {:>14}
+",
+        r.model, r.criterion, r.search, r.resolution, "B (N·s/m)", "K_max (N/m)"
+    );
+    for p in &r.boundary {
+        s.push_str(&format!(
+            "{:>14.2} {:>14.1}
+",
+            p.b, p.k_max
+        ));
+    }
+    s.push_str(&format!(
+        "K-width {:.1} N/m, B-width {:.2} N·s/m",
+        r.k_width, r.b_width
+    ));
+    if let Some(f) = r.max_fidelity_error {
+        s.push_str(&format!(", max fidelity error {f:.2} N·s/m"));
+    }
+    s.push_str(&format!(
+        "
+{} trials in {:.3} s
+",
+        r.trials, r.elapsed_s
+    ));
+    s
+}

@@ -1,0 +1,447 @@
+//! Commands that run the engines locally: trial, impedance, map, tune,
+//! compare, bench, estimate, accuracy, lipschitz, gains.
+
+use std::io::{BufRead, BufWriter, Write};
+
+use crate::accuracy::{self, AccuracyConfig};
+use crate::estimators::{EstimatorKind, EstimatorSpec, Sampling, VelocityEstimator};
+use crate::lipschitz;
+use crate::plot::{loglog_svg, Series};
+use crate::zwidth::compare;
+use crate::zwidth::hit::{wall_hit, HitKnobs, NoTrace, TraceRow};
+use crate::zwidth::scene::validate_wall;
+use crate::zwidth::search::{map_observed, Evaluator, Observer};
+use crate::zwidth::settings::{
+    Accuracy, AccuracyKnobs, Criterion, MapSpec, Method, Preset, SearchKind,
+};
+use crate::zwidth::tradeoff;
+
+use super::common::*;
+use super::{BenchCommand, CliError, Command};
+
+pub(super) fn run(
+    command: Command,
+    stdin: impl BufRead,
+    stdout: &mut impl Write,
+) -> Result<(), CliError> {
+    match command {
+        Command::Trial {
+            scene,
+            k,
+            b,
+            json,
+            trace,
+        } => {
+            let sc = read_scene(&scene)?.validate()?;
+            validate_wall(k, b)?;
+            let knobs = HitKnobs {
+                settle_s: sc.spec.hit.settle_s,
+                measure_s: sc.spec.hit.measure_s,
+            };
+            let outcome = if let Some(path) = &trace {
+                let worst = (sc.spec.hit.settle_s * 11.0 + sc.spec.hit.measure_s + 60.0)
+                    * sc.spec.control.sample_hz;
+                if worst > 1e7 {
+                    return Err(CliError::Input(format!(
+                        "--trace: this trial may run to {worst:.0} samples; traces are limited to 10 000 000 rows (shorten hit.settle_s/measure_s or lower loop.sample_hz)"
+                    )));
+                }
+                let mut rows: Vec<TraceRow> = Vec::new();
+                let o = wall_hit(&sc, k, b, knobs, &mut rows);
+                let mut csv = String::from(
+                    "t_s,x_true_m,y_measured_m,v_est_m_per_s,v_true_m_per_s,force_n\n",
+                );
+                for r in rows {
+                    csv.push_str(&format!(
+                        "{},{},{},{},{},{}\n",
+                        r.t, r.x, r.y, r.v_est, r.v, r.force
+                    ));
+                }
+                write_file(path, &csv)?;
+                o
+            } else {
+                wall_hit(&sc, k, b, knobs, &mut NoTrace)
+            };
+            if json {
+                write_json(stdout, &outcome)
+            } else {
+                let rms = outcome
+                    .rms
+                    .map(|r| format!("{r:.3e} m"))
+                    .unwrap_or("- (diverged)".into());
+                writeln!(
+                    stdout,
+                    "{} (RMS {rms} about {:.6e} m, threshold {:.3e} m; {} samples)",
+                    if outcome.stable { "stable" } else { "unstable" },
+                    outcome.mean_position,
+                    sc.spec.hit.threshold,
+                    outcome.samples
+                )
+                .map_err(io)
+            }
+        }
+        Command::Impedance {
+            scene,
+            k,
+            b,
+            method,
+            accuracy,
+            json,
+        } => {
+            let sc = read_scene(&scene)?.validate()?;
+            validate_wall(k, b)?;
+            let method: Method = parse_choice("method", &method)?;
+            let acc = Accuracy::Preset(parse_choice("accuracy", &accuracy)?);
+            let res = acc.resolve(&sc)?;
+            let ev = Evaluator::new(sc, method, Criterion::Impedance, res)?;
+            let curve = ev.impedance(k, b).ok_or_else(|| {
+                CliError::Input("--method must be auto, analytic or frequency".into())
+            })?;
+            if json {
+                #[derive(serde::Serialize)]
+                struct Out<'a> {
+                    model: String,
+                    #[serde(flatten)]
+                    curve: &'a crate::zwidth::analytic::ImpedanceCurve,
+                }
+                write_json(
+                    stdout,
+                    &Out {
+                        model: ev.model_description(),
+                        curve: &curve,
+                    },
+                )
+            } else {
+                let mut s = format!(
+                    "model: {}
+{:>10} {:>14} {:>10}
+",
+                    ev.model_description(),
+                    "f (Hz)",
+                    "|Z| (N·s/m)",
+                    "phase (°)"
+                );
+                for i in 0..curve.freq_hz.len() {
+                    s.push_str(&format!(
+                        "{:>10.2} {:>14.4} {:>10.3}
+",
+                        curve.freq_hz[i], curve.magnitude[i], curve.phase_deg[i]
+                    ));
+                }
+                s.push_str(&format!(
+                    "{}; fidelity error {:.3} N·s/m
+",
+                    if curve.passive {
+                        "passive (phase within ±90° over the band)"
+                    } else {
+                        "NOT passive"
+                    },
+                    curve.fidelity
+                ));
+                write!(stdout, "{s}").map_err(io)
+            }
+        }
+        Command::Map {
+            scene,
+            method,
+            criterion,
+            search,
+            b,
+            k_rel_tol,
+            accuracy,
+            json,
+            svg,
+        } => {
+            let spec = MapSpec {
+                scene: read_scene(&scene)?,
+                method: parse_choice("method", &method)?,
+                criterion: parse_choice("criterion", &criterion)?,
+                search: parse_choice::<SearchKind>("search", &search)?,
+                accuracy: Accuracy::Knobs(AccuracyKnobs {
+                    preset: parse_choice::<Preset>("accuracy", &accuracy)?,
+                    k_rel_tol,
+                    ..Default::default()
+                }),
+                b,
+                b_max: 1000.0,
+                k_max: 1e7,
+            };
+            let observer = std::sync::Arc::new(Observer::default());
+            let r = with_progress(&observer, || map_observed(&spec, Some(observer.clone()), 0))?;
+            if let Some(path) = svg {
+                write_file(
+                    &path,
+                    &map_svg(&format!("Z-width: {}", spec.scene.estimator.label()), &r)?,
+                )?;
+            }
+            write_either(stdout, json, &r, || map_table(&r))
+        }
+        Command::Tune {
+            scene,
+            params,
+            objective,
+            method,
+            criterion,
+            search,
+            solver,
+            seed,
+            accuracy,
+            final_accuracy,
+            finalists,
+            max_evaluations,
+            constraint,
+            b,
+            json,
+            svg,
+            csv,
+        } => {
+            let params = serde_json::from_str(&params).map_err(|e| {
+                CliError::Input(format!(
+                    "--params = {params:?} is not allowed: {e}; e.g. '{{\"cutoff_hz\":{{\"min\":10,\"max\":500}}}}'"
+                ))
+            })?;
+            let objective: crate::tune::Objective = if objective.trim_start().starts_with('{') {
+                serde_json::from_str(&objective)
+            } else {
+                serde_json::from_value(serde_json::Value::String(objective.clone()))
+            }
+            .map_err(|e| {
+                CliError::Input(format!(
+                    "--objective = {objective:?} is not allowed: {e}; k_width, b_width, max_fidelity_error, area, {{\"weighted\":{{…}}}} or {{\"pareto\":[…]}}"
+                ))
+            })?;
+            let spec = crate::tune::TuneSpec {
+                scene: read_scene(&scene)?,
+                params,
+                objective,
+                method: parse_choice("method", &method)?,
+                criterion: parse_choice("criterion", &criterion)?,
+                search: parse_choice("search", &search)?,
+                accuracy: Accuracy::Preset(parse_choice("accuracy", &accuracy)?),
+                final_accuracy: Accuracy::Preset(parse_choice("final-accuracy", &final_accuracy)?),
+                finalists,
+                solver: parse_choice("solver", &solver)?,
+                seed,
+                max_evaluations,
+                constraint: constraint
+                    .map(|c| parse_choice("constraint", &c))
+                    .transpose()?,
+                b,
+                b_max: 1000.0,
+                k_max: 1e7,
+            };
+            let tune = spec.validate()?;
+            let observer = std::sync::Arc::new(Observer::default());
+            let r = with_progress(&observer, || tune.run(Some(observer.clone())))?;
+            if let Some(p) = svg {
+                write_file(&p, &r.svg().map_err(CliError::Failure)?)?;
+            }
+            if let Some(p) = csv {
+                write_file(&p, &r.csv())?;
+            }
+            write_either(stdout, json, &r, || r.table())
+        }
+        Command::Compare {
+            scene,
+            accuracy,
+            json,
+            svg_dir,
+        } => {
+            let spec = match &scene {
+                Some(p) => read_scene(p)?,
+                None => compare::seed_2018_scene(),
+            };
+            let acc = Accuracy::Preset(parse_choice("accuracy", &accuracy)?);
+            let observer = std::sync::Arc::new(Observer::default());
+            let r = with_progress(&observer, || {
+                compare::compare_observed(&spec, &acc, None, Some(observer.clone()))
+            })?;
+            if let Some(dir) = svg_dir {
+                std::fs::create_dir_all(&dir).map_err(|e| {
+                    CliError::Failure(format!("cannot create {}: {e}", dir.display()))
+                })?;
+                for row in &r.rows {
+                    let name: String = row
+                        .name
+                        .chars()
+                        .map(|c| {
+                            if c.is_ascii_alphanumeric() {
+                                c.to_ascii_lowercase()
+                            } else {
+                                '_'
+                            }
+                        })
+                        .collect();
+                    write_file(
+                        &dir.join(format!("{name}.svg")),
+                        &map_svg(
+                            &format!("Z-width: {} ({})", row.name, row.parameters),
+                            &row.map,
+                        )?,
+                    )?;
+                }
+            }
+            write_either(stdout, json, &r, || r.table())
+        }
+        Command::Bench {
+            what:
+                BenchCommand::Service {
+                    server,
+                    submissions,
+                    rate,
+                    seconds,
+                },
+        } => {
+            if !(rate > 0.0
+                && rate <= 10_000.0
+                && seconds > 0.0
+                && seconds <= 600.0
+                && (1..=100_000).contains(&submissions))
+            {
+                return Err(CliError::Input(
+                    "bench service: rate must be 0–10000 /s, seconds 0–600, submissions 1–100000"
+                        .into(),
+                ));
+            }
+            let r = client(server).bench(submissions, rate, seconds)?;
+            write_json(stdout, &r)
+        }
+        Command::Bench {
+            what:
+                BenchCommand::Tune {
+                    accuracy,
+                    scan_points,
+                    levant_accuracy,
+                    levant_evaluations,
+                    json,
+                },
+        } => {
+            if !(5..=5000).contains(&scan_points) || !(1..=1000).contains(&levant_evaluations) {
+                return Err(CliError::Input(
+                    "bench tune: --scan-points must be 5 to 5000, --levant-evaluations 1 to 1000"
+                        .into(),
+                ));
+            }
+            let study = crate::tune::study::Study {
+                cutoff: crate::tune::study::cutoff(
+                    parse_choice("accuracy", &accuracy)?,
+                    scan_points,
+                )?,
+                levant: crate::tune::study::levant(
+                    parse_choice("levant-accuracy", &levant_accuracy)?,
+                    levant_evaluations,
+                )?,
+            };
+            write_either(stdout, json, &study, || study.table())
+        }
+        Command::Bench {
+            what: BenchCommand::Tradeoff { json },
+        } => {
+            let rows = tradeoff::run()?;
+            write_either(stdout, json, &rows, || tradeoff::table(&rows))
+        }
+        Command::Estimate {
+            rate,
+            estimator,
+            quantization,
+        } => {
+            let sampling = Sampling::new(rate, quantization)?;
+            let spec = EstimatorSpec::from_json(&estimator)?;
+            let mut est = spec.build(sampling)?;
+            let ys = read_samples(stdin)?;
+            let mut out = BufWriter::new(stdout);
+            for y in ys {
+                let v = est.update(y);
+                if !v.is_finite() {
+                    return Err(CliError::Failure(format!(
+                        "internal error: non-finite estimate for input {y}"
+                    )));
+                }
+                writeln!(out, "{v}").map_err(io)?;
+            }
+            out.flush().map_err(io)
+        }
+        Command::Accuracy {
+            rates,
+            json,
+            svg,
+            quantization,
+        } => {
+            let cfg = AccuracyConfig {
+                rates,
+                quantization,
+                ..AccuracyConfig::default()
+            };
+            let report = accuracy::run(&cfg)?;
+            if let Some(path) = svg {
+                let series: Vec<Series> = report
+                    .rows
+                    .iter()
+                    .map(|r| Series {
+                        name: r.name.clone(),
+                        points: report
+                            .rates
+                            .iter()
+                            .copied()
+                            .zip(r.rms_error.iter().copied())
+                            .collect(),
+                    })
+                    .collect();
+                let text = loglog_svg(
+                    "RMS velocity error vs sample rate (2011 paper Fig. 2 study)",
+                    "sample rate (Hz)",
+                    "RMS error (m/s)",
+                    &series,
+                )
+                .map_err(CliError::Failure)?;
+                std::fs::write(&path, text).map_err(|e| {
+                    CliError::Failure(format!("cannot write {}: {e}", path.display()))
+                })?;
+            }
+            if json {
+                write_json(stdout, &report)
+            } else {
+                write!(stdout, "{}", report.table()).map_err(io)
+            }
+        }
+        Command::Lipschitz {
+            rate,
+            quantization,
+            json,
+        } => {
+            let ys = read_samples(stdin)?;
+            let est = lipschitz::estimate(&ys, rate, quantization)?;
+            if json {
+                write_json(stdout, &est)
+            } else {
+                writeln!(
+                    stdout,
+                    "C = {:.6} m/s² (max |x''| at t = {:.6} s; window {} samples = {:.6} s; noise floor {:.3e} m/s²)\nmethod: {}",
+                    est.lipschitz,
+                    est.at_s,
+                    2 * est.half_window + 1,
+                    est.window_s,
+                    est.noise_floor,
+                    est.method
+                )
+                .map_err(io)
+            }
+        }
+        Command::Gains { estimator, json } => {
+            let spec = EstimatorSpec::from_json(&estimator)?;
+            let EstimatorKind::Levant(l) = &spec.kind else {
+                return Err(CliError::Input(format!(
+                    "estimator.kind = {:?} is not allowed: gains are reported for kind \"levant\" only",
+                    serde_json::to_value(&spec).ok().and_then(|v| v.get("kind").cloned()).unwrap_or_default()
+                )));
+            };
+            let report = l.gains()?.report();
+            if json {
+                write_json(stdout, &report)
+            } else {
+                writeln!(stdout, "{report}").map_err(io)
+            }
+        }
+        other => Err(CliError::Failure(format!("{other:?} is not handled here"))),
+    }
+}

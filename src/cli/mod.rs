@@ -1,0 +1,357 @@
+//! The `zwidth` command line: parse, call the library, print. Bad input
+//! exits with code 2 and one line naming the problem; I/O failures exit 1.
+//! Local engines are in `local`, the service and its client in `service`,
+//! shared helpers in `common`.
+
+mod common;
+mod local;
+mod service;
+
+use std::io::{BufRead, Write};
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand};
+
+pub use crate::error::CliError;
+pub use common::{map_svg, map_table, read_samples};
+
+/// Default encoder step (m): the 1 µm encoder of the papers' device.
+pub const DEFAULT_QUANTIZATION: f64 = 1e-6;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "zwidth",
+    version,
+    about = "Velocity estimators and Z-width of haptic devices (SI units throughout)"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Estimate velocity: positions (m, one per line) on stdin, velocities (m/s) on stdout.
+    Estimate {
+        /// Sample rate (Hz).
+        #[arg(long)]
+        rate: f64,
+        /// Estimator spec as JSON, e.g. '{"kind":"butterworth","cutoff_hz":100}'.
+        #[arg(long)]
+        estimator: String,
+        /// Encoder quantization step d (m); sets Kalman r = d²/3 and the FOAW band.
+        #[arg(long, default_value_t = DEFAULT_QUANTIZATION)]
+        quantization: f64,
+    },
+    /// The 2011 paper's Fig. 2 study: RMS derivative error of every estimator vs sample rate.
+    Accuracy {
+        /// Sample rates (Hz), comma-separated.
+        #[arg(long, value_delimiter = ',', default_values_t = [1e3, 2e3, 5e3, 1e4, 2e4, 5e4, 1e5])]
+        rates: Vec<f64>,
+        /// Print JSON instead of the table.
+        #[arg(long)]
+        json: bool,
+        /// Also write the error-vs-rate plot here.
+        #[arg(long)]
+        svg: Option<PathBuf>,
+        /// Encoder quantization step (m).
+        #[arg(long, default_value_t = DEFAULT_QUANTIZATION)]
+        quantization: f64,
+    },
+    /// Estimate the Lipschitz constant C (bound on |acceleration|, m/s²) of a position trace on stdin.
+    Lipschitz {
+        /// Sample rate (Hz).
+        #[arg(long)]
+        rate: f64,
+        /// Encoder quantization step (m), if known; otherwise the noise is estimated from the data.
+        #[arg(long)]
+        quantization: Option<f64>,
+        #[arg(long)]
+        json: bool,
+    },
+    /// One wall hit (time domain, 2011 paper §2.4).
+    Trial {
+        /// Scene JSON file.
+        #[arg(long)]
+        scene: PathBuf,
+        /// Wall stiffness K (N/m).
+        #[arg(long)]
+        k: f64,
+        /// Wall damping B (N·s/m).
+        #[arg(long, allow_negative_numbers = true)]
+        b: f64,
+        #[arg(long)]
+        json: bool,
+        /// Write the trace here: t, true and measured position, estimated and true velocity, force.
+        #[arg(long)]
+        trace: Option<PathBuf>,
+    },
+    /// Impedance of the rendered wall over the probe band (analytic when the scene is linear, else simulated).
+    Impedance {
+        #[arg(long)]
+        scene: PathBuf,
+        #[arg(long)]
+        k: f64,
+        #[arg(long, allow_negative_numbers = true)]
+        b: f64,
+        /// auto | analytic | frequency
+        #[arg(long, default_value = "auto")]
+        method: String,
+        /// draft | standard | reference
+        #[arg(long, default_value = "standard")]
+        accuracy: String,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Z-width map: the (K, B) region the scene renders.
+    Map {
+        #[arg(long)]
+        scene: PathBuf,
+        /// auto | analytic | time | frequency
+        #[arg(long, default_value = "auto")]
+        method: String,
+        /// stability | impedance | strict_passivity
+        #[arg(long, default_value = "impedance")]
+        criterion: String,
+        /// trace | bisect | robust_bisect | grid
+        #[arg(long, default_value = "bisect")]
+        search: String,
+        /// Only these damping values (N·s/m), comma-separated.
+        #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+        b: Option<Vec<f64>>,
+        /// Relative K resolution of the bisection (overrides the accuracy preset).
+        #[arg(long)]
+        k_rel_tol: Option<f64>,
+        /// draft | standard | reference
+        #[arg(long, default_value = "standard")]
+        accuracy: String,
+        #[arg(long)]
+        json: bool,
+        /// Write the Fig. 7-style plot here.
+        #[arg(long)]
+        svg: Option<PathBuf>,
+    },
+    /// Tune the scene's estimator parameters (argmin) for an objective.
+    Tune {
+        #[arg(long)]
+        scene: PathBuf,
+        /// Parameters with bounds, e.g. '{"cutoff_hz":{"min":10,"max":500}}',
+        /// '{"q":{"min":1e2,"max":1e8,"scale":"log"}}'.
+        #[arg(long)]
+        params: String,
+        /// k_width | b_width | max_fidelity_error | area, or JSON:
+        /// '{"weighted":{"k_width":1e-5,"b_width":1e-2}}', '{"pareto":["k_width","max_fidelity_error"]}'.
+        #[arg(long)]
+        objective: String,
+        /// auto | analytic | time | frequency
+        #[arg(long, default_value = "auto")]
+        method: String,
+        /// stability | impedance | strict_passivity
+        #[arg(long, default_value = "impedance")]
+        criterion: String,
+        /// robust_bisect | bisect | trace | grid: how each map searches.
+        #[arg(long, default_value = "robust_bisect")]
+        search: String,
+        /// auto | brent | golden | nelder_mead | particle_swarm | grid | halton
+        #[arg(long, default_value = "auto")]
+        solver: String,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Accuracy while searching: draft | standard | reference.
+        #[arg(long, default_value = "draft")]
+        accuracy: String,
+        /// Accuracy the finalists are re-evaluated at.
+        #[arg(long, default_value = "reference")]
+        final_accuracy: String,
+        #[arg(long, default_value_t = 3)]
+        finalists: usize,
+        #[arg(long, default_value_t = 40)]
+        max_evaluations: usize,
+        /// levant | lyapunov (Levant gains only).
+        #[arg(long)]
+        constraint: Option<String>,
+        /// Only these damping values (N·s/m), comma-separated.
+        #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+        b: Option<Vec<f64>>,
+        #[arg(long)]
+        json: bool,
+        /// Plot of the objective over evaluations (or the Pareto front).
+        #[arg(long)]
+        svg: Option<PathBuf>,
+        /// Every evaluation as CSV.
+        #[arg(long)]
+        csv: Option<PathBuf>,
+    },
+    /// Every estimator on one scene, as the 2018 paper's Table I.
+    Compare {
+        /// Scene JSON file (default: the 2018 paper's simulated device at 1 kHz).
+        scene: Option<PathBuf>,
+        /// draft | standard | reference
+        #[arg(long, default_value = "standard")]
+        accuracy: String,
+        #[arg(long)]
+        json: bool,
+        /// Write one map plot per estimator into this directory.
+        #[arg(long)]
+        svg_dir: Option<PathBuf>,
+    },
+    /// Run the HTTP service: queue experiments, run them, store every run in SQLite.
+    Serve {
+        /// SQLite database file (created and migrated on first start).
+        #[arg(long, env = "ZWIDTH_DB", default_value = "zwidth.db")]
+        db: PathBuf,
+        /// Address to listen on; port 0 picks a free one (printed on start).
+        #[arg(long, env = "ZWIDTH_BIND", default_value = "127.0.0.1:8080")]
+        bind: String,
+        /// Bearer tokens that may submit and cancel (comma-separated); required beyond loopback.
+        #[arg(
+            long = "token",
+            env = "ZWIDTH_TOKENS",
+            value_delimiter = ',',
+            hide_env_values = true
+        )]
+        tokens: Vec<String>,
+        /// A file with the bearer tokens, one per line (keeps them out of `ps`
+        /// and the shell history; prefer this or ZWIDTH_TOKENS to --token).
+        #[arg(long, env = "ZWIDTH_TOKEN_FILE")]
+        token_file: Option<PathBuf>,
+        /// Another origin that may write (e.g. a dashboard behind a proxy:
+        /// https://lab.example); the server's own origin always may.
+        #[arg(
+            long = "allow-origin",
+            env = "ZWIDTH_ALLOW_ORIGINS",
+            value_delimiter = ','
+        )]
+        allow_origins: Vec<String>,
+        /// Simulated rigs, NAME[:THREADS] comma-separated (0 threads: one per core); the first is the default.
+        #[arg(long, env = "ZWIDTH_RIGS", default_value = "sim:0")]
+        rigs: String,
+        /// Longest a request may take before a 503 (s).
+        #[arg(long, env = "ZWIDTH_REQUEST_TIMEOUT_S", default_value_t = 30.0)]
+        request_timeout_s: f64,
+    },
+    /// Submit an experiment JSON file to a running service; prints its id.
+    Submit {
+        file: PathBuf,
+        #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
+        server: String,
+        #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+        priority: i64,
+        #[arg(long)]
+        idempotency_key: Option<String>,
+        /// Rig to run on (see GET /v1/rigs); default the server's first.
+        #[arg(long)]
+        rig: Option<String>,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Show an experiment's state and progress (JSON).
+    Status {
+        id: String,
+        #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
+        server: String,
+    },
+    /// Follow an experiment with a progress line until it ends (exit 1 unless it succeeded).
+    Watch {
+        id: String,
+        #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
+        server: String,
+    },
+    /// Fetch a finished experiment's result: JSON on stdout, or points as CSV, or the plot.
+    Results {
+        id: String,
+        #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
+        server: String,
+        #[arg(long)]
+        csv: Option<PathBuf>,
+        #[arg(long)]
+        svg: Option<PathBuf>,
+    },
+    /// Print the service's OpenAPI 3.1 description (what api/openapi.json holds).
+    Openapi,
+    /// A consistent copy of a service's database in one file (SQLite
+    /// `VACUUM INTO`), safe while the service runs; restore by starting
+    /// `zwidth serve --db` on the copy.
+    Backup {
+        /// The database to copy.
+        #[arg(long, env = "ZWIDTH_DB", default_value = "zwidth.db")]
+        db: PathBuf,
+        /// The copy to write (must not exist).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Measurements: `zwidth bench tradeoff`.
+    Bench {
+        #[command(subcommand)]
+        what: BenchCommand,
+    },
+    /// Report which convergence conditions a Levant gain pair meets.
+    Gains {
+        /// A levant estimator spec, e.g. '{"kind":"levant","alpha":13,"lambda":1.58,"lipschitz":12}'.
+        #[arg(long)]
+        estimator: String,
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+pub enum BenchCommand {
+    /// Against a running service: 1 000 submissions, then GET latency at 500 requests/s while a long experiment runs.
+    Service {
+        #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
+        server: String,
+        #[arg(long, default_value_t = 1000)]
+        submissions: usize,
+        #[arg(long, default_value_t = 500.0)]
+        rate: f64,
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+    },
+    /// Tuning on the seed device: Butterworth tuner vs a 1 Hz brute-force scan, Levant tuned vs rule gains.
+    Tune {
+        /// Accuracy of the Butterworth scan and tune.
+        #[arg(long, default_value = "draft")]
+        accuracy: String,
+        /// Points of the brute-force scan (490: 1 Hz steps over 10–499 Hz); the tuner gets a fifth.
+        #[arg(long, default_value_t = 490)]
+        scan_points: usize,
+        /// Accuracy of the Levant tune.
+        #[arg(long, default_value = "standard")]
+        levant_accuracy: String,
+        /// Evaluations the Levant tune may make.
+        #[arg(long, default_value_t = 16)]
+        levant_evaluations: usize,
+        #[arg(long)]
+        json: bool,
+    },
+    /// Wall time and K/B-width error against `reference` for each accuracy preset, on the example scenes.
+    Tradeoff {
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+impl Command {
+    /// Commands that run or talk to the service.
+    fn is_service(&self) -> bool {
+        matches!(
+            self,
+            Command::Serve { .. }
+                | Command::Submit { .. }
+                | Command::Openapi
+                | Command::Backup { .. }
+                | Command::Status { .. }
+                | Command::Watch { .. }
+                | Command::Results { .. }
+        )
+    }
+}
+
+pub fn run(cli: Cli, stdin: impl BufRead, stdout: &mut impl Write) -> Result<(), CliError> {
+    if cli.command.is_service() {
+        service::run(cli.command, stdout)
+    } else {
+        local::run(cli.command, stdin, stdout)
+    }
+}
