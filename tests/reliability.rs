@@ -79,15 +79,30 @@ fn specs_beyond_the_cost_limits_are_refused_naming_the_field() {
         "objective": "k_width", "search": "trace", "accuracy": "reference", "max_evaluations": 5000}).to_string();
     let (code, ct, v) = call(post_json(&url).send_string(&tune));
     assert_problem(code, &ct, &v, 422, Some("max_evaluations"));
+    // A compare takes 1 to 20 estimators (validated before anything runs).
+    call(ureq::post(&format!("{}/v1/queue/pause", s.base)).call());
+    let est = |n: usize| {
+        serde_json::json!({"kind": "compare", "accuracy": "draft",
+            "estimators": vec![serde_json::json!({"kind": "fdm"}); n]})
+        .to_string()
+    };
+    let (code, ct, v) = call(post_json(&url).send_string(&est(21)));
+    assert_problem(code, &ct, &v, 422, Some("estimators"));
+    let (code, ct, v) = call(post_json(&url).send_string(&est(0)));
+    assert_problem(code, &ct, &v, 422, Some("estimators"));
+    let (code, _, v) = call(post_json(&url).send_string(&est(20)));
+    assert_eq!(code, 202, "{v}");
+    assert_eq!(v["estimate"]["maps"], 20, "{v}");
     // Accepted requests say what they will cost.
     let ok = map(serde_json::json!({"b": [0, 5], "criterion": "strict_passivity"}));
     let (code, _, v) = call(post_json(&url).send_string(&ok));
     assert_eq!(code, 202, "{v}");
+    assert_eq!(v["kind"], "map", "{v}");
     assert_eq!(v["estimate"]["trials"], 2, "{v}");
     assert_eq!(v["estimate"]["b_columns"], 2, "{v}");
-    // Nothing but the good one was stored.
+    // Nothing but the good ones was stored.
     let all = get(&url);
-    assert_eq!(all["experiments"].as_array().unwrap().len(), 1, "{all}");
+    assert_eq!(all["experiments"].as_array().unwrap().len(), 2, "{all}");
 }
 
 /// Defect 1, the crash loop: a spec stored by an older version that today's
@@ -230,14 +245,28 @@ fn a_cancelled_experiment_never_ends_succeeded() {
 fn a_finish_blocked_by_a_held_lock_is_retried() {
     let s = start();
     let url = format!("{}/v1/experiments", s.base);
-    // A time-domain map of about a second.
-    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"method":"time","criterion":"stability","b":[0,20],"accuracy":"draft"}"#;
+    // A time-domain trace of about two seconds (1 600 trials at 10 kHz).
+    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":10000,"render_hz":1000}},"method":"time","criterion":"stability","search":"trace"}"#;
     let (code, _, v) = call(post_json(&url).send_string(body));
     assert_eq!(code, 202, "{v}");
     let id = v["id"].as_str().unwrap().to_string();
+    // Lock only once it runs (a claim blocked by the lock would just wait),
+    // and longer than the run plus the 5 s busy timeout, so its end is
+    // written while the lock is held.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let v = get(&format!("{url}/{id}"));
+        match v["state"].as_str() {
+            Some("running") => break,
+            Some("queued") => {}
+            _ => panic!("ended before the lock could be taken: {v}"),
+        }
+        assert!(Instant::now() < deadline, "{v}");
+        std::thread::sleep(Duration::from_millis(5));
+    }
     let db = s._dir.join("test.db");
     let rt = tokio::runtime::Runtime::new().unwrap();
-    let hold = Duration::from_secs(7); // longer than the 5 s busy timeout
+    let hold = Duration::from_secs(20);
     let held_at = Instant::now();
     rt.block_on(async {
         use sqlx::Connection;
@@ -390,7 +419,7 @@ fn overflowing_inputs_are_refused() {
     assert_problem(code, &ct, &v, 422, Some("objective.weighted.k_width"));
     let zw = |args: &[&str], stdin: &str| {
         use std::io::Write;
-        let mut c = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+        let mut c = Command::new(bin())
             .args(args)
             .stdin(std::process::Stdio::piped())
             .stdout(std::process::Stdio::piped())
@@ -492,7 +521,7 @@ fn shutdown_checkpoints_and_backup_copies_a_live_database() {
     wait_end(&s.base, &id, 30);
     // Backup while it serves.
     let copy = dir.join("copy.db");
-    let o = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+    let o = Command::new(bin())
         .args(["backup", "--db"])
         .arg(dir.join("test.db"))
         .arg("--out")
@@ -501,7 +530,7 @@ fn shutdown_checkpoints_and_backup_copies_a_live_database() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // Backing up onto an existing file is bad input.
-    let o = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+    let o = Command::new(bin())
         .args(["backup", "--db"])
         .arg(dir.join("test.db"))
         .arg("--out")
@@ -546,7 +575,7 @@ fn shutdown_checkpoints_and_backup_copies_a_live_database() {
 fn tokens_stay_out_of_logs_and_can_come_from_a_file() {
     let dir = temp_dir("token");
     std::fs::write(dir.join("tokens"), "file-secret\n").unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+    let child = Command::new(bin())
         .args(["serve", "--bind", "127.0.0.1:0", "--token-file"])
         .arg(dir.join("tokens"))
         .arg("--db")

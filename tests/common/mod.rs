@@ -33,8 +33,14 @@ pub fn start_in(dir: std::path::PathBuf) -> Server {
     start_with(dir, &[])
 }
 
+/// The binary under test: this build's, or `ZWIDTH_TEST_BIN` (to check
+/// that a test fails on another build, e.g. the version before a fix).
+pub fn bin() -> std::ffi::OsString {
+    std::env::var_os("ZWIDTH_TEST_BIN").unwrap_or_else(|| env!("CARGO_BIN_EXE_zwidth").into())
+}
+
 pub fn start_with(dir: std::path::PathBuf, extra: &[&str]) -> Server {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_zwidth"))
+    let mut child = Command::new(bin())
         .args(["serve", "--bind", "127.0.0.1:0"])
         .args(extra)
         .arg("--db")
