@@ -143,7 +143,11 @@ mod tests {
         fn info(&self) -> &RigInfo {
             &self.0
         }
-        fn run(&self, _: &ExperimentSpec, _: Arc<Observer>) -> Result<serde_json::Value, SpecError> {
+        fn run(
+            &self,
+            _: &ExperimentSpec,
+            _: Arc<Observer>,
+        ) -> Result<serde_json::Value, SpecError> {
             Err(SpecError::new("rig", "bench", "runs nothing"))
         }
     }
@@ -170,7 +174,10 @@ mod tests {
             force_limit_n: None,
             parallelism: 1,
         });
-        assert_eq!(rig.check(&sweep).unwrap_err().field, "scenes[1].loop.sample_hz");
+        assert_eq!(
+            rig.check(&sweep).unwrap_err().field,
+            "scenes[1].loop.sample_hz"
+        );
         let compare: ExperimentSpec = serde_json::from_str(r#"{"kind":"compare"}"#).unwrap();
         let c = compare.scenes();
         assert_eq!(c.len(), 1);

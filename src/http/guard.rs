@@ -21,6 +21,13 @@ pub fn same_secret(a: &[u8], b: &[u8]) -> bool {
     a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
+/// Whether `given` is one of `tokens`; every one is compared, no early exit.
+pub fn token_accepted(tokens: &[String], given: &str) -> bool {
+    tokens.iter().fold(false, |acc, k| {
+        acc | same_secret(k.as_bytes(), given.as_bytes())
+    })
+}
+
 /// Mutating endpoints need `Authorization: Bearer <token>` when tokens are
 /// configured: 401 without one, 403 with a wrong one.
 pub fn authorize(st: &AppState, headers: &HeaderMap) -> Result<(), Problem> {
@@ -158,6 +165,20 @@ mod tests {
         assert!(!same_secret(b"s3cret", b"s3cre"));
         assert!(!same_secret(b"", b"x"));
         assert!(same_secret(b"", b""));
+        // Differences that cancel under xor still differ.
+        assert!(!same_secret(b"ab", b"ba"));
+        assert!(!same_secret(b"aabb", b"bbaa"));
+    }
+
+    #[test]
+    fn any_configured_token_is_accepted() {
+        let t = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert!(token_accepted(&t(&["x", "y"]), "y"));
+        assert!(token_accepted(&t(&["x", "y"]), "x"));
+        assert!(!token_accepted(&t(&["x", "y"]), "z"));
+        // A token listed twice (a token file with a repeated line) still works.
+        assert!(token_accepted(&t(&["x", "x"]), "x"));
+        assert!(!token_accepted(&[], "x"));
     }
 
     #[test]
