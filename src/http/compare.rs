@@ -34,12 +34,15 @@ pub async fn compare_runs(
         );
     }
     let runs = q.str("runs").unwrap_or("");
-    let ids: Vec<String> = runs
+    let mut ids: Vec<String> = runs
         .split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())
         .map(str::to_owned)
         .collect();
+    // Each run once, in the order given.
+    let mut seen = std::collections::HashSet::new();
+    ids.retain(|id| seen.insert(id.clone()));
     if ids.is_empty() || ids.len() > COMPARE_MAX_RUNS {
         return Err(SpecError::new(
             "runs",

@@ -217,10 +217,7 @@ pub async fn submit(
             rig: &rig.info().id,
         })
         .await
-        .map_err(|e| {
-            st.store.observe(&e);
-            Problem::store(e)
-        })?;
+        .map_err(|e| st.fail(e))?;
     let (status, row) = match inserted {
         Inserted::New(row) => (StatusCode::ACCEPTED, row),
         Inserted::Earlier(row) => (StatusCode::OK, row),
@@ -310,10 +307,10 @@ pub async fn list(
         .list(
             limit,
             cursor.as_ref().map(|(t, id)| (*t, id.as_str())),
-            with_result,
+            with_spec || with_result,
         )
         .await
-        .map_err(Problem::store)?;
+        .map_err(|e| st.fail(e))?;
     let next_cursor = (rows.len() as i64 == limit)
         .then(|| rows.last().map(|r| format!("{}_{}", r.created_ms, r.id)))
         .flatten();
@@ -323,6 +320,9 @@ pub async fn list(
             let mut v = st.view(r);
             if !with_spec {
                 v.spec = None;
+            }
+            if !with_result {
+                v.result = None;
             }
             v
         })
@@ -347,7 +347,7 @@ pub async fn show(
     State(st): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<ExperimentView>, Problem> {
-    match st.store.get(&id).await.map_err(Problem::store)? {
+    match st.store.get(&id).await.map_err(|e| st.fail(e))? {
         Some(row) => Ok(Json(st.view(row))),
         None => Err(Problem::not_found("experiment", &id)),
     }
@@ -366,11 +366,11 @@ pub async fn cancel(
     Path(id): Path<String>,
 ) -> Result<Json<ExperimentView>, Problem> {
     authorize(&st, &headers)?;
-    let changed = st.store.cancel(&id).await.map_err(Problem::store)?;
+    let changed = st.store.cancel(&id).await.map_err(|e| st.fail(e))?;
     if changed {
         crate::jobs::cancel_running(&st.running, &id);
     }
-    match st.store.get(&id).await.map_err(Problem::store)? {
+    match st.store.get(&id).await.map_err(|e| st.fail(e))? {
         None => Err(Problem::not_found("experiment", &id)),
         Some(row) if !changed => Err(Problem::new(
             StatusCode::CONFLICT,
@@ -406,7 +406,7 @@ pub async fn trials(
         .store
         .trials_page(&id, scope, offset, limit)
         .await
-        .map_err(Problem::store)?;
+        .map_err(|e| st.fail(e))?;
     Ok(Json(t))
 }
 
@@ -419,13 +419,13 @@ pub async fn evaluations(
 ) -> Result<Json<Vec<StoredEvaluation>>, Problem> {
     st.exists(&id).await?;
     Ok(Json(
-        st.store.evaluations(&id).await.map_err(Problem::store)?,
+        st.store.evaluations(&id).await.map_err(|e| st.fail(e))?,
     ))
 }
 
 impl AppState {
     async fn exists(&self, id: &str) -> Result<(), Problem> {
-        match self.store.state(id).await.map_err(Problem::store)? {
+        match self.store.state(id).await.map_err(|e| self.fail(e))? {
             Some(_) => Ok(()),
             None => Err(Problem::not_found("experiment", id)),
         }
@@ -441,7 +441,7 @@ pub async fn finished_maps(
         .store
         .get(id)
         .await
-        .map_err(Problem::store)?
+        .map_err(|e| st.fail(e))?
         .ok_or_else(|| Problem::not_found("experiment", id))?;
     let (Some(result), "succeeded") = (row.result.as_deref(), row.state.as_str()) else {
         return Err(Problem::new(

@@ -48,6 +48,13 @@ impl AppState {
         self.rigs.iter().find(|r| r.info().id == id)
     }
 
+    /// A storage error as a problem; a corrupt page met on the way is
+    /// remembered, so writes are refused from then on.
+    fn fail(&self, e: sqlx::Error) -> Problem {
+        self.store.observe(&e);
+        Problem::store(e)
+    }
+
     fn rig_ids(&self) -> String {
         self.rigs
             .iter()
@@ -161,6 +168,8 @@ pub fn router(state: AppState, timeout: Duration) -> Router {
             timeout,
         ))
         .layer(from_fn(uri_limit))
+        // A panic in a handler is a 500 problem, not a dropped connection.
+        .layer(tower_http::catch_panic::CatchPanicLayer::new())
         .layer(map_response(problem::problems_everywhere))
         .layer(PropagateRequestIdLayer::x_request_id())
         .layer(trace)
@@ -205,6 +214,14 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
             "refusing to serve on {bind} without a token: set ZWIDTH_TOKENS=<secret>[,<secret>…] (or --token-file), or bind to 127.0.0.1"
         ));
     }
+    // Then the socket (a second server on the same port stops here, before
+    // touching the database), then the database, which one server at a time
+    // may serve (an exclusive lock on `<db>.lock`).
+    let listener = tokio::net::TcpListener::bind(addrs.as_slice())
+        .await
+        .map_err(|e| format!("cannot bind {bind}: {e}"))?;
+    let addr = listener.local_addr().map_err(|e| e.to_string())?;
+    let _serving = lock_database(db)?;
     let store = Store::open(db)
         .await
         .map_err(|e| format!("cannot open database {}: {e}", db.display()))?;
@@ -224,10 +241,6 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
             );
         }
     }
-    let listener = tokio::net::TcpListener::bind(addrs.as_slice())
-        .await
-        .map_err(|e| format!("cannot bind {bind}: {e}"))?;
-    let addr = listener.local_addr().map_err(|e| e.to_string())?;
     if tokens.is_empty() {
         tracing::warn!("no token set: anyone on this machine may submit; set ZWIDTH_TOKENS=<secret> to require Authorization: Bearer <secret>");
     }
@@ -255,14 +268,21 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         rigs: Arc::new(rigs),
         running,
     };
+    // On the signal the runners stop at once (the running experiment is
+    // interrupted within a trial) while open requests drain.
+    let stop_tx = Arc::new(stop_tx);
+    let stop = stop_tx.clone();
     let served = axum::serve(
         listener,
         router(state, Duration::from_secs_f64(request_timeout_s)),
     )
-    .with_graceful_shutdown(shutdown_signal())
+    .with_graceful_shutdown(async move {
+        shutdown_signal().await;
+        tracing::info!("shutting down: stopping the runners, draining requests");
+        let _ = stop.send(true);
+    })
     .await
     .map_err(|e| e.to_string());
-    tracing::info!("shutting down: letting the runners stop");
     let _ = stop_tx.send(true);
     for r in runners {
         let _ = r.await;
@@ -274,6 +294,29 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         Err(e) => tracing::error!(error = %e, "checkpoint at shutdown failed"),
     }
     served
+}
+
+/// Hold an exclusive lock on `<db>.lock` while serving: a second server
+/// on the same database is refused (two would run the same experiments).
+fn lock_database(db: &std::path::Path) -> Result<std::fs::File, String> {
+    let mut name = db.as_os_str().to_owned();
+    name.push(".lock");
+    let path = std::path::PathBuf::from(name);
+    let f = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .map_err(|e| format!("cannot open {}: {e}", path.display()))?;
+    match f.try_lock() {
+        Ok(()) => Ok(f),
+        Err(std::fs::TryLockError::WouldBlock) => Err(format!(
+            "refusing: another zwidth serve is using {} (lock {})",
+            db.display(),
+            path.display()
+        )),
+        Err(std::fs::TryLockError::Error(e)) => Err(format!("cannot lock {}: {e}", path.display())),
+    }
 }
 
 /// Ctrl-C or SIGTERM (what `docker stop` sends).

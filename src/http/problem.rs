@@ -147,8 +147,18 @@ impl IntoResponse for Problem {
 /// Parse a JSON body into `T`, naming the field a parse error is in
 /// (`scene.device.mass`), or `body` when it is the whole document.
 pub fn json_body<T: serde::de::DeserializeOwned>(bytes: &[u8], what: &str) -> Result<T, Problem> {
-    let de = &mut serde_json::Deserializer::from_slice(bytes);
-    serde_path_to_error::deserialize(de).map_err(|e| parse_problem(e, what, ""))
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    let v = serde_path_to_error::deserialize(&mut de).map_err(|e| parse_problem(e, what, ""))?;
+    // Nothing but white space may follow the document.
+    de.end().map_err(|e| {
+        Problem::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "Invalid request",
+            format!("the body is not a valid {what}: {e}"),
+        )
+        .with_field("body")
+    })?;
+    Ok(v)
 }
 
 /// `T` from a parsed value, naming fields below `prefix` (`""` or `a.`).
@@ -304,7 +314,8 @@ pub async fn problems_everywhere(resp: Response) -> Response {
         StatusCode::NOT_FOUND => ("Not found", None),
         StatusCode::METHOD_NOT_ALLOWED => ("Method not allowed", None),
         StatusCode::SERVICE_UNAVAILABLE => ("Unavailable", None),
-        StatusCode::BAD_REQUEST if detail.contains("path") || detail.contains("Path") => {
+        // axum: "Invalid URL: Invalid UTF-8 in `id`" for a bad escape.
+        StatusCode::BAD_REQUEST if detail.starts_with("Invalid URL") => {
             ("Invalid path", Some("id"))
         }
         StatusCode::URI_TOO_LONG => ("URI too long", Some("query")),

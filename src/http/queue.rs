@@ -23,7 +23,7 @@ pub struct HealthView {
 }
 
 #[utoipa::path(get, path = "/healthz",
-    params(("check" = Option<bool>, Query, description = "run the database's integrity check (PRAGMA quick_check) now")),
+    params(("check" = Option<bool>, Query, description = "run the database's integrity check (PRAGMA quick_check) now, unless one ran in the last 10 s")),
     responses((status = 200, description = "serving, the database readable and not known to be corrupt", body = HealthView),
               (status = 422, description = "bad check value", body = ProblemBody, content_type = "application/problem+json"),
               (status = 503, description = "the database is corrupt or cannot be read", body = HealthView)))]
@@ -32,7 +32,9 @@ pub async fn healthz(
     RawQuery(query): RawQuery,
 ) -> Result<Response, Problem> {
     let q = QueryArgs::parse(query.as_deref(), &["check"])?;
-    let readable = if q.flag("check")?.unwrap_or(false) {
+    // The full check at most every 10 s (it reads every page).
+    let recent = crate::store::now_ms() - st.store.health().checked_ms < 10_000;
+    let readable = if q.flag("check")?.unwrap_or(false) && !recent {
         st.store.check().await.map(|_| ())
     } else {
         st.store.paused().await.map(|_| ())
@@ -63,8 +65,8 @@ pub async fn healthz(
 
 #[utoipa::path(get, path = "/v1/queue", responses((status = 200, description = "paused flag and experiments per state", body = Object)))]
 pub async fn queue(State(st): State<AppState>) -> Result<Json<Value>, Problem> {
-    let paused = st.store.paused().await.map_err(Problem::store)?;
-    let (by_state, _) = st.store.counts().await.map_err(Problem::store)?;
+    let paused = st.store.paused().await.map_err(|e| st.fail(e))?;
+    let (by_state, _) = st.store.counts().await.map_err(|e| st.fail(e))?;
     let counts: serde_json::Map<String, Value> =
         by_state.into_iter().map(|(s, n)| (s, json!(n))).collect();
     Ok(Json(json!({ "paused": paused, "experiments": counts })))
@@ -73,7 +75,7 @@ pub async fn queue(State(st): State<AppState>) -> Result<Json<Value>, Problem> {
 #[utoipa::path(post, path = "/v1/queue/pause", responses((status = 200, description = "paused flag and experiments per state", body = Object), (status = 401, description = "token required", body = ProblemBody, content_type = "application/problem+json"), (status = 403, description = "token refused, or a cross-origin write", body = ProblemBody, content_type = "application/problem+json")), security((), ("bearer" = [])))]
 pub async fn pause(State(st): State<AppState>, headers: HeaderMap) -> Result<Json<Value>, Problem> {
     authorize(&st, &headers)?;
-    st.store.set_paused(true).await.map_err(Problem::store)?;
+    st.store.set_paused(true).await.map_err(|e| st.fail(e))?;
     queue(State(st)).await
 }
 
@@ -83,7 +85,7 @@ pub async fn resume(
     headers: HeaderMap,
 ) -> Result<Json<Value>, Problem> {
     authorize(&st, &headers)?;
-    st.store.set_paused(false).await.map_err(Problem::store)?;
+    st.store.set_paused(false).await.map_err(|e| st.fail(e))?;
     queue(State(st)).await
 }
 
@@ -91,7 +93,7 @@ pub async fn resume(
 /// runner's current trials per second.
 #[utoipa::path(get, path = "/metrics", responses((status = 200, description = "Prometheus text", body = String, content_type = "text/plain")))]
 pub async fn metrics(State(st): State<AppState>) -> Result<Response, Problem> {
-    let (by_state, trials) = st.store.counts().await.map_err(Problem::store)?;
+    let (by_state, trials) = st.store.counts().await.map_err(|e| st.fail(e))?;
     let depth: i64 = by_state
         .iter()
         .filter(|(s, _)| s == "queued" || s == "scheduled")

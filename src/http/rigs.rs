@@ -32,13 +32,13 @@ pub struct RigView {
 
 pub async fn rig_view(st: &AppState, rig: &Arc<dyn Rig>) -> Result<RigView, Problem> {
     let id = &rig.info().id;
-    let window = st.store.rig_window(id).await.map_err(Problem::store)?;
+    let window = st.store.rig_window(id).await.map_err(|e| st.fail(e))?;
     let now = jiff::Timestamp::now();
     let next = match window.as_ref().and_then(|w| w.validate().ok()) {
         Some(h) => h.next_open(now),
         None => now,
     };
-    let (waiting, running) = st.store.rig_load(id).await.map_err(Problem::store)?;
+    let (waiting, running) = st.store.rig_load(id).await.map_err(|e| st.fail(e))?;
     Ok(RigView {
         info: rig.info().clone(),
         open_now: next == now,
@@ -85,7 +85,7 @@ pub async fn set_window(
     st.store
         .set_rig_window(&id, Some(&w))
         .await
-        .map_err(Problem::store)?;
+        .map_err(|e| st.fail(e))?;
     Ok(Json(rig_view(&st, &rig).await?))
 }
 
@@ -108,6 +108,6 @@ pub async fn clear_window(
     st.store
         .set_rig_window(&id, None)
         .await
-        .map_err(Problem::store)?;
+        .map_err(|e| st.fail(e))?;
     Ok(Json(rig_view(&st, &rig).await?))
 }

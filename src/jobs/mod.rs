@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use crate::experiment::ExperimentSpec;
 use crate::rig::Rig;
-use crate::store::Store;
+use crate::store::{Fault, Store};
 use crate::zwidth::search::{Observer, StoredEvaluation, StoredTrial};
 
 /// The observers of running experiments by id, so a cancel request reaches
@@ -92,9 +92,9 @@ struct Unstored {
 }
 
 impl Unstored {
-    /// Store what finished since the last call (and a tune's best so far);
-    /// true when everything is stored.
-    async fn flush(&mut self, store: &Store, id: &str, observer: &Observer) -> bool {
+    /// Store what finished since the last call (and a tune's best so far).
+    /// Err: what could not be stored is kept for the next call.
+    async fn flush(&mut self, store: &Store, id: &str, observer: &Observer) -> Result<(), Fault> {
         self.trials.extend(observer.take_new());
         self.evals.extend(observer.take_new_evaluations());
         let r = match store.add_trials(id, &self.trials).await {
@@ -113,7 +113,7 @@ impl Unstored {
                     tracing::info!("storing works again: the run goes on");
                 }
                 observer.hold(None);
-                true
+                Ok(())
             }
             Err(e) => {
                 store.observe(&e);
@@ -126,36 +126,49 @@ impl Unstored {
                     "held: {} finished trials cannot be stored ({e}); retrying",
                     self.trials.len()
                 )));
-                false
+                Err(Fault::of(&e))
             }
         }
     }
 }
 
-/// Retry a write until it succeeds or the service shuts down (then the
-/// experiment is requeued at the next start and resumes from its trials).
-async fn until_written<F, Fut>(
+/// Run a store operation, retrying while its fault is transient (another
+/// writer holds the lock, the disk is full) with back-off (0.1 s to 5 s);
+/// meanwhile `held` (if any) shows why. A permanent fault, or shutdown,
+/// ends the retries with the error.
+async fn retrying<T, F, Fut>(
     what: &str,
     shutdown: &tokio::sync::watch::Receiver<bool>,
     store: &Store,
+    held: Option<&Observer>,
     mut f: F,
-) where
+) -> Result<T, sqlx::Error>
+where
     F: FnMut() -> Fut,
-    Fut: std::future::Future<Output = Result<bool, sqlx::Error>>,
+    Fut: std::future::Future<Output = Result<T, sqlx::Error>>,
 {
     let mut wait = Duration::from_millis(100);
     loop {
         match f().await {
-            Ok(_) => return,
+            Ok(v) => {
+                if let Some(o) = held {
+                    o.hold(None);
+                }
+                return Ok(v);
+            }
             Err(e) => {
                 store.observe(&e);
-                tracing::error!(error = %e, "{what} failed; retrying in {wait:?}");
-                if *shutdown.borrow() {
-                    tracing::error!(
-                        "{what}: giving up at shutdown; the experiment resumes at the next start"
-                    );
-                    return;
+                let transient = matches!(Fault::of(&e), Fault::Busy | Fault::Full);
+                if !transient || *shutdown.borrow() {
+                    tracing::error!(error = %e, "{what} failed; not retrying");
+                    return Err(e);
                 }
+                if let Some(o) = held {
+                    o.hold(Some(format!(
+                        "held: {what} cannot be written ({e}); retrying"
+                    )));
+                }
+                tracing::warn!(error = %e, "{what} failed; retrying in {wait:?}");
                 tokio::time::sleep(wait).await;
                 wait = (wait * 2).min(Duration::from_secs(5));
             }
@@ -183,7 +196,7 @@ async fn run_one(
     let (parsed, cost) = match checked {
         Ok(x) => x,
         Err(e) => {
-            until_written("recording a failed spec", &shutdown, store, || {
+            let _ = retrying("recording a failed spec", &shutdown, store, None, || {
                 store.finish(&id, "failed", 0, None, Some(&e))
             })
             .await;
@@ -191,25 +204,35 @@ async fn run_one(
         }
     };
     // Resume: trials stored by an interrupted run are replayed, not redone.
-    let done = match store.trials(&id).await {
-        Ok(t) => t,
+    // They are read (retrying while the database is busy) before anything
+    // runs; an experiment whose stored work cannot be read fails saying so.
+    let stored = async {
+        let t = retrying("reading stored trials", &shutdown, store, None, || {
+            store.trials(&id)
+        })
+        .await?;
+        let e = retrying("reading stored evaluations", &shutdown, store, None, || {
+            store.evaluations(&id)
+        })
+        .await?;
+        Ok::<_, sqlx::Error>((t, e))
+    };
+    let (done, evals) = match stored.await {
+        Ok(x) => x,
         Err(e) => {
-            tracing::error!(error = %e, "reading stored trials failed");
-            Vec::new()
+            if !*shutdown.borrow() {
+                let why = format!("its stored trials could not be read: {e}");
+                let _ = store.finish(&id, "failed", 0, None, Some(&why)).await;
+            }
+            return;
         }
     };
-    if !done.is_empty() {
-        tracing::info!(stored = done.len(), "resuming from stored trials");
-    }
-    let evals = match store.evaluations(&id).await {
-        Ok(e) => e,
-        Err(e) => {
-            tracing::error!(error = %e, "reading stored evaluations failed");
-            Vec::new()
-        }
-    };
-    if !evals.is_empty() {
-        tracing::info!(stored = evals.len(), "resuming from stored evaluations");
+    if !done.is_empty() || !evals.is_empty() {
+        tracing::info!(
+            trials = done.len(),
+            evaluations = evals.len(),
+            "resuming from stored work"
+        );
     }
     let observer = Arc::new(Observer::resuming(done).with_evaluations(evals));
     observer.limit_trials(usize::try_from(cost.trial_limit()).unwrap_or(usize::MAX));
@@ -228,7 +251,7 @@ async fn run_one(
         tokio::select! {
             r = &mut task => break r,
             _ = tokio::time::sleep(Duration::from_millis(100)) => {
-                unstored.flush(store, &id, &observer).await;
+                let _ = unstored.flush(store, &id, &observer).await;
                 let trials = observer.trials.load(Ordering::Relaxed) as i64;
                 let dt = rate_mark.0.elapsed().as_secs_f64();
                 if dt >= 1.0 {
@@ -255,20 +278,35 @@ async fn run_one(
     // Every finished trial is stored before the end is recorded (the
     // experiment stays in `running` meanwhile, so its `held` reason shows).
     let mut wait = Duration::from_millis(100);
-    while !unstored.flush(store, &id, &observer).await && !*shutdown.borrow() {
-        tokio::time::sleep(wait).await;
-        wait = (wait * 2).min(Duration::from_secs(5));
-    }
+    let stored_all = loop {
+        match unstored.flush(store, &id, &observer).await {
+            Ok(()) => break true,
+            Err(Fault::Busy | Fault::Full) if !*shutdown.borrow() => {
+                tokio::time::sleep(wait).await;
+                wait = (wait * 2).min(Duration::from_secs(5));
+            }
+            Err(_) => break false,
+        }
+    };
     let trials = observer.trials.load(Ordering::Relaxed) as i64;
-    if interrupted {
-        until_written("recording an interrupted run", &shutdown, store, || async {
-            store.interrupt(&id, trials).await.map(|_| true)
-        })
-        .await;
+    let forget = || {
         running
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .remove(&id);
+            .remove(&id)
+    };
+    if interrupted || !stored_all {
+        // Shut down, or its trials cannot be stored: leave it to resume at
+        // the next start from what is stored (never end it with trials lost).
+        let _ = retrying(
+            "recording an interrupted run",
+            &shutdown,
+            store,
+            None,
+            || store.interrupt(&id, trials),
+        )
+        .await;
+        forget();
         return;
     }
     let (state, result, error) = match (observer.runaway(), observer.cancelled(), outcome) {
@@ -278,12 +316,18 @@ async fn run_one(
         (None, false, Ok(Err(e))) => ("failed", None, Some(e.to_string())),
         (None, false, Err(e)) => ("failed", None, Some(format!("the run panicked: {e}"))),
     };
-    until_written("recording the end of a run", &shutdown, store, || {
+    let what = "recording the end of a run";
+    let r = retrying(what, &shutdown, store, Some(&observer), || {
         store.finish(&id, state, trials, result.as_deref(), error.as_deref())
     })
     .await;
-    running
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .remove(&id);
+    if let (Err(e), "succeeded") = (&r, state) {
+        // A result the database refuses (e.g. too big): say so.
+        let why = format!("the result could not be stored: {e}");
+        let _ = retrying(what, &shutdown, store, Some(&observer), || {
+            store.finish(&id, "failed", trials, None, Some(&why))
+        })
+        .await;
+    }
+    forget();
 }

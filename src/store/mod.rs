@@ -185,6 +185,12 @@ impl Store {
             not_before_ms,
             rig,
         } = e;
+        let state = if not_before_ms.is_some_and(|t| t > now_ms()) {
+            "scheduled"
+        } else {
+            "queued"
+        };
+        let created_ms = now_ms();
         let r = sqlx::query(
             "INSERT INTO experiments (id, kind, spec, state, priority, created_ms, idempotency_key, not_before_ms, rig)
              VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (idempotency_key) DO NOTHING",
@@ -192,17 +198,35 @@ impl Store {
         .bind(id)
         .bind(kind)
         .bind(spec)
-        .bind(if not_before_ms.is_some_and(|t| t > now_ms()) { "scheduled" } else { "queued" })
+        .bind(state)
         .bind(priority)
-        .bind(now_ms())
+        .bind(created_ms)
         .bind(key)
         .bind(not_before_ms)
         .bind(rig)
         .execute(&self.pool)
         .await?;
         if r.rows_affected() == 1 {
-            let row = self.get(id).await?.ok_or(sqlx::Error::RowNotFound)?;
-            return Ok(Inserted::New(row));
+            // Committed: the row is what was written (no read that could
+            // fail after the commit and turn a stored submission into an error).
+            return Ok(Inserted::New(ExperimentRow {
+                id: id.into(),
+                kind: kind.into(),
+                spec: spec.into(),
+                state: state.into(),
+                priority,
+                created_ms,
+                started_ms: None,
+                finished_ms: None,
+                trials_done: 0,
+                result: None,
+                error: None,
+                idempotency_key: key.map(str::to_owned),
+                not_before_ms,
+                rig: rig.into(),
+                progress: 0.0,
+                best: None,
+            }));
         }
         let row = sqlx::query_as::<_, ExperimentRow>(
             "SELECT * FROM experiments WHERE idempotency_key = ?",
@@ -229,20 +253,21 @@ impl Store {
     }
 
     /// A page of experiments, newest first, after `cursor` (the last page's
-    /// last `(created_ms, id)`), without their results unless `results`.
+    /// last `(created_ms, id)`); with `full`, their specs and results too
+    /// (else `spec` is empty and `result` none).
     pub async fn list(
         &self,
         limit: i64,
         cursor: Option<(i64, &str)>,
-        results: bool,
+        full: bool,
     ) -> Result<Vec<ExperimentRow>, sqlx::Error> {
         // Two fixed statements (sqlx takes no SQL built at run time).
-        let sql = if results {
+        let sql = if full {
             "SELECT * FROM experiments
              WHERE ?1 = '' OR created_ms < ?2 OR (created_ms = ?2 AND id < ?1)
              ORDER BY created_ms DESC, id DESC LIMIT ?3"
         } else {
-            "SELECT id, kind, spec, state, priority, created_ms, started_ms, finished_ms, trials_done,
+            "SELECT id, kind, '' AS spec, state, priority, created_ms, started_ms, finished_ms, trials_done,
                     NULL AS result, error, idempotency_key, not_before_ms, rig, progress, best
              FROM experiments
              WHERE ?1 = '' OR created_ms < ?2 OR (created_ms = ?2 AND id < ?1)
@@ -395,10 +420,11 @@ impl Store {
         Ok(r.rows_affected() == 1)
     }
 
-    /// Ask a queued or running experiment to stop; true if it was either.
+    /// Ask a queued, scheduled, running or interrupted experiment to stop;
+    /// true if it was one of those.
     pub async fn cancel(&self, id: &str) -> Result<bool, sqlx::Error> {
         self.writable()?;
-        let r = sqlx::query("UPDATE experiments SET state = 'cancelled', finished_ms = ? WHERE id = ? AND state IN ('queued', 'scheduled', 'running')")
+        let r = sqlx::query("UPDATE experiments SET state = 'cancelled', finished_ms = ? WHERE id = ? AND state IN ('queued', 'scheduled', 'running', 'interrupted')")
             .bind(now_ms())
             .bind(id)
             .execute(&self.pool)

@@ -14,6 +14,9 @@ use crate::error::SpecError;
 pub const MAX_B_COLUMNS: u64 = 2_000;
 /// Most stiffness steps (`k_max / accuracy.k_step`) a trace or grid walks.
 pub const MAX_K_STEPS: u64 = 100_000;
+/// Largest `k_max / accuracy.k_step` for any search (the first K tried is
+/// one step; a bisection brackets from there by doubling).
+pub const MAX_K_RATIO: f64 = 1e12;
 /// Finest relative K resolution a bisection may ask for (f64 has ~1e-16;
 /// below 1e-6 each halving buys nothing a haptic device can show).
 pub const MIN_K_REL_TOL: f64 = 1e-6;
@@ -97,6 +100,7 @@ impl Cost {
 /// `k_step` up to `k_max` (or halving down ten times), then halving the
 /// bracket until it is within `k_rel_tol`.
 fn bisect_trials(res: &Resolved, k_max: f64, robust: bool) -> u64 {
+    // k_max / k_step ≤ MAX_K_RATIO (checked): at most ~40 doublings.
     let up = (k_max / res.k_step).log2().max(0.0).ceil() as u64 + 1;
     let bracket = up.max(11) + 1;
     let halvings = (1.0 / res.k_rel_tol).log2().ceil() as u64 + 1;
@@ -121,7 +125,8 @@ pub fn of_map(spec: &MapSpec, res: &Resolved, exact: bool) -> Result<Cost, SpecE
             n
         }
         None => {
-            let n = (spec.b_max / res.b_step).floor();
+            // As the search builds it: 0, b_step, … while b <= b_max + 1e-9.
+            let n = ((spec.b_max + 1e-9) / res.b_step).floor();
             if n.is_nan() || n >= MAX_B_COLUMNS as f64 {
                 let (field, value) = if spec.b_max > 1000.0 {
                     ("b_max", spec.b_max)
@@ -146,7 +151,15 @@ pub fn of_map(spec: &MapSpec, res: &Resolved, exact: bool) -> Result<Cost, SpecE
             format!("must be {MIN_K_REL_TOL:e} to 0.5"),
         ));
     }
-    let k_steps = (spec.k_max / res.k_step).ceil();
+    let ratio = spec.k_max / res.k_step;
+    if ratio.is_nan() || ratio > MAX_K_RATIO {
+        return Err(SpecError::new(
+            "accuracy.k_step",
+            res.k_step,
+            format!("k_max / accuracy.k_step = {ratio:.3e}; at most {MAX_K_RATIO:e}: raise accuracy.k_step"),
+        ));
+    }
+    let k_steps = ratio.ceil();
     let walks_k = matches!(spec.search, SearchKind::Trace | SearchKind::Grid) && !exact;
     if walks_k && (k_steps.is_nan() || k_steps > MAX_K_STEPS as f64) {
         return Err(SpecError::new(
@@ -163,18 +176,21 @@ pub fn of_map(spec: &MapSpec, res: &Resolved, exact: bool) -> Result<Cost, SpecE
         b_columns
     } else {
         match spec.search {
-            SearchKind::Bisect | SearchKind::RobustBisect => {
-                b_columns * bisect_trials(res, spec.k_max, spec.search == SearchKind::RobustBisect)
-            }
-            // Up the boundary once, then a step or two per B (2011 paper §2.4).
-            SearchKind::Trace => 2 * k_steps + 3 * b_columns,
+            SearchKind::Bisect | SearchKind::RobustBisect => b_columns.saturating_mul(
+                bisect_trials(res, spec.k_max, spec.search == SearchKind::RobustBisect),
+            ),
+            // Automatic B (0 up, 2011 paper §2.4): up the boundary once,
+            // then a step or two per B. A given list may jump up and down
+            // the whole K range between columns.
+            SearchKind::Trace if spec.b.is_none() => 2 * k_steps + 3 * b_columns,
+            SearchKind::Trace => b_columns.saturating_mul(k_steps + 2),
             SearchKind::Grid => {
                 let nb = if spec.b.is_some() {
                     b_columns
                 } else {
                     b_columns.min(60)
                 };
-                nb * k_steps.clamp(1, 60)
+                nb.saturating_mul(k_steps.clamp(1, 60))
             }
         }
     };

@@ -810,7 +810,7 @@ fn grid(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, 
         .map(|(k, b)| {
             let p = ev.classify(k, b);
             let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            if n % 16 == 0 {
+            if n.is_multiple_of(16) {
                 ev.report(n as f64 / total as f64);
             }
             p
