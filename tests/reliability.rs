@@ -38,6 +38,10 @@ fn assert_problem(code: u16, ct: &str, v: &serde_json::Value, want: u16, field: 
 
 const LINEAR: &str = include_str!("../examples/linear_1khz.json");
 
+/// The cheapest experiment: one exact strict-passivity column of the 2018
+/// device without friction and quantization, single rate (milliseconds).
+const SMALL: &str = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+
 /// Defects 1 and 5: accepted specs whose cost has no bound. Each is a 422
 /// naming the field now; before, 202 and a server that aborted (b_max) or
 /// ran without end (k_rel_tol, k_step).
@@ -145,7 +149,7 @@ fn concurrent_submissions_with_one_key_store_one_experiment() {
     let url = format!("{}/v1/experiments", s.base);
     // Pause so nothing runs while we count.
     call(ureq::post(&format!("{}/v1/queue/pause", s.base)).call());
-    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    let body = SMALL;
     let answers: Vec<(u16, serde_json::Value)> = std::thread::scope(|sc| {
         let hs: Vec<_> = (0..32)
             .map(|_| {
@@ -297,7 +301,7 @@ fn the_list_is_paged_with_a_cursor() {
     let s = start();
     let url = format!("{}/v1/experiments", s.base);
     call(ureq::post(&format!("{}/v1/queue/pause", s.base)).call());
-    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    let body = SMALL;
     let mut ids = Vec::new();
     for _ in 0..5 {
         let (_, _, v) = call(post_json(&url).send_string(body));
@@ -340,7 +344,7 @@ fn the_list_is_paged_with_a_cursor() {
 fn writes_from_other_sites_are_refused() {
     let s = start();
     let url = format!("{}/v1/experiments", s.base);
-    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    let body = SMALL;
     let (code, ct, v) = call(
         ureq::post(&url)
             .set("content-type", "text/plain")
@@ -416,7 +420,7 @@ fn a_second_server_on_one_database_is_refused() {
 fn every_error_is_a_problem_naming_the_field() {
     let s = start();
     let url = format!("{}/v1/experiments", s.base);
-    let good = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    let good = SMALL;
     // Bad query values.
     let (code, ct, v) = call(post_json(&format!("{url}?priority=abc")).send_string(good));
     assert_problem(code, &ct, &v, 422, Some("priority"));
@@ -544,7 +548,7 @@ fn a_corrupt_database_is_reported_and_refuses_writes() {
     let (code, _, v) = call(ureq::get(&format!("{}/healthz", s.base)).call());
     assert_eq!(code, 503, "{v}");
     assert_eq!(v["status"], "corrupt", "{v}");
-    let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    let body = SMALL;
     let url = format!("{}/v1/experiments", s.base);
     let (code, ct, v) = call(post_json(&url).send_string(body));
     assert_problem(code, &ct, &v, 503, None);
@@ -768,7 +772,7 @@ fn a_full_disk_loses_no_acknowledged_submission_and_recovers() {
     }
     // Space returns: writes work again without a restart.
     std::fs::remove_file(filler).unwrap();
-    let small = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+    let small = SMALL;
     let deadline = Instant::now() + Duration::from_secs(10);
     let id = loop {
         let (code, _, v) = call(post_json(&url).send_string(small));
