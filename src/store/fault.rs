@@ -76,3 +76,85 @@ impl Health {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sqlx::sqlite::{SqliteConnectOptions, SqlitePoolOptions};
+    use sqlx::Connection;
+
+    /// Real SQLite errors, provoked: SQLITE_FULL from a page cap, SQLITE_BUSY
+    /// from a second writer, and sqlx's own pool timeout.
+    #[test]
+    fn sqlite_errors_map_to_what_the_caller_can_do() {
+        let rt = tokio::runtime::Runtime::new().unwrap();
+        rt.block_on(async {
+            let dir = std::env::temp_dir().join(format!("zwidth-fault-{}", std::process::id()));
+            std::fs::create_dir_all(&dir).unwrap();
+            // A database that may not grow past 8 pages: SQLITE_FULL.
+            let opts = SqliteConnectOptions::new()
+                .filename(dir.join("full.db"))
+                .create_if_missing(true)
+                .pragma("max_page_count", "8");
+            let mut c = sqlx::SqliteConnection::connect_with(&opts).await.unwrap();
+            sqlx::query("CREATE TABLE t (x TEXT)")
+                .execute(&mut c)
+                .await
+                .unwrap();
+            let mut full = None;
+            for _ in 0..100 {
+                if let Err(e) = sqlx::query("INSERT INTO t VALUES (?)")
+                    .bind("x".repeat(4000))
+                    .execute(&mut c)
+                    .await
+                {
+                    full = Some(e);
+                    break;
+                }
+            }
+            assert_eq!(Fault::of(&full.expect("the cap is reached")), Fault::Full);
+            // A write while another connection holds the write lock: BUSY.
+            let busy = SqliteConnectOptions::new()
+                .filename(dir.join("busy.db"))
+                .create_if_missing(true)
+                .busy_timeout(std::time::Duration::ZERO);
+            let mut a = sqlx::SqliteConnection::connect_with(&busy).await.unwrap();
+            let mut b = sqlx::SqliteConnection::connect_with(&busy).await.unwrap();
+            sqlx::query("CREATE TABLE t (x)")
+                .execute(&mut a)
+                .await
+                .unwrap();
+            sqlx::query("BEGIN IMMEDIATE")
+                .execute(&mut a)
+                .await
+                .unwrap();
+            let e = sqlx::query("INSERT INTO t VALUES (1)")
+                .execute(&mut b)
+                .await
+                .unwrap_err();
+            assert_eq!(Fault::of(&e), Fault::Busy);
+            // No pooled connection in time: busy too.
+            let pool = SqlitePoolOptions::new()
+                .max_connections(1)
+                .acquire_timeout(std::time::Duration::from_millis(50))
+                .connect_with(busy.clone())
+                .await
+                .unwrap();
+            let held = pool.acquire().await.unwrap();
+            let e = pool.acquire().await.unwrap_err();
+            assert_eq!(Fault::of(&e), Fault::Busy);
+            drop(held);
+            // A syntax error is none of these.
+            let e = sqlx::query("SELEC 1").execute(&mut b).await.unwrap_err();
+            assert_eq!(Fault::of(&e), Fault::Other);
+            std::fs::remove_dir_all(dir).unwrap();
+        });
+        // The store's own refusal of writes to a known-corrupt database.
+        let own = sqlx::Error::Protocol(format!("{CORRUPT_PREFIX}: page 3"));
+        assert_eq!(Fault::of(&own), Fault::Corrupt);
+        assert_eq!(
+            Fault::of(&sqlx::Error::Protocol("other".into())),
+            Fault::Other
+        );
+    }
+}
