@@ -12,6 +12,13 @@ fn submit_progress_result() {
     let s = start();
     let health = get(&format!("{}/healthz", s.base));
     assert_eq!(health["status"], "ok", "{health}");
+    // Checked at start: a unix time in ms within the last minute.
+    let now_ms = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_millis() as i64;
+    let checked = health["database"]["checked_ms"].as_i64().unwrap();
+    assert!((now_ms - 60_000..=now_ms).contains(&checked), "{health}");
     // An analytic strict-passivity map: b > KT/2 + |B| gives 16 400 N/m at B = 5.
     let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},
                   "criterion":"strict_passivity","b":[0,5]}"#;
