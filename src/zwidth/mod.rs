@@ -6,6 +6,7 @@ pub mod compare;
 pub mod controller;
 pub mod cost;
 pub mod hit;
+pub mod observer;
 pub mod poly;
 pub mod probe;
 pub mod scene;

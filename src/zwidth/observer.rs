@@ -1,0 +1,190 @@
+//! What a running map shares with whoever runs it: trials done, a cancel
+//! flag, trials and tune evaluations replayed from an interrupted run, the
+//! new ones to store, the progress, the runaway limit and the hold while
+//! storing fails.
+
+use serde::Serialize;
+
+use super::search::Point;
+
+/// A finished trial of map `scope` within one experiment.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct StoredTrial {
+    pub scope: u32,
+    pub point: Point,
+}
+
+/// Shared with whoever runs a map: trials done so far, a cancel flag the
+/// searches honour between trials (a cancelled map ends within one trial),
+/// trials already done by an earlier, interrupted run (replayed, not
+/// redone: the searches are deterministic), and the new ones to store.
+#[derive(Debug, Default)]
+pub struct Observer {
+    pub trials: std::sync::atomic::AtomicUsize,
+    pub cancel: std::sync::atomic::AtomicBool,
+    done: std::collections::HashMap<(u32, u64, u64), Point>,
+    new: std::sync::Mutex<Vec<StoredTrial>>,
+    /// Maps expected in the experiment (0 counts as 1) and each one's
+    /// fraction done, for the progress and ETA.
+    scopes: std::sync::atomic::AtomicUsize,
+    progress: std::sync::Mutex<std::collections::HashMap<u32, f64>>,
+    /// Whole evaluations (a tune's objective at some parameters) done by an
+    /// earlier run, by key; the new ones to store; the best so far.
+    evals_done: std::collections::HashMap<String, serde_json::Value>,
+    evals_new: std::sync::Mutex<Vec<StoredEvaluation>>,
+    best: std::sync::Mutex<Option<serde_json::Value>>,
+    /// Trials after which the run is stopped as runaway (0: no limit), and
+    /// why it was, once it is.
+    trial_limit: std::sync::atomic::AtomicUsize,
+    runaway: std::sync::Mutex<Option<String>>,
+    /// Set while finished trials cannot be stored: the searches wait
+    /// between trials, and the reason is shown with the progress.
+    held: std::sync::Mutex<Option<String>>,
+}
+
+/// A finished evaluation of a tune (the record is the tune's own JSON).
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct StoredEvaluation {
+    /// Identifies the evaluation: accuracy and exact parameter values.
+    pub key: String,
+    pub record: serde_json::Value,
+}
+
+impl Observer {
+    /// An observer that replays `done` instead of recomputing those trials.
+    pub fn resuming(done: Vec<StoredTrial>) -> Self {
+        Self {
+            done: done
+                .into_iter()
+                .map(|t| ((t.scope, t.point.k.to_bits(), t.point.b.to_bits()), t.point))
+                .collect(),
+            ..Self::default()
+        }
+    }
+
+    /// Also replay the evaluations `evals` (a resumed tune).
+    pub fn with_evaluations(mut self, evals: Vec<StoredEvaluation>) -> Self {
+        self.evals_done = evals.into_iter().map(|e| (e.key, e.record)).collect();
+        self
+    }
+
+    /// Stop the run once it has done more than `limit` trials (a runaway:
+    /// far beyond what its spec was estimated to cost).
+    pub fn limit_trials(&self, limit: usize) {
+        self.trial_limit
+            .store(limit, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Why the run was stopped as a runaway, if it was.
+    pub fn runaway(&self) -> Option<String> {
+        self.runaway
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
+    }
+
+    /// Hold the run (Some(why)) until released (None).
+    pub fn hold(&self, why: Option<String>) {
+        *self.held.lock().unwrap_or_else(|e| e.into_inner()) = why;
+    }
+
+    /// Why the run is held, if it is.
+    pub fn held(&self) -> Option<String> {
+        self.held.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    /// Wait (between trials) while the run is held and not cancelled.
+    pub(super) fn wait_while_held(&self) {
+        while self.held().is_some() && !self.cancelled() {
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+    }
+
+    /// Count one trial; past the limit, stop the run and say why.
+    pub(super) fn count_trial(&self) {
+        use std::sync::atomic::Ordering::Relaxed;
+        let n = self.trials.fetch_add(1, Relaxed) + 1;
+        let limit = self.trial_limit.load(Relaxed);
+        if limit > 0 && n > limit && !self.cancelled() {
+            *self.runaway.lock().unwrap_or_else(|e| e.into_inner()) = Some(format!(
+                "stopped after {n} trials: more than {limit}, four times what the spec was estimated to cost (plus 1000); the scene may not have a boundary the search can find"
+            ));
+            self.cancel.store(true, Relaxed);
+        }
+    }
+
+    /// An evaluation stored by an earlier run.
+    pub fn stored_evaluation(&self, key: &str) -> Option<serde_json::Value> {
+        self.evals_done.get(key).cloned()
+    }
+
+    /// A new evaluation to store.
+    pub fn record_evaluation(&self, key: String, record: serde_json::Value) {
+        self.evals_new
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(StoredEvaluation { key, record });
+    }
+
+    /// The evaluations finished since the last call.
+    pub fn take_new_evaluations(&self) -> Vec<StoredEvaluation> {
+        std::mem::take(&mut *self.evals_new.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    /// The best result so far (shown while running).
+    pub fn set_best(&self, best: serde_json::Value) {
+        *self.best.lock().unwrap_or_else(|e| e.into_inner()) = Some(best);
+    }
+
+    pub fn best(&self) -> Option<serde_json::Value> {
+        self.best.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    pub fn cancelled(&self) -> bool {
+        self.cancel.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// The trials finished since the last call.
+    pub fn take_new(&self) -> Vec<StoredTrial> {
+        std::mem::take(&mut *self.new.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    /// How many maps the experiment runs (for [`Observer::fraction`]).
+    pub fn set_scopes(&self, n: usize) {
+        self.scopes.store(n, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Map `scope` is `fraction` (0 to 1) done.
+    pub fn report(&self, scope: u32, fraction: f64) {
+        if fraction.is_finite() {
+            self.progress
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .insert(scope, fraction.clamp(0.0, 1.0));
+        }
+    }
+
+    /// The fraction of the whole experiment done, 0 to 1.
+    pub fn fraction(&self) -> f64 {
+        let n = self
+            .scopes
+            .load(std::sync::atomic::Ordering::Relaxed)
+            .max(1);
+        let p = self.progress.lock().unwrap_or_else(|e| e.into_inner());
+        (p.values().sum::<f64>() / n as f64).clamp(0.0, 1.0)
+    }
+
+    pub(super) fn replay(&self, scope: u32, k: f64, b: f64) -> Option<Point> {
+        self.done.get(&(scope, k.to_bits(), b.to_bits())).cloned()
+    }
+
+    pub(super) fn record(&self, scope: u32, p: &Point) {
+        self.new
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(StoredTrial {
+                scope,
+                point: p.clone(),
+            });
+    }
+}
