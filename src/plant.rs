@@ -147,14 +147,37 @@ mod tests {
 
     #[test]
     fn series_and_closed_forms_agree() {
-        for a in [1e-9f64, 1e-6, 5e-4, 1.5e-3, 0.1, 1.0, 30.0] {
-            let p = (1.0 - (-a).exp()) / a;
-            let q = (a - 1.0 + (-a).exp()) / (a * a);
+        // Reference: the closed forms φ(a) = (1 − e^{−a})/a and
+        // ψ(a) = (a − 1 + e^{−a})/a² where they are well conditioned (a ≥
+        // 0.1), their Taylor series φ = Σ (−a)^n/(n+1)!, ψ = Σ (−a)^n/(n+2)!
+        // (twelve terms: the rest is below 1e-16 for a ≤ 0.1) below.
+        let series = |a: f64, shift: u32| {
+            let (mut sum, mut term) = (0.0, 1.0);
+            for i in 1..=shift {
+                term /= i as f64;
+            }
+            for n in 0..12 {
+                sum += term;
+                term *= -a / (n + shift + 1) as f64;
+            }
+            sum
+        };
+        for a in [1e-9f64, 1e-6, 5e-4, 1.5e-3, 0.01, 0.1, 1.0, 30.0] {
+            let (p, q) = if a >= 0.1 {
+                ((1.0 - (-a).exp()) / a, (a - 1.0 + (-a).exp()) / (a * a))
+            } else {
+                (series(a, 1), series(a, 2))
+            };
             assert!(
-                (phi(a) - p).abs() < 1e-9 * p.max(1e-3) || a < 1e-5,
-                "phi {a}"
+                (phi(a) - p).abs() <= 1e-13 * p,
+                "phi {a}: {} vs {p}",
+                phi(a)
             );
-            assert!((psi(a) - q).abs() < 1e-9 || a < 1e-4, "psi {a}");
+            assert!(
+                (psi(a) - q).abs() <= 1e-13 * q,
+                "psi {a}: {} vs {q}",
+                psi(a)
+            );
         }
         assert_eq!(psi(0.0), 0.5);
         assert_eq!(phi(0.0), 1.0);
@@ -180,6 +203,32 @@ mod tests {
             p.step_linear(&mut s, 3.0);
         }
         assert!((s.x - 0.75).abs() < 1e-12 && (s.v - 1.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn damped_stop_time_and_position_are_the_closed_form() {
+        // m = 0.5, b = 2, f_c = 1, v0 = 1, no applied force: net force −1 N,
+        // v∞ = −0.5 m/s, τ = m/b = 0.25 s. v(t) = v∞ + (v0 − v∞)e^{−t/τ} is
+        // zero at t* = τ·ln(1 − v0/v∞) = 0.25·ln 3, where
+        // x(t*) = v∞·t* + τ(v0 − v∞)(1 − e^{−t*/τ}) = −0.125 ln 3 + 0.25.
+        let p = Plant::new(0.5, 2.0, 1.0, 1.0);
+        let t_star = 0.25 * 3f64.ln();
+        assert!((p.time_to_stop(1.0, -1.0) - t_star).abs() < 1e-14);
+        // One 1 s interval: it stops at t* and sticks for the rest.
+        let mut s = PlantState { x: 0.0, v: 1.0 };
+        p.step_friction(&mut s, 0.0);
+        assert_eq!(s.v, 0.0);
+        let x_star = -0.125 * 3f64.ln() + 0.25;
+        assert!((s.x - x_star).abs() < 1e-12, "{s:?} vs {x_star}");
+        // Moving the other way, pushed on by 0.5 N (< f_c): net −0.5 − 1·(−1)
+        // = +0.5 N decelerates v0 = −1; v∞ = +0.25, t* = 0.25·ln(1 + 4).
+        let mut s = PlantState { x: 0.0, v: -1.0 };
+        assert!((p.time_to_stop(-1.0, 0.5) - 0.25 * 5f64.ln()).abs() < 1e-14);
+        p.step_friction(&mut s, -0.5);
+        assert_eq!(s.v, 0.0);
+        let t = 0.25 * 5f64.ln();
+        let x = 0.25 * t + 0.25 * (-1.25) * (1.0 - (-t / 0.25).exp());
+        assert!((s.x - x).abs() < 1e-12, "{s:?} vs {x}");
     }
 
     #[test]

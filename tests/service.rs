@@ -116,13 +116,41 @@ fn idempotency_key_and_cancel() {
         assert!(Instant::now() < deadline);
         std::thread::sleep(Duration::from_millis(20));
     }
+    // Some trials stored first, so that "stops storing" means something.
+    let stored = |id: &str| {
+        get(&format!("{url}/{id}/trials?limit=10000"))
+            .as_array()
+            .unwrap()
+            .len()
+    };
+    wait_for("trials stored before the cancel", 30, || stored(id) >= 5);
     let (code, v, _) = post(&format!("{url}/{id}/cancel"), "");
     assert_eq!(code, 200, "{v}");
-    std::thread::sleep(Duration::from_millis(500));
-    let v = get(&format!("{url}/{id}"));
     assert_eq!(v["state"], "cancelled", "{v}");
+    // The simulation stops: within a second no more trials reach the store
+    // (the runner stores finished trials every 100 ms, so a second with the
+    // same count, twice over, is ten store rounds without a new trial).
+    let settled = |id: &str| {
+        let before = stored(id);
+        std::thread::sleep(Duration::from_millis(1000));
+        before == stored(id)
+    };
+    wait_for("the stored trial count to stop growing", 3, || settled(id));
+    assert!(settled(id), "trials still being stored after the cancel");
+    // The state stays cancelled (it never flips to succeeded when the map
+    // would have ended) and a second cancel is refused.
+    assert_eq!(get(&format!("{url}/{id}"))["state"], "cancelled");
     let (code, _, _) = post(&format!("{url}/{id}/cancel"), "");
     assert_eq!(code, 409);
+    // The rig is free: the next experiment on it (one at a time per rig)
+    // starts and finishes, long before the cancelled reference-accuracy
+    // trace could have ended (minutes).
+    let small = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"method":"analytic","criterion":"stability","b":[0,10]}"#;
+    let (code, v, _) = post(&url, small);
+    assert_eq!(code, 202, "{v}");
+    let next = wait_end(&s.base, v["id"].as_str().unwrap(), 10);
+    assert_eq!(next["state"], "succeeded", "{next}");
+    assert_eq!(get(&format!("{url}/{id}"))["state"], "cancelled");
 }
 
 #[test]
@@ -150,11 +178,48 @@ fn killed_mid_run_resumes_from_stored_trials_with_the_same_result() {
         assert!(Instant::now() < deadline);
         std::thread::sleep(Duration::from_millis(10));
     }
-    std::thread::sleep(Duration::from_millis(250)); // a trial batch reaches the store
+    // Trials are in the store before the kill (the runner stores them every
+    // 100 ms): these are what the restart must replay.
+    wait_for("60 trials stored", 30, || {
+        get(&format!("{url}/{id}/trials?limit=10000"))
+            .as_array()
+            .unwrap()
+            .len()
+            >= 60
+    });
     let mut s = s;
     s.child.kill().unwrap(); // SIGKILL
     s.child.wait().unwrap();
     std::mem::forget(s);
+    // Mark the first stored trial with a fidelity of 123.25 N·s/m, a field
+    // a stability map never computes and that steers nothing: if the resumed
+    // run replays stored trials, the mark shows in its result; recomputed,
+    // it cannot.
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let stored_before = rt.block_on(async {
+        let st = zwidth::store::Store::open(&dir.join("test.db"))
+            .await
+            .unwrap();
+        let n = st.trial_count(&id).await.unwrap();
+        st.close().await.unwrap();
+        let pool =
+            sqlx::SqlitePool::connect(&format!("sqlite://{}", dir.join("test.db").display()))
+                .await
+                .unwrap();
+        let marked = sqlx::query(
+            "UPDATE trials SET point = json_set(point, '$.fidelity', 123.25)
+             WHERE rowid = (SELECT min(rowid) FROM trials WHERE experiment_id = ?)",
+        )
+        .bind(&id)
+        .execute(&pool)
+        .await
+        .unwrap()
+        .rows_affected();
+        assert_eq!(marked, 1);
+        pool.close().await;
+        n
+    });
+    assert!(stored_before >= 60, "{stored_before} trials stored");
     // Restart on the same database: the run is requeued and resumes.
     let s2 = start_in(dir);
     let url = format!("{}/v1/experiments", s2.base);
@@ -186,6 +251,14 @@ fn killed_mid_run_resumes_from_stored_trials_with_the_same_result() {
         .collect();
     let want_b: Vec<(f64, f64)> = want.boundary.iter().map(|p| (p.b, p.k_max)).collect();
     assert_eq!(boundary, want_b);
+    // Replayed, not recomputed: exactly one point carries the mark.
+    let marked = got["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["fidelity"] == 123.25)
+        .count();
+    assert_eq!(marked, 1, "the stored trial was recomputed, not replayed");
 }
 
 #[test]
@@ -245,8 +318,12 @@ fn pause_schedule_metrics_and_the_cli_client() {
     assert_eq!((code, v["paused"].as_bool()), (200, Some(true)));
     let (_, v, _) = post(&url, body);
     let id = v["id"].as_str().unwrap().to_string();
-    std::thread::sleep(Duration::from_millis(400));
-    assert_eq!(get(&format!("{url}/{id}"))["state"], "queued");
+    // A negative observation needs a window: 400 ms, four runner rounds.
+    let window = Instant::now() + Duration::from_millis(400);
+    while Instant::now() < window {
+        assert_eq!(get(&format!("{url}/{id}"))["state"], "queued");
+        std::thread::sleep(Duration::from_millis(50));
+    }
     // Scheduled far in the future: stays scheduled after resuming.
     let (code, v, _) = post(&format!("{url}?not_before_ms=99999999999999"), body);
     assert_eq!(code, 202);

@@ -236,6 +236,23 @@ mod tests {
     /// Straightforward unscaled Kalman filter in SI units, written from
     /// Janabi-Sharifi eq. 7 with full 3×3 matrices: the independent reference.
     fn reference(q: f64, model: QModel, rate: f64, d: f64, ys: &[f64]) -> Vec<f64> {
+        reference_fading(q, model, None, rate, d, ys).0
+    }
+
+    /// The same, with Xia, Rao & Ying's optimal fading factor when `rho` is
+    /// given (module doc): `C_1 = γ²`, `C_k = (ρ·C_{k−1} + γ²)/(1 + ρ)`,
+    /// `λ = max(1, (C − HQHᵀ − r)/(H·APAᵀ·Hᵀ))`, `P' = λ·APAᵀ + Q`.
+    /// Returns the velocities and each step's λ.
+    fn reference_fading(
+        q: f64,
+        model: QModel,
+        rho: Option<f64>,
+        rate: f64,
+        d: f64,
+        ys: &[f64],
+    ) -> (Vec<f64>, Vec<f64>) {
+        let mut lambdas = Vec::new();
+        let mut c_prev: Option<f64> = None;
         let t = 1.0 / rate;
         let a = [[1.0, t, t * t / 2.0], [0.0, 1.0, t], [0.0, 0.0, 1.0]];
         let qm = match model {
@@ -280,15 +297,27 @@ mod tests {
         ];
         for &y in &ys[3..] {
             let xp = [x[0] + t * x[1] + t * t / 2.0 * x[2], x[1] + t * x[2], x[2]];
+            let g = y - xp[0];
             let mut pp = mm(&mm(&a, &p), &at);
+            let lambda = match rho {
+                None => 1.0,
+                Some(rho) => {
+                    let c = match c_prev {
+                        None => g * g,
+                        Some(c) => (rho * c + g * g) / (1.0 + rho),
+                    };
+                    c_prev = Some(c);
+                    ((c - qm[0][0] - r) / pp[0][0]).max(1.0)
+                }
+            };
+            lambdas.push(lambda);
             for i in 0..3 {
                 for j in 0..3 {
-                    pp[i][j] += qm[i][j];
+                    pp[i][j] = lambda * pp[i][j] + qm[i][j];
                 }
             }
             let s = pp[0][0] + r;
             let k = [pp[0][0] / s, pp[1][0] / s, pp[2][0] / s];
-            let g = y - xp[0];
             x = [xp[0] + k[0] * g, xp[1] + k[1] * g, xp[2] + k[2] * g];
             for i in 0..3 {
                 for j in 0..3 {
@@ -297,7 +326,7 @@ mod tests {
             }
             out.push(x[1]);
         }
-        out
+        (out, lambdas)
     }
 
     #[test]
@@ -332,6 +361,42 @@ mod tests {
         assert_eq!(f.update(4.0), 3.0);
         let v = f.update(9.0);
         assert!((v - (5.0 + 15.0 / 16.5)).abs() < 1e-12, "{v}");
+    }
+
+    #[test]
+    fn adaptive_filter_equals_the_textbook_fading_filter() {
+        // A quantized chirp with two position jumps (a wall contact, an
+        // encoder glitch): the fading factor rises above 1 after each. The
+        // adaptive filter must equal the unscaled full-matrix reference with
+        // the fading factor, sample by sample, velocity and λ.
+        let ys: Vec<f64> = (0..600)
+            .map(|k| {
+                let jump = if k >= 200 { 2e-4 } else { 0.0 } + if k >= 420 { -5e-5 } else { 0.0 };
+                (((0.003 * (k as f64).powf(1.3)).sin() * 1e-2 + jump) * 1e6).round() * 1e-6
+            })
+            .collect();
+        for (model, rho) in [(QModel::WhiteJerk, DEFAULT_RHO), (QModel::Diagonal, 0.6)] {
+            let (want, lambdas) = reference_fading(2.5e4, model, Some(rho), 1000.0, 1e-6, &ys);
+            let mut f = Kalman::new(2.5e4, model, Some(rho), sampling(1000.0, 1e-6)).unwrap();
+            for (k, (&y, w)) in ys.iter().zip(&want).enumerate() {
+                let v = f.update(y);
+                assert!(
+                    (v - w).abs() <= 1e-7 * w.abs().max(1e-3),
+                    "{model:?} k={k}: {v} vs {w}"
+                );
+                if k >= 3 {
+                    let l = lambdas[k - 3];
+                    assert!(
+                        (f.last_lambda() - l).abs() <= 1e-7 * l,
+                        "{model:?} k={k}: λ {} vs {l}",
+                        f.last_lambda()
+                    );
+                }
+            }
+            // The fading path was exercised, strongly, more than once.
+            let faded = lambdas.iter().filter(|&&l| l > 1.5).count();
+            assert!(faded >= 2, "{model:?}: λ > 1.5 at {faded} steps");
+        }
     }
 
     #[test]

@@ -103,6 +103,15 @@ pub fn fetch(r: Result<ureq::Response, ureq::Error>) -> (u16, String, String) {
     }
 }
 
+/// Poll `cond` every 20 ms until it holds; panics naming `what` after `secs`.
+pub fn wait_for(what: &str, secs: u64, mut cond: impl FnMut() -> bool) {
+    let deadline = Instant::now() + Duration::from_secs(secs);
+    while !cond() {
+        assert!(Instant::now() < deadline, "waited {secs} s for {what}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// Poll an experiment until it ends; panics after `secs`.
 pub fn wait_end(base: &str, id: &str, secs: u64) -> serde_json::Value {
     let deadline = Instant::now() + Duration::from_secs(secs);
