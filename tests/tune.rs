@@ -60,12 +60,16 @@ fn spec(
 }
 
 fn k_at(cutoff: f64) -> f64 {
+    k_at_accuracy(cutoff, Preset::Standard)
+}
+
+fn k_at_accuracy(cutoff: f64, preset: Preset) -> f64 {
     let m = MapSpec {
         scene: linear(&format!(r#"{{"kind":"butterworth","cutoff_hz":{cutoff}}}"#)),
         method: Method::Auto,
         criterion: Criterion::Impedance,
         search: SearchKind::Bisect,
-        accuracy: Accuracy::Preset(Preset::Standard),
+        accuracy: Accuracy::Preset(preset),
         b: Some(vec![20.0]),
         b_max: 1000.0,
         k_max: 1e7,
@@ -323,6 +327,159 @@ fn levant_constraint_keeps_the_gains_inside_the_condition() {
     let (a, l) = (r.best.params["alpha"], r.best.params["lambda"]);
     assert!(a > c && l * l >= 4.0 * c * (a + c) / (a - c));
     assert!(r.best.gains.as_deref().unwrap().contains("Levant 1998"));
+}
+
+#[test]
+fn draft_search_then_standard_finals_report_what_plain_maps_give() {
+    // Grid over the cutoff at draft, the best three re-evaluated at
+    // standard. Each score must be what a plain map at that accuracy gives,
+    // and ranking_held / best_held must say what those maps say.
+    let mut s = spec(
+        linear(r#"{"kind":"butterworth","cutoff_hz":100}"#),
+        &[("cutoff_hz", 30.0, 210.0)],
+        Objective::Single(Metric::KWidth),
+        SolverKind::Grid,
+        7,
+    );
+    s.accuracy = Accuracy::Preset(Preset::Draft);
+    let r = s.validate().unwrap().run(None).unwrap();
+    let c = r.coarse_to_fine.as_ref().expect("draft → standard");
+    assert_eq!(
+        (c.search_accuracy.as_str(), c.final_accuracy.as_str()),
+        ("draft", "standard")
+    );
+    assert_eq!(c.finalists.len(), 3);
+    // The search's scores, best first, are plain draft maps; the finalists
+    // are the three best of them.
+    let mut search: Vec<(f64, f64)> = r
+        .history
+        .iter()
+        .filter(|e| e.phase == "search")
+        .map(|e| (e.params["cutoff_hz"], e.score))
+        .collect();
+    assert_eq!(search.len(), 7);
+    for &(f, score) in &search {
+        assert_eq!(score, k_at_accuracy(f, Preset::Draft), "draft at {f} Hz");
+    }
+    search.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let finals: Vec<f64> = c.finalists.iter().map(|f| f.params["cutoff_hz"]).collect();
+    assert_eq!(finals, search[..3].iter().map(|x| x.0).collect::<Vec<_>>());
+    // Final scores are plain standard maps; the ranks follow from them.
+    let standard: Vec<f64> = finals
+        .iter()
+        .map(|&f| k_at_accuracy(f, Preset::Standard))
+        .collect();
+    for (f, want) in c.finalists.iter().zip(&standard) {
+        assert_eq!(f.final_score, *want);
+        let rank = standard.iter().filter(|&&x| x > *want).count();
+        assert_eq!(f.final_rank, rank);
+    }
+    let held = standard.windows(2).all(|w| w[0] >= w[1]);
+    assert_eq!(c.ranking_held, held);
+    let best_std = standard.iter().cloned().fold(f64::MIN, f64::max);
+    assert_eq!(c.best_held, standard[0] == best_std);
+    // The best is the finalist best at standard, in the "final" phase.
+    assert_eq!(r.best.phase, "final");
+    assert_eq!(r.best.objectives["k_width"], Some(best_std));
+    // saved_s: what the search would have cost at standard minus what the
+    // search and finals did cost (the struct's own documented formula).
+    let want = 7.0 * c.mean_final_evaluation_s - (c.search_s + c.final_s);
+    assert!(
+        (c.saved_s.unwrap() - want).abs() < 1e-9,
+        "{:?} vs {want}",
+        c.saved_s
+    );
+    assert!(c.mean_search_evaluation_s > 0.0 && c.mean_final_evaluation_s > 0.0);
+    // The same accuracy twice: nothing to save.
+    let mut same = s.clone();
+    same.accuracy = Accuracy::Preset(Preset::Standard);
+    same.max_evaluations = 3;
+    let r = same.validate().unwrap().run(None).unwrap();
+    assert_eq!(r.coarse_to_fine.unwrap().saved_s, None);
+}
+
+#[test]
+fn lyapunov_constraint_keeps_the_gains_inside_the_condition() {
+    // Moreno–Osorio (2018 paper eq. 14): α > 3C + 2C²/λ².
+    let c = 2.0;
+    let mut s = spec(
+        serde_json::from_str(&format!(
+            r#"{{"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{{"kind":"levant","rule":"hba_sc","lipschitz":{c}}}}}"#
+        ))
+        .unwrap(),
+        &[("alpha", 0.5, 20.0), ("lambda", 0.5, 20.0)],
+        Objective::Single(Metric::BWidth),
+        SolverKind::Halton,
+        12,
+    );
+    s.constraint = Some(zwidth::tune::GainCondition::Lyapunov);
+    s.accuracy = Accuracy::Preset(Preset::Draft);
+    s.final_accuracy = Accuracy::Preset(Preset::Draft);
+    s.b = Some(vec![0.0, 10.0]);
+    let r = s.validate().unwrap().run(None).unwrap();
+    let (mut met, mut not) = (0, 0);
+    for e in &r.history {
+        let (a, l) = (e.params["alpha"], e.params["lambda"]);
+        let meets = a > 3.0 * c + 2.0 * c * c / (l * l);
+        assert_eq!(e.feasible, meets, "{a} {l}");
+        if meets {
+            met += 1;
+        } else {
+            not += 1;
+            assert_eq!(e.trials, 0, "infeasible gains are not simulated");
+            assert!(e.score < -1e15, "ranked below every feasible score");
+        }
+    }
+    assert!(met > 0 && not > 0, "both sides exercised: {met} / {not}");
+    let (a, l) = (r.best.params["alpha"], r.best.params["lambda"]);
+    assert!(a > 3.0 * c + 2.0 * c * c / (l * l));
+    assert!(r.best.gains.as_deref().unwrap().contains("Moreno-Osorio"));
+}
+
+#[test]
+fn weighted_objective_is_the_weighted_sum_of_plain_map_metrics() {
+    // score = 1e-5·K-width + 1e-2·B-width − 1e-3·fidelity error, each
+    // metric what a plain map at those parameters gives.
+    let weights = [
+        (Metric::KWidth, 1e-5),
+        (Metric::BWidth, 1e-2),
+        (Metric::MaxFidelityError, 1e-3),
+    ];
+    let mut s = spec(
+        linear(r#"{"kind":"butterworth","cutoff_hz":100}"#),
+        &[("cutoff_hz", 40.0, 200.0)],
+        Objective::Weighted(weights.into_iter().collect()),
+        SolverKind::Grid,
+        5,
+    );
+    s.b = Some(vec![0.0, 10.0, 20.0]);
+    s.finalists = 0;
+    let r = s.validate().unwrap().run(None).unwrap();
+    let mut best = (f64::MIN, 0.0);
+    for e in &r.history {
+        let f = e.params["cutoff_hz"];
+        let m = map(&MapSpec {
+            scene: linear(&format!(r#"{{"kind":"butterworth","cutoff_hz":{f}}}"#)),
+            method: Method::Auto,
+            criterion: Criterion::Impedance,
+            search: SearchKind::Bisect,
+            accuracy: Accuracy::Preset(Preset::Standard),
+            b: Some(vec![0.0, 10.0, 20.0]),
+            b_max: 1000.0,
+            k_max: 1e7,
+        })
+        .unwrap();
+        let want = 1e-5 * m.k_width + 1e-2 * m.b_width - 1e-3 * m.max_fidelity_error.unwrap();
+        assert!(
+            (e.score - want).abs() <= 1e-12 * want.abs(),
+            "{f} Hz: {} vs {want}",
+            e.score
+        );
+        if want > best.0 {
+            best = (want, f);
+        }
+    }
+    assert_eq!(r.best.params["cutoff_hz"], best.1);
 }
 
 fn zwidth(args: &[&str]) -> (i32, String, String) {
