@@ -427,3 +427,43 @@ fn zwidth_commands_reject_bad_input() {
         "probe.f_max_hz = 700",
     );
 }
+
+#[test]
+fn compare_default_path_pins_c_and_the_ranking() {
+    // `zwidth compare` with no scene: the 2018 paper's simulated device at
+    // 1 kHz, its four estimators with its parameters, Levant's gains from C
+    // estimated on an FDM + Butterworth wall hit (the papers' procedure).
+    // docs/zwidth.md (standard accuracy) records C = 1.098 m/s² from that
+    // hit at K = 7 441.2 N/m, B = 29.76 N·s/m, and the K-width order
+    // AKF ≈ FDM+filter > FOAW ≫ Levant (2.1e5, 2.0e5, 1.25e5, 6.3e3 N/m).
+    let r = json_ok(&["compare", "--accuracy", "draft", "--json"], "");
+    let c = &r["lipschitz"];
+    let lip = c["estimate"]["lipschitz"].as_f64().unwrap();
+    assert!((lip / 1.098 - 1.0).abs() < 0.005, "C = {lip}");
+    assert!((c["wall_k"].as_f64().unwrap() - 7441.2).abs() < 0.1, "{c}");
+    assert!((c["wall_b"].as_f64().unwrap() - 29.76).abs() < 1e-9, "{c}");
+    assert_eq!(c["estimator"]["kind"], "butterworth", "{c}");
+    let rows = r["rows"].as_array().unwrap();
+    let names: Vec<&str> = rows.iter().map(|r| r["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["FDM+filter", "FOAW", "AKF", "Levant"]);
+    // Levant's gains are the paper's μ1 = 6.6, μ2 = 2.45 times that C.
+    let lev = &rows[3]["estimator"];
+    assert_eq!(
+        (lev["mu1"].as_f64(), lev["mu2"].as_f64()),
+        (Some(6.6), Some(2.45))
+    );
+    assert_eq!(lev["lipschitz"].as_f64(), Some(lip));
+    let k: Vec<f64> = rows
+        .iter()
+        .map(|r| r["map"]["k_width"].as_f64().unwrap())
+        .collect();
+    let mut order: Vec<usize> = (0..4).collect();
+    order.sort_by(|&a, &b| k[b].total_cmp(&k[a]));
+    let ranked: Vec<&str> = order.iter().map(|&i| names[i]).collect();
+    assert_eq!(ranked, ["AKF", "FDM+filter", "FOAW", "Levant"], "{k:?}");
+    // Each within a factor 1.5 of the documented standard-accuracy value
+    // (draft resolves K to 5 %, and verdict noise moves it more: issue 11).
+    for (got, want) in k.iter().zip([2.0e5, 1.25e5, 2.1e5, 6.3e3]) {
+        assert!(got / want > 1.0 / 1.5 && got / want < 1.5, "{k:?}");
+    }
+}

@@ -788,7 +788,8 @@ fn tokens_stay_out_of_logs_and_can_come_from_a_file() {
     assert_eq!(code, 200, "{v}");
     // Both pause requests are logged once answered: wait for the lines.
     wait_for("the pause request in the log", 10, || {
-        std::fs::read_to_string(dir.join("err.log")).is_ok_and(|l| l.matches("queue/pause").count() >= 2)
+        std::fs::read_to_string(dir.join("err.log"))
+            .is_ok_and(|l| l.matches("queue/pause").count() >= 2)
     });
     let log = std::fs::read_to_string(dir.join("err.log")).unwrap();
     assert!(log.contains("healthz"), "the request was logged: {log}");
