@@ -423,6 +423,18 @@ mod tests {
                 (lo / rule - 1.0).abs() < 0.06,
                 "delay {delay}: {lo} vs {rule}"
             );
+            // Exactly: the Jury criterion on the characteristic polynomial
+            // (FDM, B = 20), solved independently in Python/mpmath
+            // (tests/engines.rs, JURY): 64 197.082… and 21 354.105… N/m.
+            let jury = if delay == 0 {
+                64_197.082_392_778_42
+            } else {
+                21_354.105_800_543_147
+            };
+            assert!(
+                (lo / jury - 1.0).abs() < 1e-9,
+                "delay {delay}: {lo} vs Jury {jury}"
+            );
         }
     }
 
