@@ -192,7 +192,8 @@ fn estimate_bad_inputs_exit_2_with_one_clear_line() {
 
 #[test]
 fn accuracy_json_has_every_estimator_and_svg() {
-    let svg = std::env::temp_dir().join(format!("zwidth-acc-{}.svg", std::process::id()));
+    let tmp = Scratch::new("accuracy");
+    let svg = tmp.path("accuracy.svg");
     let v = json_ok(
         &[
             "accuracy",
@@ -261,20 +262,44 @@ fn lipschitz_and_gains_commands() {
     rejects(&["gains", "--estimator", r#"{"kind":"fdm"}"#], "", "levant");
 }
 
-fn scene_file(name: &str, json: &str) -> String {
-    let p = std::env::temp_dir().join(format!("zwidth-{}-{name}.json", std::process::id()));
-    std::fs::write(&p, json).unwrap();
-    p.to_str().unwrap().to_string()
+/// A test's own temporary directory, removed when the test ends (passed or
+/// failed).
+struct Scratch(std::path::PathBuf);
+
+impl Scratch {
+    fn new(tag: &str) -> Self {
+        let d = std::env::temp_dir().join(format!("zwidth-cli-{tag}-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        Scratch(d)
+    }
+
+    fn path(&self, name: &str) -> std::path::PathBuf {
+        self.0.join(name)
+    }
+
+    /// A scene file with this JSON; its path.
+    fn scene(&self, name: &str, json: &str) -> String {
+        let p = self.path(&format!("{name}.json"));
+        std::fs::write(&p, json).unwrap();
+        p.to_str().unwrap().to_string()
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 #[test]
 fn trial_impedance_map_commands() {
-    let lin = scene_file(
+    let tmp = Scratch::new("maps");
+    let lin = tmp.scene(
         "lin",
         r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
     );
     // A soft, damped wall is stable; its trace has a header and one row per sample.
-    let csv = std::env::temp_dir().join(format!("zwidth-{}-trace.csv", std::process::id()));
+    let csv = tmp.path("trace.csv");
     let v = json_ok(
         &[
             "trial",
@@ -315,7 +340,7 @@ fn trial_impedance_map_commands() {
     assert_eq!(v["passive"], true);
     assert!(v["model"].as_str().unwrap().starts_with("analytic"));
     // Strict-passivity map: b > KT/2 + |B| gives 2(13.2 − 5)/1e-3 = 16 400 N/m at B = 5.
-    let svg = std::env::temp_dir().join(format!("zwidth-{}-map.svg", std::process::id()));
+    let svg = tmp.path("map.svg");
     let v = json_ok(
         &[
             "map",
@@ -353,12 +378,13 @@ fn trial_impedance_map_commands() {
 
 #[test]
 fn zwidth_commands_reject_bad_input() {
-    let lin = scene_file(
+    let tmp = Scratch::new("bad");
+    let lin = tmp.scene(
         "lin2",
         r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
     );
-    let seed = scene_file("seed", "{}");
-    let bad = scene_file("bad", r#"{"device":{"mass":-1}}"#);
+    let seed = tmp.scene("seed", "{}");
+    let bad = tmp.scene("bad", r#"{"device":{"mass":-1}}"#);
     rejects(
         &["trial", "--scene", &bad, "--k", "1", "--b", "1"],
         "",
@@ -420,7 +446,7 @@ fn zwidth_commands_reject_bad_input() {
         "",
         "--accuracy = \"fast\"",
     );
-    let nyq = scene_file("nyq", r#"{"probe":{"f_max_hz":700}}"#);
+    let nyq = tmp.scene("nyq", r#"{"probe":{"f_max_hz":700}}"#);
     rejects(
         &["impedance", "--scene", &nyq, "--k", "1", "--b", "1"],
         "",

@@ -498,6 +498,14 @@ fn zwidth(args: &[&str]) -> (i32, String, String) {
 fn zwidth_tune_contract_and_bad_requests() {
     let dir = std::env::temp_dir().join(format!("zwidth-tune-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
+    // Removed when the test ends, passed or failed.
+    struct Remove(std::path::PathBuf);
+    impl Drop for Remove {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+    let _cleanup = Remove(dir.clone());
     let scene = dir.join("scene.json");
     std::fs::write(
         &scene,

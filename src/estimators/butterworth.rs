@@ -385,5 +385,13 @@ mod tests {
             design_lowpass(2, f64::NAN, 1000.0).unwrap_err().field,
             "cutoff_hz"
         );
+        // Zero is not a cutoff (a filter that passes nothing).
+        assert_eq!(
+            design_lowpass(2, 0.0, 1000.0).unwrap_err().field,
+            "cutoff_hz"
+        );
+        // Just inside both ends is a filter.
+        assert!(design_lowpass(2, 1e-3, 1000.0).is_ok());
+        assert!(design_lowpass(2, 499.999, 1000.0).is_ok());
     }
 }
