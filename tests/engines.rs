@@ -68,17 +68,7 @@ fn run(
     b: &[f64],
     accuracy: Accuracy,
 ) -> MapResult {
-    map(&MapSpec {
-        scene,
-        method,
-        criterion,
-        search: SearchKind::Bisect,
-        accuracy,
-        b: Some(b.to_vec()),
-        b_max: 1000.0,
-        k_max: 1e7,
-    })
-    .unwrap()
+    run_search(scene, method, criterion, SearchKind::Bisect, b, accuracy)
 }
 
 fn k_at(r: &MapResult, b: f64) -> f64 {

@@ -301,21 +301,7 @@ fn the_pareto_front_is_non_dominated() {
 fn levant_constraint_keeps_the_gains_inside_the_condition() {
     // Levant 1998 (2018 paper eq. 10): α > C and λ² ≥ 4C(α+C)/(α−C).
     let c = 2.0;
-    let mut s = spec(
-        serde_json::from_str(&format!(
-            r#"{{"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{{"kind":"levant","rule":"hba_sc","lipschitz":{c}}}}}"#
-        ))
-        .unwrap(),
-        &[("alpha", 0.5, 20.0), ("lambda", 0.5, 20.0)],
-        Objective::Single(Metric::BWidth),
-        SolverKind::Halton,
-        12,
-    );
-    s.constraint = Some(zwidth::tune::GainCondition::Levant);
-    s.accuracy = Accuracy::Preset(Preset::Draft);
-    s.final_accuracy = Accuracy::Preset(Preset::Draft);
-    s.b = Some(vec![0.0, 10.0]);
-    let r = s.validate().unwrap().run(None).unwrap();
+    let r = constrained_levant_tune(c, zwidth::tune::GainCondition::Levant);
     for e in &r.history {
         let (a, l) = (e.params["alpha"], e.params["lambda"]);
         let meets = a > c && l * l >= 4.0 * c * (a + c) / (a - c);
@@ -327,6 +313,29 @@ fn levant_constraint_keeps_the_gains_inside_the_condition() {
     let (a, l) = (r.best.params["alpha"], r.best.params["lambda"]);
     assert!(a > c && l * l >= 4.0 * c * (a + c) / (a - c));
     assert!(r.best.gains.as_deref().unwrap().contains("Levant 1998"));
+}
+
+/// A Halton tune of Levant's α and λ (0.5…20) for B-width at draft, under
+/// a gain condition with Lipschitz bound `c`.
+fn constrained_levant_tune(
+    c: f64,
+    condition: zwidth::tune::GainCondition,
+) -> zwidth::tune::TuneResult {
+    let mut s = spec(
+        serde_json::from_str(&format!(
+            r#"{{"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{{"kind":"levant","rule":"hba_sc","lipschitz":{c}}}}}"#
+        ))
+        .unwrap(),
+        &[("alpha", 0.5, 20.0), ("lambda", 0.5, 20.0)],
+        Objective::Single(Metric::BWidth),
+        SolverKind::Halton,
+        12,
+    );
+    s.constraint = Some(condition);
+    s.accuracy = Accuracy::Preset(Preset::Draft);
+    s.final_accuracy = Accuracy::Preset(Preset::Draft);
+    s.b = Some(vec![0.0, 10.0]);
+    s.validate().unwrap().run(None).unwrap()
 }
 
 #[test]
@@ -402,21 +411,7 @@ fn draft_search_then_standard_finals_report_what_plain_maps_give() {
 fn lyapunov_constraint_keeps_the_gains_inside_the_condition() {
     // Moreno–Osorio (2018 paper eq. 14): α > 3C + 2C²/λ².
     let c = 2.0;
-    let mut s = spec(
-        serde_json::from_str(&format!(
-            r#"{{"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{{"kind":"levant","rule":"hba_sc","lipschitz":{c}}}}}"#
-        ))
-        .unwrap(),
-        &[("alpha", 0.5, 20.0), ("lambda", 0.5, 20.0)],
-        Objective::Single(Metric::BWidth),
-        SolverKind::Halton,
-        12,
-    );
-    s.constraint = Some(zwidth::tune::GainCondition::Lyapunov);
-    s.accuracy = Accuracy::Preset(Preset::Draft);
-    s.final_accuracy = Accuracy::Preset(Preset::Draft);
-    s.b = Some(vec![0.0, 10.0]);
-    let r = s.validate().unwrap().run(None).unwrap();
+    let r = constrained_levant_tune(c, zwidth::tune::GainCondition::Lyapunov);
     let (mut met, mut not) = (0, 0);
     for e in &r.history {
         let (a, l) = (e.params["alpha"], e.params["lambda"]);
