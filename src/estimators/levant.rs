@@ -341,13 +341,17 @@ impl VelocityEstimator for Levant {
 mod tests {
     use super::*;
 
-    fn explicit(alpha: f64, lambda: f64, t: f64) -> Levant {
+    fn with_gains(alpha: f64, lambda: f64, t: f64, d: Discretization) -> Levant {
         let g = LevantGains {
             alpha,
             lambda,
             lipschitz: None,
         };
-        Levant::new(g, Discretization::Explicit, t)
+        Levant::new(g, d, t)
+    }
+
+    fn explicit(alpha: f64, lambda: f64, t: f64) -> Levant {
+        with_gains(alpha, lambda, t, Discretization::Explicit)
     }
 
     #[test]
@@ -365,12 +369,7 @@ mod tests {
     }
 
     fn implicit(alpha: f64, lambda: f64, t: f64) -> Levant {
-        let g = LevantGains {
-            alpha,
-            lambda,
-            lipschitz: None,
-        };
-        Levant::new(g, Discretization::Implicit, t)
+        with_gains(alpha, lambda, t, Discretization::Implicit)
     }
 
     /// The backward-Euler equations the implicit step must satisfy

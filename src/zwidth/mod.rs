@@ -2,6 +2,7 @@
 //! impedance probe, the analytic model, and the (K, B) searches.
 
 pub mod analytic;
+mod bisect;
 pub mod compare;
 pub mod controller;
 pub mod cost;

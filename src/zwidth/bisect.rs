@@ -1,0 +1,221 @@
+//! Bisection along K at one B (the searches' inner loop), pure: it sees
+//! only a verdict closure, so a scripted verdict can test it.
+
+use super::search::Point;
+
+/// Where a bisection along K starts, how far it may go and how fine it ends.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Bracket {
+    pub k0: f64,
+    pub k_cap: f64,
+    pub rel_tol: f64,
+}
+
+/// Largest K whose verdict (`classify`, at one B) renders: bracket from
+/// `k0` by doubling or halving, then bisect to `rel_tol`. With `robust`,
+/// fractions of the result below it are checked, and a failure there moves
+/// the search below it: the result is the first failure from below, not
+/// whichever edge of a non-monotone verdict the bracket happened to find.
+pub(super) fn bisect_k(
+    mut classify: impl FnMut(f64) -> Point,
+    bounds: Bracket,
+    robust: bool,
+    points: &mut Vec<Point>,
+) -> Option<f64> {
+    let k0 = bounds.k0;
+    let mut k = bisect_once(&mut classify, bounds, points)?;
+    if !robust {
+        return Some(k);
+    }
+    // Fractions of the result checked below it, lowest first.
+    const CHECKS: [f64; 5] = [0.3, 0.45, 0.6, 0.75, 0.9];
+    for _ in 0..8 {
+        let below = CHECKS
+            .iter()
+            .map(|f| f * k)
+            .filter(|&x| x >= k0)
+            .find(|&x| {
+                let p = classify(x);
+                let ok = p.ok();
+                points.push(p);
+                !ok
+            });
+        let Some(fail) = below else { return Some(k) };
+        // Bisect between the highest pass below the failure and it.
+        let lo = points
+            .iter()
+            .filter(|p| p.ok() && p.k < fail)
+            .map(|p| p.k)
+            .fold(0.0, f64::max);
+        if lo < k0 {
+            return None;
+        }
+        k = bisect_between(&mut classify, lo, fail, bounds.rel_tol, points);
+    }
+    Some(k)
+}
+
+fn bisect_between(
+    classify: &mut impl FnMut(f64) -> Point,
+    mut lo: f64,
+    mut hi: f64,
+    rel_tol: f64,
+    points: &mut Vec<Point>,
+) -> f64 {
+    while (hi - lo) > rel_tol * hi {
+        let mid = 0.5 * (lo + hi);
+        if !(mid > lo && mid < hi) {
+            break; // no f64 between them: as fine as it gets
+        }
+        let p = classify(mid);
+        let ok = p.ok();
+        points.push(p);
+        if ok {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+fn bisect_once(
+    classify: &mut impl FnMut(f64) -> Point,
+    bounds: Bracket,
+    points: &mut Vec<Point>,
+) -> Option<f64> {
+    let Bracket { k0, k_cap, rel_tol } = bounds;
+    let mut eval = |k: f64| {
+        let p = classify(k);
+        let ok = p.ok();
+        points.push(p);
+        ok
+    };
+    let (mut lo, mut hi);
+    if eval(k0) {
+        lo = k0;
+        loop {
+            let k = (lo * 2.0).min(k_cap);
+            if k <= lo {
+                return Some(lo);
+            }
+            if eval(k) {
+                lo = k;
+            } else {
+                hi = k;
+                break;
+            }
+        }
+    } else {
+        hi = k0;
+        loop {
+            let k = hi / 2.0;
+            if k < k0 / 1024.0 {
+                return None;
+            }
+            if eval(k) {
+                lo = k;
+                break;
+            }
+            hi = k;
+        }
+    }
+    Some(bisect_between(classify, lo, hi, rel_tol, points))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scripted verdict at one B: renders below 1500 N/m, fails on
+    /// [1500, 2000), renders again on [2000, 4000), fails from 4000.
+    fn scripted(k: f64) -> Point {
+        let ok = k < 1500.0 || (2000.0..4000.0).contains(&k);
+        Point {
+            k,
+            b: 0.0,
+            stable: Some(ok),
+            passive: None,
+            fidelity: None,
+        }
+    }
+
+    const BRACKET: Bracket = Bracket {
+        k0: 10.0,
+        k_cap: 1e7,
+        rel_tol: 1e-3,
+    };
+
+    #[test]
+    fn robust_bisection_returns_the_first_failure_from_below() {
+        // Plain bisection doubles 10, 20, …, 2560 (all render: 1280 < 1500,
+        // 2560 in the second band) and fails at 5120, so it finds the upper
+        // edge, 4000, to 0.1 %.
+        let mut pts = Vec::new();
+        let plain = bisect_k(scripted, BRACKET, false, &mut pts).unwrap();
+        assert!(plain < 4000.0 && plain > 4000.0 * (1.0 - 1e-3), "{plain}");
+        // Robust: the check at 0.45 of that (≈ 1800) fails, so it bisects
+        // between the highest pass below it (1280) and that failure, down to
+        // the script's first failure, 1500; 0.3…0.9 of 1500 all render.
+        let mut pts = Vec::new();
+        let robust = bisect_k(scripted, BRACKET, true, &mut pts).unwrap();
+        assert!(
+            robust < 1500.0 && robust > 1500.0 * (1.0 - 1e-3),
+            "{robust}"
+        );
+        // The check that found the failure is among the points.
+        assert!(pts.iter().any(|p| p.k == 0.45 * plain && !p.ok()));
+        for f in [0.3, 0.45, 0.6, 0.75, 0.9] {
+            assert!(
+                pts.iter().any(|p| p.k == f * robust && p.ok()),
+                "check at {f} of the result"
+            );
+        }
+        // Nothing between the result and the first failure is called good:
+        // every point above the result that renders is in the second band.
+        assert!(pts
+            .iter()
+            .all(|p| p.k <= robust || !p.ok() || p.k >= 2000.0));
+    }
+
+    #[test]
+    fn bisection_brackets_down_and_gives_up_below_k0_over_1024() {
+        // Renders below 70 N/m only, from k0 = 1000: halves 500, 250, 125,
+        // 62.5 (renders), then bisects [62.5, 125] down to 70.
+        let below_70 = |k: f64| Point {
+            stable: Some(k < 70.0),
+            ..scripted(k)
+        };
+        let b = Bracket {
+            k0: 1000.0,
+            ..BRACKET
+        };
+        let mut pts = Vec::new();
+        let k = bisect_k(below_70, b, false, &mut pts).unwrap();
+        assert!(k < 70.0 && k > 70.0 * (1.0 - 1e-3), "{k}");
+        assert_eq!(
+            pts[..5].iter().map(|p| p.k).collect::<Vec<_>>(),
+            [1000.0, 500.0, 250.0, 125.0, 62.5]
+        );
+        // Nothing renders above k0/1024: no boundary, after exactly eleven
+        // trials (k0 and ten halvings down to k0/1024).
+        let never = |k: f64| Point {
+            stable: Some(k < 1000.0 / 1024.0 * 0.99),
+            ..scripted(k)
+        };
+        let mut pts = Vec::new();
+        assert_eq!(bisect_k(never, b, false, &mut pts), None);
+        assert_eq!(pts.len(), 11);
+        // Everything renders: doubling stops at the cap, which is the result.
+        let always = |k: f64| Point {
+            stable: Some(true),
+            ..scripted(k)
+        };
+        let capped = Bracket { k_cap: 3000.0, ..b };
+        let mut pts = Vec::new();
+        assert_eq!(bisect_k(always, capped, true, &mut pts), Some(3000.0));
+        // 1000, 2000, 3000 (capped), then the robust checks at or above k0:
+        // 0.45…0.9 of 3000 (0.3·3000 = 900 < k0 is not checked).
+        assert_eq!(pts.len(), 3 + 4);
+    }
+}
