@@ -48,6 +48,8 @@ fn summary(run: &str, label: String, scene: &SceneSpec, map: &Value) -> MapSumma
                 .map(|p| BoundaryPoint {
                     b: p["b"].as_f64().unwrap_or(0.0),
                     k_max: p["k_max"].as_f64().unwrap_or(0.0),
+                    k_lo: p["k_lo"].as_f64(),
+                    k_hi: p["k_hi"].as_f64(),
                 })
                 .collect()
         })

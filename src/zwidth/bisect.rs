@@ -123,6 +123,80 @@ fn bisect_once(
     Some(bisect_between(classify, lo, hi, rel_tol, points))
 }
 
+/// A confidence interval around a boundary `k_est` found on a noisy
+/// verdict (`Point::decided`). Taking the margin to fall with K (the
+/// assumption bisection makes too), a K decided passive bounds the boundary
+/// from below and one decided not passive from above: `lo` is the largest
+/// K decided passive below every K decided not passive, `hi` the smallest
+/// K decided not passive above `lo`, each refined by bisection to `rel_tol`
+/// against the undecided points next to it. The boundary lies below `lo`
+/// only if the verdict at `lo` was wrong, above `hi` only if that at `hi`
+/// was: each with probability at most the scene's error rate. When nothing
+/// was decided not passive, K doubles from the estimate until something is
+/// or `k_cap` is reached (`hi` is then `None`).
+pub(super) fn interval(
+    mut classify: impl FnMut(f64) -> Point,
+    k_est: f64,
+    bounds: Bracket,
+    points: &mut Vec<Point>,
+) -> (f64, Option<f64>) {
+    let rel_tol = bounds.rel_tol;
+    let min_k = |pts: &[Point], keep: &dyn Fn(&Point) -> bool| {
+        pts.iter().filter(|p| keep(p)).map(|p| p.k).fold(f64::INFINITY, f64::min)
+    };
+    let max_k = |pts: &[Point], keep: &dyn Fn(&Point) -> bool| {
+        pts.iter().filter(|p| keep(p)).map(|p| p.k).fold(0.0, f64::max)
+    };
+    // Nothing decided not passive yet: look above the estimate.
+    if min_k(points, &|p| p.surely_not_ok()).is_infinite() {
+        let mut k = k_est.max(bounds.k0);
+        while k < bounds.k_cap {
+            k = (2.0 * k).min(bounds.k_cap);
+            let p = classify(k);
+            let stop = p.surely_not_ok();
+            points.push(p);
+            if stop {
+                break;
+            }
+        }
+    }
+    let first_fail = min_k(points, &|p| p.surely_not_ok());
+    let mut lo = max_k(points, &|p| p.surely_ok() && p.k < first_fail);
+    // Refine: bisect between lo and the next point above it that is not
+    // decided passive.
+    let mut lo_top = min_k(points, &|p| !p.surely_ok() && p.k > lo);
+    if lo > 0.0 && lo_top.is_finite() {
+        while lo_top - lo > rel_tol * lo_top {
+            let mid = 0.5 * (lo + lo_top);
+            let p = classify(mid);
+            let sure = p.surely_ok();
+            points.push(p);
+            if sure {
+                lo = mid;
+            } else {
+                lo_top = mid;
+            }
+        }
+    }
+    let mut hi = min_k(points, &|p| p.surely_not_ok() && p.k > lo);
+    if hi.is_infinite() {
+        return (lo, None);
+    }
+    let mut hi_bottom = max_k(points, &|p| !p.surely_not_ok() && p.k < hi).max(lo);
+    while hi - hi_bottom > rel_tol * hi {
+        let mid = 0.5 * (hi_bottom + hi);
+        let p = classify(mid);
+        let sure = p.surely_not_ok();
+        points.push(p);
+        if sure {
+            hi = mid;
+        } else {
+            hi_bottom = mid;
+        }
+    }
+    (lo, Some(hi))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -135,8 +209,7 @@ mod tests {
             k,
             b: 0.0,
             stable: Some(ok),
-            passive: None,
-            fidelity: None,
+            ..Point::default()
         }
     }
 

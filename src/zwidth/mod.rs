@@ -3,6 +3,7 @@
 
 pub mod analytic;
 mod bisect;
+pub mod bla;
 pub mod compare;
 pub mod controller;
 pub mod cost;
@@ -13,6 +14,7 @@ pub mod probe;
 pub mod scene;
 pub mod search;
 pub mod settings;
+pub mod stats;
 pub mod sweep;
 pub mod tradeoff;
 

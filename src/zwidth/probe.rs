@@ -37,6 +37,7 @@ use num_complex::Complex64 as C;
 use serde::Serialize;
 
 use super::analytic::ImpedanceCurve;
+use super::bla::{self, BlaStats};
 use super::controller::Controller;
 use super::scene::Scene;
 use crate::plant::{Plant, PlantState};
@@ -52,6 +53,8 @@ pub struct ProbeKnobs {
     pub settle_tol: f64,
     /// Give up (not passive) after this many periods.
     pub max_periods: u32,
+    /// Noisy scenes: most random-phase realizations per point (`bla.rs`).
+    pub realizations: u32,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -64,6 +67,26 @@ pub struct ProbeOutcome {
     /// damping scale b + |B|.
     pub last_change: f64,
     pub impedance: ImpedanceCurve,
+    /// Noisy scenes: the BLA verdict's statistics (absent on a
+    /// deterministic scene, whose verdict is exact).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub confidence: Option<VerdictConfidence>,
+}
+
+/// How sure a noisy scene's verdict is (`bla.rs`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct VerdictConfidence {
+    /// Decided at the scene's confidence level; else undecided and
+    /// `passive` is the sign of the margin.
+    pub decided: bool,
+    /// min over lines of Re Z of the BLA (N·s/m).
+    pub margin: f64,
+    /// Its standard error (N·s/m), and the part of it that is noise.
+    pub margin_se: f64,
+    pub noise_se: f64,
+    pub realizations: u32,
+    /// Bands of neighbouring lines the verdict judged Re Z on.
+    pub bands: u32,
 }
 
 /// Substeps of the excitation grid per encoder sample.
@@ -77,6 +100,8 @@ pub fn substeps(scene: &Scene) -> usize {
 /// a short probe).
 #[derive(Debug, Clone)]
 pub struct ProbeSetup {
+    /// The Schroeder design: its line amplitudes are every realization's.
+    design: Multisine,
     nsub: usize,
     h: f64,
     lines: Vec<usize>,
@@ -98,29 +123,39 @@ impl ProbeSetup {
         let per_period = (s.control.sample_hz / p.f_min_hz).round() as usize * nsub;
         let ms = Multisine::schroeder(p.f_min_hz, p.f_max_hz, p.amplitude);
         let omegas = ms.omegas();
-        let force = ms.period(per_period);
-        let mut fa = LineAnalyzer::new(per_period);
-        let mut f_lines = vec![C::new(0.0, 0.0); ms.lines.len()];
-        fa.lines(&force, &ms.lines, &mut f_lines);
-        // The staircase's true coefficient: × (1 − e^{−jωh})/(jωh).
         let j = C::new(0.0, 1.0);
-        for (f, &w) in f_lines.iter_mut().zip(&omegas) {
-            *f *= (C::new(1.0, 0.0) - C::from_polar(1.0, -w * h)) / (j * w * h);
-        }
         // The mean over [t, t+h] of V·e^{jωt} is V·e^{jωt}·(e^{jωh} − 1)/(jωh): undo it.
         let v_correction = omegas
             .iter()
             .map(|&w| (j * w * h) / (C::from_polar(1.0, w * h) - 1.0))
             .collect();
-        Self {
+        let mut setup = Self {
+            design: ms.clone(),
             nsub,
             h,
-            lines: ms.lines,
+            lines: ms.lines.clone(),
             omegas,
-            force,
-            f_lines,
+            force: Vec::new(),
+            f_lines: Vec::new(),
             v_correction,
+        };
+        (setup.force, setup.f_lines) = setup.excitation(&ms, per_period);
+        setup
+    }
+
+    /// One period of `ms` as the applied staircase (N), and the
+    /// staircase's true Fourier coefficients on the lines.
+    fn excitation(&self, ms: &Multisine, per_period: usize) -> (Vec<f64>, Vec<C>) {
+        let force = ms.period(per_period);
+        let mut fa = LineAnalyzer::new(per_period);
+        let mut f_lines = vec![C::new(0.0, 0.0); ms.lines.len()];
+        fa.lines(&force, &ms.lines, &mut f_lines);
+        // The staircase's true coefficient: × (1 − e^{−jωh})/(jωh).
+        let (j, h) = (C::new(0.0, 1.0), self.h);
+        for (f, &w) in f_lines.iter_mut().zip(&self.omegas) {
+            *f *= (C::new(1.0, 0.0) - C::from_polar(1.0, -w * h)) / (j * w * h);
         }
+        (force, f_lines)
     }
 }
 
@@ -139,13 +174,163 @@ pub fn probe_with(
 ) -> ProbeOutcome {
     let d = &scene.spec.device;
     match (d.coulomb > 0.0, d.quantization > 0.0) {
-        (true, true) => run::<true, true>(setup, scene, k, b, knobs),
-        (true, false) => run::<true, false>(setup, scene, k, b, knobs),
-        (false, true) => run::<false, true>(setup, scene, k, b, knobs),
+        (true, true) => run_bla::<true, true>(setup, scene, k, b, knobs),
+        (true, false) => run_bla::<true, false>(setup, scene, k, b, knobs),
+        (false, true) => run_bla::<false, true>(setup, scene, k, b, knobs),
         (false, false) => run::<false, false>(setup, scene, k, b, knobs),
     }
 }
 
+/// The device and its controller, stepped one excitation period at a time.
+struct Loop<'a, const FRICTION: bool, const QUANT: bool> {
+    plant: Plant,
+    ctl: Controller,
+    st: PlantState,
+    q: f64,
+    nsub: usize,
+    sub: usize,
+    h: f64,
+    _scene: std::marker::PhantomData<&'a ()>,
+}
+
+impl<const FRICTION: bool, const QUANT: bool> Loop<'_, FRICTION, QUANT> {
+    fn new(setup: &ProbeSetup, scene: &Scene, k: f64, b: f64) -> Self {
+        let s = &scene.spec;
+        Self {
+            plant: Plant::new(s.device.mass, s.device.damping, s.device.coulomb, setup.h),
+            ctl: Controller::new(scene, k, b, 0.0, false),
+            st: PlantState {
+                x: s.wall.position,
+                v: 0.0,
+            },
+            q: s.device.quantization,
+            nsub: setup.nsub,
+            sub: 0,
+            h: setup.h,
+            _scene: std::marker::PhantomData,
+        }
+    }
+
+    /// One period of `force`; the mean velocity over each step into `vbuf`.
+    /// False once the loop has diverged.
+    fn period(&mut self, force: &[f64], vbuf: &mut [f64]) -> bool {
+        for (vb, f_ext) in vbuf.iter_mut().zip(force) {
+            if self.sub == 0 {
+                self.ctl
+                    .sample(if QUANT { quantize(self.st.x, self.q) } else { self.st.x });
+            }
+            self.sub = if self.sub + 1 == self.nsub { 0 } else { self.sub + 1 };
+            let x0 = self.st.x;
+            let f = self.ctl.applied + f_ext;
+            if FRICTION {
+                self.plant.step_friction(&mut self.st, f);
+            } else {
+                self.plant.step_linear(&mut self.st, f);
+            }
+            // Mean velocity over the step: exact, and its aliases are a
+            // factor ωh smaller than those of point samples.
+            *vb = (self.st.x - x0) / self.h;
+        }
+        self.st.x.abs() < 10.0 && self.st.v.abs() < 1e3
+    }
+}
+
+/// A noisy scene: random-phase realizations until the BLA verdict is
+/// decided or `knobs.realizations` have run (`bla.rs`). Each realization
+/// continues from the state the last one left, discards
+/// `TRANSIENT_PERIODS` and averages `knobs.periods` periods.
+fn run_bla<const FRICTION: bool, const QUANT: bool>(
+    setup: &ProbeSetup,
+    scene: &Scene,
+    k: f64,
+    b: f64,
+    knobs: ProbeKnobs,
+) -> ProbeOutcome {
+    let p = &scene.spec.probe;
+    let per_period = setup.force.len();
+    let mut lp = Loop::<FRICTION, QUANT>::new(setup, scene, k, b);
+    let mut fa = LineAnalyzer::new(per_period);
+    let mut vbuf = vec![0.0; per_period];
+    let mut v_lines = vec![C::new(0.0, 0.0); setup.lines.len()];
+    let mut stats = BlaStats::new(setup.lines.len(), knobs.periods);
+    let alpha = 1.0 - p.confidence;
+    let max_m = knobs.realizations.max(1);
+    let mut periods_run = 0u32;
+    let mut verdict = None;
+    for m in 0..max_m {
+        let ms = bla::realization(&setup.design, p.seed, m);
+        let (force, f_lines) = setup.excitation(&ms, per_period);
+        let mut g = Vec::with_capacity(knobs.periods as usize);
+        for i in 0..(bla::TRANSIENT_PERIODS + knobs.periods) {
+            periods_run += 1;
+            if !lp.period(&force, &mut vbuf) {
+                // Diverged: not passive, and no doubt about it.
+                let z = vec![C::new(-1.0, 0.0); setup.omegas.len()];
+                let mut imp = ImpedanceCurve::from_z(&setup.omegas, &z, k, b);
+                imp.passive = false;
+                return ProbeOutcome {
+                    passive: false,
+                    settled: false,
+                    diverged: true,
+                    periods_run,
+                    last_change: f64::MAX,
+                    impedance: imp,
+                    confidence: Some(VerdictConfidence {
+                        decided: true,
+                        margin: -1.0,
+                        margin_se: 0.0,
+                        noise_se: 0.0,
+                        realizations: m + 1,
+                        bands: 0,
+                    }),
+                };
+            }
+            if i < bla::TRANSIENT_PERIODS {
+                continue;
+            }
+            fa.lines(&vbuf, &setup.lines, &mut v_lines);
+            g.push(
+                v_lines
+                    .iter()
+                    .zip(&setup.v_correction)
+                    .zip(&f_lines)
+                    .map(|((v, c), f)| v * c / f)
+                    .collect::<Vec<C>>(),
+            );
+        }
+        stats.push(&g);
+        if stats.count() >= bla::MIN_REALIZATIONS || m + 1 == max_m {
+            let v = stats.verdict(alpha, max_m);
+            let done = v.decided;
+            verdict = Some(v);
+            if done {
+                break;
+            }
+        }
+    }
+    let v = verdict.unwrap_or_else(|| stats.verdict(alpha, max_m));
+    let mut imp = ImpedanceCurve::from_z(&setup.omegas, &v.z, k, b);
+    imp.passive = v.passive;
+    ProbeOutcome {
+        passive: v.passive,
+        settled: v.decided,
+        diverged: false,
+        periods_run,
+        last_change: 0.0,
+        impedance: imp,
+        confidence: Some(VerdictConfidence {
+            decided: v.decided,
+            margin: v.margin,
+            margin_se: v.margin_se,
+            noise_se: v.noise_se,
+            realizations: v.realizations,
+            bands: v.bands,
+        }),
+    }
+}
+
+/// A deterministic (linear) scene: one Schroeder multisine until the
+/// response is periodic, then `knobs.periods` periods averaged.
 fn run<const FRICTION: bool, const QUANT: bool>(
     setup: &ProbeSetup,
     scene: &Scene,
@@ -154,23 +339,10 @@ fn run<const FRICTION: bool, const QUANT: bool>(
     knobs: ProbeKnobs,
 ) -> ProbeOutcome {
     let s = &scene.spec;
-    let (nsub, h) = (setup.nsub, setup.h);
-    let (omegas, force, f_lines, v_correction) = (
-        &setup.omegas,
-        &setup.force,
-        &setup.f_lines,
-        &setup.v_correction,
-    );
-    let per_period = force.len();
+    let (omegas, f_lines, v_correction) = (&setup.omegas, &setup.f_lines, &setup.v_correction);
+    let per_period = setup.force.len();
     let mut fa = LineAnalyzer::new(per_period);
-    let plant = Plant::new(s.device.mass, s.device.damping, s.device.coulomb, h);
-    let q = s.device.quantization;
-    let mut ctl = Controller::new(scene, k, b, 0.0, false);
-    let mut st = PlantState {
-        x: s.wall.position,
-        v: 0.0,
-    };
-    let mut sub = 0usize;
+    let mut lp = Loop::<FRICTION, QUANT>::new(setup, scene, k, b);
     let mut vbuf = vec![0.0; per_period];
     let mut v_lines = vec![C::new(0.0, 0.0); setup.lines.len()];
     let mut prev_z: Option<Vec<C>> = None;
@@ -204,28 +376,14 @@ fn run<const FRICTION: bool, const QUANT: bool>(
                 f64::MAX
             },
             impedance: imp,
+            confidence: None,
         }
     };
 
     while periods_run < knobs.max_periods {
-        for (i, vb) in vbuf.iter_mut().enumerate() {
-            if sub == 0 {
-                ctl.sample(if QUANT { quantize(st.x, q) } else { st.x });
-            }
-            sub = if sub + 1 == nsub { 0 } else { sub + 1 };
-            let x0 = st.x;
-            let f = ctl.applied + force[i];
-            if FRICTION {
-                plant.step_friction(&mut st, f);
-            } else {
-                plant.step_linear(&mut st, f);
-            }
-            // Mean velocity over the step: exact, and its aliases are a
-            // factor ωh smaller than those of point samples.
-            *vb = (st.x - x0) / h;
-        }
+        let alive = lp.period(&setup.force, &mut vbuf);
         periods_run += 1;
-        if !(st.x.abs() < 10.0 && st.v.abs() < 1e3) {
+        if !alive {
             return finish(
                 prev_z.unwrap_or_else(|| vec![C::new(-1.0, 0.0); omegas.len()]),
                 false,
@@ -265,18 +423,8 @@ fn run<const FRICTION: bool, const QUANT: bool>(
         }
         history.push(z.clone());
         prev_z = Some(z);
-        // A loop that does not settle (noise) can still be clearly passive or
-        // clearly not: decide early on the last half of the periods.
-        // (Only where noise is modelled: a deterministic loop settles.)
-        if (QUANT || FRICTION) && !settled && periods_run >= 8 && periods_run % 4 == 0 {
-            if let Some((mean, verdict)) = noisy_verdict(&history, false) {
-                let mut out = finish(mean, false, false, periods_run, last_change);
-                out.impedance.passive = verdict;
-                out.passive = verdict;
-                return out;
-            }
-        }
     }
+    // Not periodic within the limit: judged on the last half of the periods.
     match noisy_verdict(&history, true) {
         Some((mean, passive)) => {
             let mut out = finish(mean, false, false, periods_run, last_change);
@@ -332,6 +480,7 @@ fn noisy_verdict(history: &[Vec<C>], final_call: bool) -> Option<(Vec<C>, bool)>
     }
 }
 
+
 /// Largest remaining transient (N·s/m) over the lines. A decaying
 /// transient changes Z by d_p = T_{p−1}(r − 1) per period with the complex
 /// ratio r = d_p/d_{p−1}; what remains of it is T_p = d_p·r/(r − 1)
@@ -365,6 +514,7 @@ mod tests {
         periods: 2,
         settle_tol: 1e-6,
         max_periods: 400,
+        realizations: 8,
     };
 
     #[test]
@@ -417,6 +567,7 @@ mod tests {
                 periods: 4,
                 settle_tol: 1e-3,
                 max_periods: 150,
+                realizations: 8,
             },
         );
         assert!(o.passive && o.settled, "{o:?}");

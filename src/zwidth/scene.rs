@@ -171,9 +171,27 @@ pub struct ProbeSpec {
     /// Peak force of the multisine (N).
     #[serde(default = "d_amp")]
     pub amplitude: f64,
-    /// Periods averaged once the response is periodic.
+    /// Periods averaged once the response is periodic; on a noisy scene,
+    /// the steady-state periods of each random-phase realization.
     #[serde(default = "d_periods")]
     pub periods: u32,
+    /// Noisy scenes (friction, quantization): the confidence of a decided
+    /// verdict, 1 − the error rate of each kind (passive called not
+    /// passive, and the reverse); see docs/zwidth.md.
+    #[serde(default = "d_confidence")]
+    pub confidence: f64,
+    /// Noisy scenes: seed of the random-phase realizations. Maps with the
+    /// same seed see the same realizations (common random numbers), so a
+    /// difference between them is their parameters', not the noise's.
+    #[serde(default = "d_seed")]
+    pub seed: u64,
+}
+
+fn d_confidence() -> f64 {
+    0.95
+}
+fn d_seed() -> u64 {
+    1
 }
 
 fn d_fmin() -> f64 {
@@ -196,6 +214,8 @@ impl Default for ProbeSpec {
             f_max_hz: d_fmax(),
             amplitude: d_amp(),
             periods: d_periods(),
+            confidence: d_confidence(),
+            seed: d_seed(),
         }
     }
 }
@@ -378,6 +398,22 @@ impl SceneSpec {
             ));
         }
         require_positive("amplitude", p.amplitude, "N").map_err(pp)?;
+        if let Some(limit) = d.force_limit {
+            if p.amplitude > limit {
+                return Err(SpecError::new(
+                    "probe.amplitude",
+                    p.amplitude,
+                    format!("must not exceed device.force_limit = {limit} N"),
+                ));
+            }
+        }
+        if !(p.confidence > 0.0 && p.confidence < 1.0) {
+            return Err(SpecError::new(
+                "probe.confidence",
+                p.confidence,
+                "must be between 0 and 1 (exclusive), e.g. 0.95",
+            ));
+        }
         if !(1..=1000).contains(&p.periods) {
             return Err(SpecError::new(
                 "probe.periods",

@@ -26,7 +26,7 @@ use super::settings::{Criterion, MapSpec, Method, Resolved, SearchKind};
 use crate::error::SpecError;
 
 /// One evaluated (K, B).
-#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct Point {
     pub k: f64,
     pub b: f64,
@@ -36,20 +36,61 @@ pub struct Point {
     pub passive: Option<bool>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fidelity: Option<f64>,
+    /// Noisy scenes: whether the verdict was decided at the scene's
+    /// confidence (false: undecided, `passive` is the sign of `margin`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decided: Option<bool>,
+    /// Noisy scenes: min over the lines of Re Z of the best linear
+    /// approximation (N·s/m) and its standard error.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub margin: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub margin_se: Option<f64>,
+    /// Noisy scenes: random-phase realizations the verdict took.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub realizations: Option<u32>,
 }
 
 impl Point {
+    /// Decided passive (or stable): certain at the stated confidence.
+    pub fn surely_ok(&self) -> bool {
+        self.ok() && self.decided != Some(false)
+    }
+
+    /// Decided not passive (or unstable).
+    pub fn surely_not_ok(&self) -> bool {
+        !self.ok() && self.decided != Some(false)
+    }
+
     pub fn ok(&self) -> bool {
         self.stable.or(self.passive).unwrap_or(false)
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct BoundaryPoint {
     /// Wall damping B (N·s/m).
     pub b: f64,
     /// Largest stiffness that renders at this B (N/m).
     pub k_max: f64,
+    /// Noisy scenes: the confidence interval of `k_max` (N/m), from the
+    /// largest K decided passive to the smallest decided not passive
+    /// (`bisect::interval`); `k_hi` is absent when nothing up to `k_max`
+    /// of the map was decided not passive.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub k_lo: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub k_hi: Option<f64>,
+}
+
+impl BoundaryPoint {
+    pub fn new(b: f64, k_max: f64) -> Self {
+        Self {
+            b,
+            k_max,
+            ..Self::default()
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -67,6 +108,13 @@ pub struct MapResult {
     pub k_width: f64,
     /// Largest B with a K that renders (N·s/m).
     pub b_width: f64,
+    /// Noisy scenes: confidence intervals of the K-width (N/m) and B-width
+    /// (N·s/m) from the boundary's intervals, at the scene's confidence
+    /// per verdict (docs/zwidth.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub k_width_interval: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub b_width_interval: Option<[f64; 2]>,
     /// Largest fidelity error over the passive points (N·s/m); impedance criteria only.
     pub max_fidelity_error: Option<f64>,
     /// Area of the region that renders, ∫ K_max dB over the boundary
@@ -204,9 +252,7 @@ impl Evaluator {
         let mut p = Point {
             k,
             b,
-            stable: None,
-            passive: None,
-            fidelity: None,
+            ..Point::default()
         };
         if let Some(o) = &self.observer {
             if o.cancelled() {
@@ -242,6 +288,12 @@ impl Evaluator {
                 let o = self.probe(k, b);
                 p.passive = Some(o.passive);
                 p.fidelity = Some(o.impedance.fidelity);
+                if let Some(c) = o.confidence {
+                    p.decided = Some(c.decided);
+                    p.margin = Some(c.margin);
+                    p.margin_se = Some(c.margin_se);
+                    p.realizations = Some(c.realizations);
+                }
             }
             (Criterion::StrictPassivity, Some(m)) => {
                 p.passive = Some(
@@ -253,6 +305,13 @@ impl Evaluator {
             (Criterion::StrictPassivity, None) => unreachable!("checked in new()"),
         }
         p
+    }
+
+    /// Whether verdicts carry uncertainty: a simulation with friction or
+    /// quantization, judged by the BLA verdict (`bla.rs`).
+    pub fn noisy(&self) -> bool {
+        let d = &self.scene.spec.device;
+        self.method == Method::Frequency && (d.coulomb > 0.0 || d.quantization > 0.0)
     }
 
     /// Tell the observer (if any) this map is `fraction` done.
@@ -279,6 +338,18 @@ impl Evaluator {
             rel_tol: self.res.k_rel_tol,
         };
         bisect_k(|k| self.classify(k, b), bounds, robust, points)
+    }
+
+    /// The confidence interval of a boundary point found by `bisect_k`.
+    fn interval(&self, bp: &mut BoundaryPoint, k0: f64, k_cap: f64, points: &mut Vec<Point>) {
+        let bounds = Bracket {
+            k0,
+            k_cap,
+            rel_tol: self.res.k_rel_tol,
+        };
+        let (lo, hi) = super::bisect::interval(|k| self.classify(k, bp.b), bp.k_max, bounds, points);
+        bp.k_lo = Some(lo.min(bp.k_max));
+        bp.k_hi = Some(hi.unwrap_or(k_cap).max(bp.k_max));
     }
 }
 
@@ -357,11 +428,11 @@ pub fn map_observed(
                 match m.strict_passivity_range(b) {
                     Some((_, hi)) => {
                         let k = hi.min(spec.k_max);
-                        boundary.push(BoundaryPoint { b, k_max: k });
+                        boundary.push(BoundaryPoint::new(b, k));
                         points.push(ev.classify(k, b));
                     }
                     None if spec.b.is_none() => break,
-                    None => boundary.push(BoundaryPoint { b, k_max: 0.0 }),
+                    None => boundary.push(BoundaryPoint::new(b, 0.0)),
                 }
             }
             (boundary, points)
@@ -376,6 +447,7 @@ pub fn map_observed(
         .filter(|p| p.k_max > 0.0)
         .map(|p| p.b)
         .fold(0.0, f64::max);
+    let (k_width_interval, b_width_interval) = widths_interval(&boundary);
     let max_fidelity_error = points
         .iter()
         .filter(|p| p.passive == Some(true))
@@ -404,12 +476,41 @@ pub fn map_observed(
         boundary,
         k_width,
         b_width,
+        k_width_interval,
+        b_width_interval,
         max_fidelity_error,
         area,
         trials: points.len(),
         points,
         elapsed_s: start.elapsed().as_secs_f64(),
     })
+}
+
+/// The K-width and B-width intervals from the boundary's: K-width lies
+/// between the largest lower and the largest upper bound; B-width between
+/// the largest B whose lower bound renders and the largest whose upper
+/// bound does. `None` when the boundary has no intervals.
+fn widths_interval(boundary: &[BoundaryPoint]) -> (Option<[f64; 2]>, Option<[f64; 2]>) {
+    if boundary.is_empty() || boundary.iter().any(|p| p.k_lo.is_none() || p.k_hi.is_none()) {
+        return (None, None);
+    }
+    let max_of = |f: &dyn Fn(&BoundaryPoint) -> f64| boundary.iter().map(f).fold(0.0, f64::max);
+    let k = [
+        max_of(&|p| p.k_lo.unwrap_or(0.0)),
+        max_of(&|p| p.k_hi.unwrap_or(0.0)),
+    ];
+    let b_of = |f: &dyn Fn(&BoundaryPoint) -> f64| {
+        boundary
+            .iter()
+            .filter(|p| f(p) > 0.0)
+            .map(|p| p.b)
+            .fold(0.0, f64::max)
+    };
+    let b = [
+        b_of(&|p| p.k_lo.unwrap_or(0.0)),
+        b_of(&|p| p.k_hi.unwrap_or(0.0)),
+    ];
+    (Some(k), Some(b))
 }
 
 /// ∫ K_max dB over a boundary, by trapezoids between successive B values
@@ -443,13 +544,11 @@ fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPo
         let mut pts = Vec::new();
         let robust = spec.search == SearchKind::RobustBisect;
         let k = ev.bisect_k(b, ev.res.k_step, spec.k_max, robust, &mut pts);
-        (
-            BoundaryPoint {
-                b,
-                k_max: k.unwrap_or(0.0),
-            },
-            pts,
-        )
+        let mut bp = BoundaryPoint::new(b, k.unwrap_or(0.0));
+        if ev.noisy() {
+            ev.interval(&mut bp, ev.res.k_step, spec.k_max, &mut pts);
+        }
+        (bp, pts)
     };
     if let Some(bs) = &spec.b {
         let finished = std::sync::atomic::AtomicUsize::new(0);
@@ -513,7 +612,7 @@ fn trace(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>,
             }
             k -= step;
             if k < step * 0.5 {
-                boundary.push(BoundaryPoint { b, k_max: 0.0 });
+                boundary.push(BoundaryPoint::new(b, 0.0));
                 if spec.b.is_none() {
                     break; // K decreased to zero: the paper's termination
                 }
@@ -522,7 +621,7 @@ fn trace(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>,
             }
             k_max = k;
         }
-        boundary.push(BoundaryPoint { b, k_max });
+        boundary.push(BoundaryPoint::new(b, k_max));
         k = (k_max + step).min(spec.k_max);
         let planned = match &spec.b {
             Some(bs) => bs.len(),
@@ -557,13 +656,13 @@ fn grid(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, 
         .collect();
     let boundary = bs
         .iter()
-        .map(|&b| BoundaryPoint {
-            b,
-            k_max: points
+        .map(|&b| {
+            let k_max = points
                 .iter()
                 .filter(|p| p.b == b && p.ok())
                 .map(|p| p.k)
-                .fold(0.0, f64::max),
+                .fold(0.0, f64::max);
+            BoundaryPoint::new(b, k_max)
         })
         .collect();
     (boundary, points)
@@ -574,7 +673,7 @@ mod tests {
     use super::*;
 
     fn bp(b: f64, k_max: f64) -> BoundaryPoint {
-        BoundaryPoint { b, k_max }
+        BoundaryPoint::new(b, k_max)
     }
 
     #[test]

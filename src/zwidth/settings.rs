@@ -78,6 +78,9 @@ pub struct AccuracyKnobs {
     pub settle_tol: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_periods: Option<u32>,
+    /// Noisy scenes: most random-phase realizations per point.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub realizations: Option<u32>,
     /// Bisection: relative K resolution.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub k_rel_tol: Option<f64>,
@@ -129,10 +132,11 @@ impl Accuracy {
         let h = &scene.spec.hit;
         let p = &scene.spec.probe;
         // (time scale, periods ×, settle_tol, max_periods, k_rel_tol, step ÷)
-        let (scale, per, tol, maxp, krel, step_div) = match knobs.preset {
-            Preset::Draft => (0.25, 0.5, 1e-2, 40, 0.05, 0.5),
-            Preset::Standard => (1.0, 1.0, 1e-3, 150, 0.01, 1.0),
-            Preset::Reference => (2.0, 2.0, 1e-5, 600, 0.002, 2.0),
+        // (time scale, periods ×, settle_tol, max_periods, k_rel_tol, step ÷, realizations)
+        let (scale, per, tol, maxp, krel, step_div, reals) = match knobs.preset {
+            Preset::Draft => (0.25, 0.5, 1e-2, 40, 0.05, 0.5, 10),
+            Preset::Standard => (1.0, 1.0, 1e-3, 150, 0.01, 1.0, 24),
+            Preset::Reference => (2.0, 2.0, 1e-5, 600, 0.002, 2.0, 48),
         };
         let r = Resolved {
             preset: knobs.preset,
@@ -146,6 +150,7 @@ impl Accuracy {
                     .unwrap_or(((p.periods as f64 * per).round() as u32).max(1)),
                 settle_tol: knobs.settle_tol.unwrap_or(tol),
                 max_periods: knobs.max_periods.unwrap_or(maxp),
+                realizations: knobs.realizations.unwrap_or(reals),
             },
             k_rel_tol: knobs.k_rel_tol.unwrap_or(krel),
             k_step: knobs.k_step.unwrap_or(PAPER_K_STEP / step_div),
@@ -178,6 +183,13 @@ impl Accuracy {
             return Err(SpecError::new(
                 "accuracy.periods",
                 r.probe.periods,
+                "must be 1 to 1000",
+            ));
+        }
+        if !(1..=1000).contains(&r.probe.realizations) {
+            return Err(SpecError::new(
+                "accuracy.realizations",
+                r.probe.realizations,
                 "must be 1 to 1000",
             ));
         }
