@@ -2,6 +2,8 @@
 
 use plotters::prelude::*;
 
+use crate::zwidth::search::BoundaryPoint;
+
 /// One named line.
 pub struct Series {
     pub name: String,
@@ -167,6 +169,24 @@ pub struct MapPlotPoint {
     pub k: f64,
     pub ok: bool,
     pub fidelity: Option<f64>,
+    /// False for a noisy verdict left undecided (drawn as an open ring).
+    pub decided: bool,
+}
+
+impl MapPlotPoint {
+    /// From a stored or computed point's JSON (`search::Point`).
+    pub fn from_json(p: &serde_json::Value) -> Self {
+        Self {
+            k: p["k"].as_f64().unwrap_or(0.0),
+            b: p["b"].as_f64().unwrap_or(0.0),
+            ok: p["stable"]
+                .as_bool()
+                .or(p["passive"].as_bool())
+                .unwrap_or(false),
+            fidelity: p["fidelity"].as_f64(),
+            decided: p["decided"].as_bool().unwrap_or(true),
+        }
+    }
 }
 
 /// Viridis-like colour for t in [0, 1] (piecewise-linear through five stops).
@@ -192,23 +212,25 @@ fn colour(t: f64) -> RGBColor {
 
 /// The 2018 paper's Fig. 7 style: K against B, the points that render
 /// coloured by fidelity error (with a colour bar), the others as grey
-/// crosses, and the boundary as a line. Returns the SVG text.
+/// crosses, undecided noisy verdicts as open orange rings, the boundary as
+/// a line and, where the map has them, its confidence intervals as
+/// vertical bars. Returns the SVG text.
 pub fn zwidth_map_svg(
     title: &str,
     points: &[MapPlotPoint],
-    boundary: &[(f64, f64)],
+    boundary: &[BoundaryPoint],
     ok_label: &str,
 ) -> Result<String, String> {
     let bmax = points
         .iter()
         .map(|p| p.b)
-        .chain(boundary.iter().map(|b| b.0))
+        .chain(boundary.iter().map(|b| b.b))
         .fold(1.0, f64::max)
         * 1.05;
     let kmax = points
         .iter()
         .map(|p| p.k)
-        .chain(boundary.iter().map(|b| b.1))
+        .chain(boundary.iter().map(|b| b.k_hi.unwrap_or(b.k_max)))
         .fold(1.0, f64::max)
         * 1.08;
     let fids: Vec<f64> = points
@@ -255,6 +277,19 @@ pub fn zwidth_map_svg(
             .map_err(|e| e.to_string())?
             .label(format!("not {ok_label}"))
             .legend(|(x, y)| Cross::new((x + 8, y), 3, RGBColor(170, 170, 170)));
+        if points.iter().any(|p| !p.decided) {
+            chart
+                .draw_series(
+                    points.iter().filter(|p| !p.decided).map(|p| {
+                        Circle::new((p.b, p.k), 6, RGBColor(230, 120, 20).stroke_width(1))
+                    }),
+                )
+                .map_err(|e| e.to_string())?
+                .label("undecided (sign of the estimate inside)")
+                .legend(|(x, y)| {
+                    Circle::new((x + 8, y), 6, RGBColor(230, 120, 20).stroke_width(1))
+                });
+        }
         chart
             .draw_series(points.iter().filter(|p| p.ok).map(|p| {
                 let c = match p.fidelity {
@@ -266,7 +301,28 @@ pub fn zwidth_map_svg(
             .map_err(|e| e.to_string())?
             .label(ok_label.to_string())
             .legend(|(x, y)| Circle::new((x + 8, y), 4, colour(0.5).filled()));
-        let mut line: Vec<(f64, f64)> = boundary.to_vec();
+        let bars: Vec<(f64, f64, f64)> = boundary
+            .iter()
+            .filter_map(|p| Some((p.b, p.k_lo?, p.k_hi?)))
+            .collect();
+        if !bars.is_empty() {
+            chart
+                .draw_series(bars.iter().map(|&(b, lo, hi)| {
+                    PathElement::new(
+                        vec![(b, lo), (b, hi)],
+                        RGBColor(200, 30, 30).stroke_width(2),
+                    )
+                }))
+                .map_err(|e| e.to_string())?
+                .label("boundary interval (k_lo to k_hi)")
+                .legend(|(x, y)| {
+                    PathElement::new(
+                        vec![(x + 8, y - 6), (x + 8, y + 6)],
+                        RGBColor(200, 30, 30).stroke_width(2),
+                    )
+                });
+        }
+        let mut line: Vec<(f64, f64)> = boundary.iter().map(|p| (p.b, p.k_max)).collect();
         line.sort_by(|a, b| a.0.total_cmp(&b.0));
         chart
             .draw_series(LineSeries::new(line, BLACK.stroke_width(2)))

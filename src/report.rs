@@ -287,9 +287,18 @@ fn boundaries_svg<'a>(
     lines_svg(title, "B (N·s/m)", "K (N/m)", &series)
 }
 
-/// CSV of every evaluated point of every map: map, k, b, renders, fidelity.
+/// CSV of every evaluated point of every map: map, k, b, renders,
+/// fidelity, and on noisy scenes whether the verdict was decided, its
+/// margin (N·s/m) with standard error, and the realizations it took
+/// (empty where a map has none).
 pub fn points_csv(maps: &[MapSummary]) -> String {
-    let mut s = String::from("map,k_n_per_m,b_ns_per_m,renders,fidelity_ns_per_m\n");
+    let mut s = String::from(
+        "map,k_n_per_m,b_ns_per_m,renders,fidelity_ns_per_m,decided,margin_ns_per_m,margin_se_ns_per_m,realizations\n",
+    );
+    let cell = |v: &Value| match v {
+        Value::Null => String::new(),
+        v => v.to_string(),
+    };
     for m in maps {
         let label = m.label.replace([',', '"', '\n'], " ");
         for p in &m.points {
@@ -297,11 +306,16 @@ pub fn points_csv(maps: &[MapSummary]) -> String {
                 .as_bool()
                 .or(p["passive"].as_bool())
                 .unwrap_or(false);
-            let fid = p["fidelity"]
-                .as_f64()
-                .map(|f| f.to_string())
-                .unwrap_or_default();
-            s.push_str(&format!("{label},{},{},{ok},{fid}\n", p["k"], p["b"]));
+            s.push_str(&format!(
+                "{label},{},{},{ok},{},{},{},{},{}\n",
+                p["k"],
+                p["b"],
+                cell(&p["fidelity"]),
+                cell(&p["decided"]),
+                cell(&p["margin"]),
+                cell(&p["margin_se"]),
+                cell(&p["realizations"])
+            ));
         }
     }
     s
@@ -314,26 +328,18 @@ pub fn svg(spec: &ExperimentSpec, maps: &[MapSummary], result: &Value) -> Result
     match (spec, maps) {
         (ExperimentSpec::Tune(_), _) => tune_result(result)?.svg(),
         (ExperimentSpec::Map(_), [m]) => {
-            let points: Vec<MapPlotPoint> = m
-                .points
-                .iter()
-                .map(|p| MapPlotPoint {
-                    k: p["k"].as_f64().unwrap_or(0.0),
-                    b: p["b"].as_f64().unwrap_or(0.0),
-                    ok: p["stable"]
-                        .as_bool()
-                        .or(p["passive"].as_bool())
-                        .unwrap_or(false),
-                    fidelity: p["fidelity"].as_f64(),
-                })
-                .collect();
-            let boundary: Vec<(f64, f64)> = m.boundary.iter().map(|p| (p.b, p.k_max)).collect();
+            let points: Vec<MapPlotPoint> = m.points.iter().map(MapPlotPoint::from_json).collect();
             let label = if m.criterion == "stability" {
                 "stable"
             } else {
                 "passive"
             };
-            zwidth_map_svg(&format!("Z-width: {}", m.label), &points, &boundary, label)
+            zwidth_map_svg(
+                &format!("Z-width: {}", m.label),
+                &points,
+                &m.boundary,
+                label,
+            )
         }
         (ExperimentSpec::Sweep(s), _) if s.parameter.is_some() => {
             let path = s.parameter.as_ref().map(|p| p.path.as_str()).unwrap_or("");

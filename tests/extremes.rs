@@ -176,6 +176,7 @@ mod scenes {
             periods: 1,
             settle_tol: 1e-2,
             max_periods: 4,
+            realizations: 3,
         };
         for json in [
             // 1 MHz encoder, 1 kHz render, ideal sensor; short approach.

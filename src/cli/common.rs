@@ -130,37 +130,54 @@ pub fn map_svg(title: &str, r: &MapResult) -> Result<String, CliError> {
             k: p.k,
             ok: p.ok(),
             fidelity: p.fidelity,
+            decided: p.decided != Some(false),
         })
         .collect();
-    let boundary: Vec<(f64, f64)> = r.boundary.iter().map(|p| (p.b, p.k_max)).collect();
     let label = if r.criterion == Criterion::Stability {
         "stable"
     } else {
         "passive"
     };
-    zwidth_map_svg(title, &points, &boundary, label).map_err(CliError::Failure)
+    zwidth_map_svg(title, &points, &r.boundary, label).map_err(CliError::Failure)
 }
 
 /// A text summary of a map.
 pub fn map_table(r: &MapResult) -> String {
+    let intervals = r.k_width_interval.is_some();
     let mut s = format!(
         "model: {}
 criterion: {:?}, search: {:?}, resolution: {}
-{:>14} {:>14}
+{:>14} {:>14}{}
 ",
-        r.model, r.criterion, r.search, r.resolution, "B (N·s/m)", "K_max (N/m)"
+        r.model,
+        r.criterion,
+        r.search,
+        r.resolution,
+        "B (N·s/m)",
+        "K_max (N/m)",
+        if intervals {
+            format!(" {:>29}", "interval (N/m)")
+        } else {
+            String::new()
+        }
     );
     for p in &r.boundary {
-        s.push_str(&format!(
-            "{:>14.2} {:>14.1}
-",
-            p.b, p.k_max
-        ));
+        s.push_str(&format!("{:>14.2} {:>14.1}", p.b, p.k_max));
+        if let (Some(lo), Some(hi)) = (p.k_lo, p.k_hi) {
+            s.push_str(&format!("   [{lo:>12.1}, {hi:>12.1}]"));
+        }
+        s.push('\n');
     }
     s.push_str(&format!(
         "K-width {:.1} N/m, B-width {:.2} N·s/m",
         r.k_width, r.b_width
     ));
+    if let (Some(k), Some(b)) = (r.k_width_interval, r.b_width_interval) {
+        s.push_str(&format!(
+            " (intervals: K-width [{:.1}, {:.1}], B-width [{:.2}, {:.2}])",
+            k[0], k[1], b[0], b[1]
+        ));
+    }
     if let Some(f) = r.max_fidelity_error {
         s.push_str(&format!(", max fidelity error {f:.2} N·s/m"));
     }

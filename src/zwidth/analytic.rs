@@ -265,7 +265,12 @@ impl LinearModel {
             .iter()
             .map(|&w| self.impedance_at(k, b, w))
             .collect();
-        ImpedanceCurve::from_z(&self.omegas, &z, k, b)
+        let mut curve = ImpedanceCurve::from_z(&self.omegas, &z, k, b);
+        // Z = F/V describes a loop that settles; an unstable one renders
+        // nothing (the frequency engine sees it diverge), whatever Re Z the
+        // formula gives on the band.
+        curve.passive &= self.spectral_radius(k, b) < 1.0;
+        curve
     }
 
     /// The closed-loop characteristic polynomial (ascending powers).

@@ -142,10 +142,16 @@ pub(super) fn interval(
 ) -> (f64, Option<f64>) {
     let rel_tol = bounds.rel_tol;
     let min_k = |pts: &[Point], keep: &dyn Fn(&Point) -> bool| {
-        pts.iter().filter(|p| keep(p)).map(|p| p.k).fold(f64::INFINITY, f64::min)
+        pts.iter()
+            .filter(|p| keep(p))
+            .map(|p| p.k)
+            .fold(f64::INFINITY, f64::min)
     };
     let max_k = |pts: &[Point], keep: &dyn Fn(&Point) -> bool| {
-        pts.iter().filter(|p| keep(p)).map(|p| p.k).fold(0.0, f64::max)
+        pts.iter()
+            .filter(|p| keep(p))
+            .map(|p| p.k)
+            .fold(0.0, f64::max)
     };
     // Nothing decided not passive yet: look above the estimate.
     if min_k(points, &|p| p.surely_not_ok()).is_infinite() {

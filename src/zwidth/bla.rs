@@ -100,7 +100,6 @@ pub fn band_width(lines: usize) -> usize {
 /// line measures to ±0.06 rad per realization on the seed device.
 pub const BANDS: usize = 20;
 
-
 /// Each realization's admittance per line, and the period-to-period
 /// variance within each.
 #[derive(Debug, Clone)]
@@ -242,7 +241,11 @@ impl BlaStats {
             passive,
             z,
             margin: if margin.is_finite() { margin } else { f64::MIN },
-            margin_se: if margin_se.is_finite() { margin_se } else { f64::MAX },
+            margin_se: if margin_se.is_finite() {
+                margin_se
+            } else {
+                f64::MAX
+            },
             noise_se: if noise.is_finite() { noise } else { f64::MAX },
             realizations: self.count(),
             bands: bands.len() as u32,
@@ -309,7 +312,11 @@ mod tests {
         let v = one_line(C::new(-0.2, 0.1), &[0.0; 3]).verdict(0.05, 10);
         assert!(v.decided && !v.passive, "{v:?}");
         // Two realizations are never enough.
-        assert!(!one_line(C::new(0.2, 0.1), &[0.0; 2]).verdict(0.05, 10).decided);
+        assert!(
+            !one_line(C::new(0.2, 0.1), &[0.0; 2])
+                .verdict(0.05, 10)
+                .decided
+        );
     }
 
     /// Standard normal from two uniforms (Box–Muller).
@@ -357,13 +364,22 @@ mod tests {
         };
         let false_fail = rate(1e-6, false);
         let false_pass = rate(-1e-6, true);
-        assert!(false_fail <= 0.077, "passive called not passive in {false_fail}");
-        assert!(false_pass <= 0.077, "not passive called passive in {false_pass}");
+        assert!(
+            false_fail <= 0.077,
+            "passive called not passive in {false_fail}"
+        );
+        assert!(
+            false_pass <= 0.077,
+            "not passive called passive in {false_pass}"
+        );
         // Power: a clear margin (Re Z = 5, se ≈ 0.002·300/√M per line) is
         // decided at the first look, the right way.
         for (re_z, passive) in [(5.0, true), (-5.0, false)] {
             let v = decide(re_z, 0.002, 7);
-            assert!(v.decided && v.passive == passive && v.realizations == 3, "{v:?}");
+            assert!(
+                v.decided && v.passive == passive && v.realizations == 3,
+                "{v:?}"
+            );
             // The margin is the least of 20 band means, each within
             // ≈ 300·0.002/√6 = 0.25 of Re Z: within 6 of those.
             assert!((v.margin - re_z).abs() < 1.5, "{v:?}");
@@ -391,7 +407,12 @@ mod tests {
         let c = realization(&design, 1, 1);
         let d = realization(&design, 2, 0);
         assert_eq!(a.amplitudes, b.amplitudes, "a function of (seed, m) alone");
-        for ((x, y), z) in design.amplitudes.iter().zip(&c.amplitudes).zip(&d.amplitudes) {
+        for ((x, y), z) in design
+            .amplitudes
+            .iter()
+            .zip(&c.amplitudes)
+            .zip(&d.amplitudes)
+        {
             assert!((x.norm() - y.norm()).abs() < 1e-15 && (x.norm() - z.norm()).abs() < 1e-15);
         }
         assert_ne!(a.amplitudes, c.amplitudes);

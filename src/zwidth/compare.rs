@@ -225,6 +225,18 @@ impl CompareResult {
             s.push('\n');
         };
         row("K-width (N/m)", &|r| format!("{:.3e}", r.map.k_width));
+        if self.rows.iter().any(|r| r.map.k_width_interval.is_some()) {
+            row("  interval low", &|r| {
+                r.map
+                    .k_width_interval
+                    .map_or("-".into(), |i| format!("{:.3e}", i[0]))
+            });
+            row("  interval high", &|r| {
+                r.map
+                    .k_width_interval
+                    .map_or("-".into(), |i| format!("{:.3e}", i[1]))
+            });
+        }
         row("B-width (N·s/m)", &|r| format!("{:.1}", r.map.b_width));
         row("Max. fidelity error (N·s/m)", &|r| {
             r.map

@@ -216,10 +216,17 @@ impl<const FRICTION: bool, const QUANT: bool> Loop<'_, FRICTION, QUANT> {
     fn period(&mut self, force: &[f64], vbuf: &mut [f64]) -> bool {
         for (vb, f_ext) in vbuf.iter_mut().zip(force) {
             if self.sub == 0 {
-                self.ctl
-                    .sample(if QUANT { quantize(self.st.x, self.q) } else { self.st.x });
+                self.ctl.sample(if QUANT {
+                    quantize(self.st.x, self.q)
+                } else {
+                    self.st.x
+                });
             }
-            self.sub = if self.sub + 1 == self.nsub { 0 } else { self.sub + 1 };
+            self.sub = if self.sub + 1 == self.nsub {
+                0
+            } else {
+                self.sub + 1
+            };
             let x0 = self.st.x;
             let f = self.ctl.applied + f_ext;
             if FRICTION {
@@ -479,7 +486,6 @@ fn noisy_verdict(history: &[Vec<C>], final_call: bool) -> Option<(Vec<C>, bool)>
         None
     }
 }
-
 
 /// Largest remaining transient (N·s/m) over the lines. A decaying
 /// transient changes Z by d_p = T_{p−1}(r − 1) per period with the complex

@@ -631,6 +631,19 @@ mod tests {
             .contains("loop.render_hz = 3000"));
         assert!(bad(r#"{"probe":{"f_max_hz":600}}"#).contains("probe.f_max_hz = 600"));
         assert!(bad(r#"{"probe":{"f_min_hz":3}}"#).contains("probe.f_min_hz = 3"));
+        for c in ["0", "1", "-0.5", "1.5"] {
+            let e = bad(&format!(r#"{{"probe":{{"confidence":{c}}}}}"#));
+            assert!(
+                e.contains(&format!("probe.confidence = {c}")) && e.contains("between 0 and 1"),
+                "{e}"
+            );
+        }
+        let e = bad(r#"{"device":{"force_limit":0.4},"probe":{"amplitude":0.5}}"#);
+        assert!(
+            e.contains("probe.amplitude = 0.5") && e.contains("force_limit = 0.4"),
+            "{e}"
+        );
+        assert!(bad(r#"{"probe":{"amplitude":0}}"#).contains("probe.amplitude"));
         assert!(
             bad(r#"{"estimator":{"kind":"butterworth","cutoff_hz":6000}}"#)
                 .contains("estimator.cutoff_hz = 6000")

@@ -220,10 +220,17 @@ impl Evaluator {
                 }
                 parts.push(format!("encoder {} Hz, render {} Hz, delay {}", s.control.sample_hz, s.control.render_hz, s.control.delay_samples));
                 parts.push(format!("estimator {est}"));
+                let noisy = self.noisy();
                 let kind = if self.method == Method::Time {
-                    "time-domain wall-hit simulation"
+                    "time-domain wall-hit simulation".to_string()
+                } else if noisy {
+                    format!(
+                        "frequency-domain multisine simulation (bilateral wall; best linear approximation from random-phase realizations, seed {} shared by every map with this seed, verdicts at {} % confidence)",
+                        s.probe.seed,
+                        100.0 * s.probe.confidence
+                    )
                 } else {
-                    "frequency-domain multisine simulation (bilateral wall)"
+                    "frequency-domain multisine simulation (bilateral wall)".to_string()
                 };
                 format!("{kind}: {}", parts.join(", "))
             }
@@ -347,7 +354,8 @@ impl Evaluator {
             k_cap,
             rel_tol: self.res.k_rel_tol,
         };
-        let (lo, hi) = super::bisect::interval(|k| self.classify(k, bp.b), bp.k_max, bounds, points);
+        let (lo, hi) =
+            super::bisect::interval(|k| self.classify(k, bp.b), bp.k_max, bounds, points);
         bp.k_lo = Some(lo.min(bp.k_max));
         bp.k_hi = Some(hi.unwrap_or(k_cap).max(bp.k_max));
     }
@@ -491,7 +499,11 @@ pub fn map_observed(
 /// the largest B whose lower bound renders and the largest whose upper
 /// bound does. `None` when the boundary has no intervals.
 fn widths_interval(boundary: &[BoundaryPoint]) -> (Option<[f64; 2]>, Option<[f64; 2]>) {
-    if boundary.is_empty() || boundary.iter().any(|p| p.k_lo.is_none() || p.k_hi.is_none()) {
+    if boundary.is_empty()
+        || boundary
+            .iter()
+            .any(|p| p.k_lo.is_none() || p.k_hi.is_none())
+    {
         return (None, None);
     }
     let max_of = |f: &dyn Fn(&BoundaryPoint) -> f64| boundary.iter().map(f).fold(0.0, f64::max);

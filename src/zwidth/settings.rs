@@ -260,5 +260,21 @@ mod tests {
         let bad: Accuracy = serde_json::from_str(r#"{"k_rel_tol":0}"#).unwrap();
         assert_eq!(bad.resolve(&sc).unwrap_err().field, "accuracy.k_rel_tol");
         assert!(serde_json::from_str::<Accuracy>(r#""fast""#).is_err());
+        // Realizations: the presets' (docs/zwidth.md), and 0 refused.
+        let reals = |p: &str| {
+            serde_json::from_str::<Accuracy>(p)
+                .unwrap()
+                .resolve(&sc)
+                .map(|r| r.probe.realizations)
+        };
+        assert_eq!(reals(r#""draft""#).unwrap(), 10);
+        assert_eq!(reals(r#""standard""#).unwrap(), 24);
+        assert_eq!(reals(r#""reference""#).unwrap(), 48);
+        assert_eq!(reals(r#"{"realizations":5}"#).unwrap(), 5);
+        let e = reals(r#"{"realizations":0}"#).unwrap_err();
+        assert_eq!(
+            (e.field.as_str(), e.to_string().contains("1 to 1000")),
+            ("accuracy.realizations", true)
+        );
     }
 }

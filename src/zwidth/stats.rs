@@ -79,7 +79,8 @@ fn inc_beta(a: f64, b: f64, x: f64) -> f64 {
     if x >= 1.0 {
         return 1.0;
     }
-    let front = (ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln()).exp();
+    let front =
+        (ln_gamma(a + b) - ln_gamma(a) - ln_gamma(b) + a * x.ln() + b * (1.0 - x).ln()).exp();
     // The fraction converges fast for x < (a + 1)/(a + b + 2); else use symmetry.
     if x < (a + 1.0) / (a + b + 2.0) {
         front * beta_cf(a, b, x) / a
@@ -161,7 +162,10 @@ mod tests {
         ];
         for (p, nu, want) in table {
             let got = student_t_quantile(p, nu);
-            assert!((got / want - 1.0).abs() < 1e-8, "t({p}, {nu}) = {got}, table {want}");
+            assert!(
+                (got / want - 1.0).abs() < 1e-8,
+                "t({p}, {nu}) = {got}, table {want}"
+            );
         }
         // Symmetry and the median.
         assert!((student_t_cdf(0.0, 3.0) - 0.5).abs() < 1e-15);
