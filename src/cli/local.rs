@@ -340,6 +340,12 @@ pub(super) fn run(
             let rows = tradeoff::run()?;
             write_either(stdout, json, &rows, || tradeoff::table(&rows))
         }
+        Command::Bench {
+            what: BenchCommand::Trust { json },
+        } => {
+            let rows = crate::zwidth::trust::run()?;
+            write_either(stdout, json, &rows, || crate::zwidth::trust::table(&rows))
+        }
         Command::Estimate {
             rate,
             estimator,

@@ -280,7 +280,7 @@ pub enum Command {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Measurements: `zwidth bench tradeoff`.
+    /// Measurements: `zwidth bench tradeoff`, `zwidth bench trust`.
     Bench {
         #[command(subcommand)]
         what: BenchCommand,
@@ -327,6 +327,13 @@ pub enum BenchCommand {
     },
     /// Wall time and K/B-width error against `reference` for each accuracy preset, on the example scenes.
     Tradeoff {
+        #[arg(long)]
+        json: bool,
+    },
+    /// The seed device's K-width with its interval against the probe seed,
+    /// the Butterworth cutoff 480–499 Hz and the probe amplitude (standard
+    /// accuracy; ~3 min on 2 cores).
+    Trust {
         #[arg(long)]
         json: bool,
     },

@@ -17,5 +17,6 @@ pub mod settings;
 pub mod stats;
 pub mod sweep;
 pub mod tradeoff;
+pub mod trust;
 
 pub use scene::{Scene, SceneSpec};

@@ -45,6 +45,12 @@ pub struct TradeoffRow {
     /// Relative errors against the reference preset of the same scene.
     pub k_width_error: f64,
     pub b_width_error: f64,
+    /// Noisy scenes: the K-width interval, and whether it overlaps the
+    /// reference preset's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub k_width_interval: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub overlaps_reference: Option<bool>,
 }
 
 pub fn run() -> Result<Vec<TradeoffRow>, SpecError> {
@@ -73,6 +79,7 @@ pub fn run() -> Result<Vec<TradeoffRow>, SpecError> {
             results.push((preset, t.elapsed().as_secs_f64(), r));
         }
         let (kr, br) = (results[0].2.k_width, results[0].2.b_width);
+        let ref_interval = results[0].2.k_width_interval;
         let rel = |x: f64, r: f64| if r > 0.0 { (x - r) / r } else { 0.0 };
         for (preset, wall_s, r) in results {
             rows.push(TradeoffRow {
@@ -84,6 +91,11 @@ pub fn run() -> Result<Vec<TradeoffRow>, SpecError> {
                 b_width: r.b_width,
                 k_width_error: rel(r.k_width, kr),
                 b_width_error: rel(r.b_width, br),
+                k_width_interval: r.k_width_interval,
+                overlaps_reference: r
+                    .k_width_interval
+                    .zip(ref_interval)
+                    .map(|(a, b)| a[0] <= b[1] && b[0] <= a[1]),
             });
         }
     }
@@ -92,12 +104,30 @@ pub fn run() -> Result<Vec<TradeoffRow>, SpecError> {
 
 pub fn table(rows: &[TradeoffRow]) -> String {
     let mut s = format!(
-        "{:<24} {:<10} {:>9} {:>7} {:>12} {:>10} {:>9} {:>9}\n",
-        "scene", "preset", "wall (s)", "trials", "K-width", "B-width", "K err", "B err"
+        "{:<24} {:<10} {:>9} {:>7} {:>12} {:>10} {:>9} {:>9} {:>27} {:>8}\n",
+        "scene",
+        "preset",
+        "wall (s)",
+        "trials",
+        "K-width",
+        "B-width",
+        "K err",
+        "B err",
+        "K-width interval (±%)",
+        "overlap"
     );
     for r in rows {
+        let interval = r.k_width_interval.map_or("-".to_string(), |[lo, hi]| {
+            format!(
+                "[{lo:.0}, {hi:.0}] ±{:.1}%",
+                50.0 * (hi - lo) / r.k_width.max(f64::MIN_POSITIVE)
+            )
+        });
+        let overlap = r
+            .overlaps_reference
+            .map_or("-", |o| if o { "yes" } else { "no" });
         s.push_str(&format!(
-            "{:<24} {:<10} {:>9.3} {:>7} {:>12.1} {:>10.2} {:>8.2}% {:>8.2}%\n",
+            "{:<24} {:<10} {:>9.3} {:>7} {:>12.1} {:>10.2} {:>8.2}% {:>8.2}% {:>27} {:>8}\n",
             r.scene,
             format!("{:?}", r.preset).to_lowercase(),
             r.wall_s,
@@ -105,7 +135,9 @@ pub fn table(rows: &[TradeoffRow]) -> String {
             r.k_width,
             r.b_width,
             100.0 * r.k_width_error,
-            100.0 * r.b_width_error
+            100.0 * r.b_width_error,
+            interval,
+            overlap
         ));
     }
     s

@@ -1,0 +1,129 @@
+//! `zwidth bench trust`: how far the seed device's figures can be trusted
+//! (issue 11's targets, measured): the K-width and its interval for a few
+//! probe seeds, against the Butterworth cutoff 480–499 Hz, and against the
+//! probe amplitude. All at standard accuracy on `examples/seed_2018.json`.
+
+use serde::Serialize;
+use std::time::Instant;
+
+use super::scene::SceneSpec;
+use super::search::map;
+use super::settings::{Accuracy, Criterion, MapSpec, Method, Preset, SearchKind};
+use super::tradeoff::EXAMPLES;
+use crate::error::SpecError;
+
+#[derive(Debug, Clone, Serialize)]
+pub struct TrustRow {
+    /// What varies: "seed", "cutoff_hz" or "amplitude_n".
+    pub vary: &'static str,
+    pub value: f64,
+    /// N/m, and its interval (N/m).
+    pub k_width: f64,
+    pub k_width_interval: Option<[f64; 2]>,
+    /// Change of the K-width from the previous row of the same kind.
+    pub change_from_previous: Option<f64>,
+    /// Largest spike of the boundary the intervals do not allow: how far a
+    /// point's interval misses the straight line between its two
+    /// neighbours' intervals (B is evenly spaced), relative to the lower of
+    /// the point and that line. A steep but steady slope is not a spike.
+    pub spike: f64,
+    pub wall_s: f64,
+}
+
+fn seed_scene() -> Result<SceneSpec, SpecError> {
+    SceneSpec::from_json(EXAMPLES[1].1)
+}
+
+fn one(vary: &'static str, value: f64, scene: SceneSpec) -> Result<TrustRow, SpecError> {
+    let spec = MapSpec {
+        scene,
+        method: Method::Auto,
+        criterion: Criterion::Impedance,
+        search: SearchKind::Bisect,
+        accuracy: Accuracy::Preset(Preset::Standard),
+        b: None,
+        b_max: 1000.0,
+        k_max: 1e7,
+    };
+    let t = Instant::now();
+    let r = map(&spec)?;
+    let spike = r
+        .boundary
+        .windows(3)
+        .filter_map(|w| {
+            let (a, p, c) = (&w[0], &w[1], &w[2]);
+            let line_lo = 0.5 * (a.k_lo? + c.k_lo?);
+            let line_hi = 0.5 * (a.k_hi? + c.k_hi?);
+            let gap = (p.k_lo? - line_hi).max(line_lo - p.k_hi?).max(0.0);
+            let base = p.k_max.min(0.5 * (a.k_max + c.k_max));
+            (base > 0.0).then(|| gap / base)
+        })
+        .fold(0.0, f64::max);
+    Ok(TrustRow {
+        vary,
+        value,
+        k_width: r.k_width,
+        k_width_interval: r.k_width_interval,
+        change_from_previous: None,
+        spike,
+        wall_s: t.elapsed().as_secs_f64(),
+    })
+}
+
+pub fn run() -> Result<Vec<TrustRow>, SpecError> {
+    let base = seed_scene()?;
+    let mut rows = Vec::new();
+    for seed in [1u64, 2, 3] {
+        let mut s = base.clone();
+        s.probe.seed = seed;
+        rows.push(one("seed", seed as f64, s)?);
+    }
+    for hz in 480..=499 {
+        let mut s = base.clone();
+        s.estimator = serde_json::from_value(serde_json::json!({
+            "kind": "butterworth", "cutoff_hz": hz, "order": 2
+        }))
+        .map_err(|e| SpecError::new("estimator", hz, e.to_string()))?;
+        rows.push(one("cutoff_hz", f64::from(hz), s)?);
+    }
+    for amp in [0.25, 0.5, 1.0, 2.0] {
+        let mut s = base.clone();
+        s.probe.amplitude = amp;
+        rows.push(one("amplitude_n", amp, s)?);
+    }
+    for i in 1..rows.len() {
+        if rows[i].vary == rows[i - 1].vary && rows[i - 1].k_width > 0.0 {
+            rows[i].change_from_previous = Some(rows[i].k_width / rows[i - 1].k_width - 1.0);
+        }
+    }
+    Ok(rows)
+}
+
+pub fn table(rows: &[TrustRow]) -> String {
+    let mut s = format!(
+        "{:<12} {:>8} {:>12} {:>28} {:>9} {:>10} {:>8}\n",
+        "vary", "value", "K-width", "interval (±%)", "change", "spike", "wall (s)"
+    );
+    for r in rows {
+        let interval = r.k_width_interval.map_or("-".to_string(), |[lo, hi]| {
+            format!(
+                "[{lo:.0}, {hi:.0}] ±{:.1}%",
+                50.0 * (hi - lo) / r.k_width.max(f64::MIN_POSITIVE)
+            )
+        });
+        let change = r
+            .change_from_previous
+            .map_or("-".to_string(), |c| format!("{:+.1}%", 100.0 * c));
+        s.push_str(&format!(
+            "{:<12} {:>8} {:>12.0} {:>28} {:>9} {:>9.1}% {:>8.2}\n",
+            r.vary,
+            r.value,
+            r.k_width,
+            interval,
+            change,
+            100.0 * r.spike,
+            r.wall_s
+        ));
+    }
+    s
+}
