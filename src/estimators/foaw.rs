@@ -40,6 +40,13 @@ use crate::error::SpecError;
 /// Largest `max_window` accepted (samples).
 pub const MAX_WINDOW_LIMIT: usize = 4096;
 
+/// Relative slack on the band ±d: residuals within d·(1 + 1e-9) count as
+/// inside. A quantized position n·q carries a rounding error of about
+/// 1e-16·|y| (1e-16 m at 1 m from the origin: 1e-10 of a 1 µm step), so
+/// ties decided by rounding fall inside the slack for |y| up to ~10 m,
+/// while 1e-9 of a 1 µm step is a femtometre: no physical difference.
+pub const BAND_SLACK: f64 = 1e-9;
+
 /// `max_window` default: 15, the bound Janabi-Sharifi et al. used (§IV-C).
 pub const DEFAULT_MAX_WINDOW: usize = 15;
 
@@ -114,7 +121,12 @@ impl Foaw {
         let cap = spec.max_window + 1;
         Ok(Self {
             fit: spec.fit,
-            d,
+            // The band is closed (eq. 13: |residual| ≤ d). On quantized data
+            // with d one encoder step, residuals of exactly d are common and
+            // rounding would decide them, differently in metres and in
+            // counts; a relative slack far below any physical length makes
+            // the closed band exact (`BAND_SLACK`).
+            d: d * (1.0 + BAND_SLACK),
             max_window: spec.max_window,
             outlier_tolerance: spec.outlier_tolerance,
             t,
@@ -409,6 +421,43 @@ mod tests {
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
         z ^= z >> 31;
         (z >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    }
+
+    #[test]
+    fn band_edge_ties_do_not_depend_on_the_unit() {
+        // Issue 11's case: end fit, 1 kHz, d = one encoder step. The third
+        // sample's 2-sample window has its interior residual exactly d
+        // (13 against the line 12 → 16 at 14): inside the closed band of
+        // eq. 13, so the estimate is (16 − 12)/2 steps per ms = 2000 steps/s.
+        for (unit, d) in [(1e-6, 1e-6), (1.0, 1.0), (1e-3, 1e-3)] {
+            let mut f = foaw(FoawFit::End, d, 15, 1e-3);
+            let out: Vec<f64> = [12.0, 13.0, 16.0]
+                .iter()
+                .map(|&c| f.update(c * unit))
+                .collect();
+            assert!(
+                (out[2] / unit - 2000.0).abs() < 1e-6,
+                "unit {unit}: {out:?}"
+            );
+            assert_eq!(f.last_window(), 2, "unit {unit}");
+        }
+        // A quantized sine in metres and in counts: every output the same
+        // up to the unit, every window the same length.
+        let q = 1e-6;
+        for fit in [FoawFit::End, FoawFit::Best, FoawFit::BestR] {
+            let mut fm = foaw(fit, q, 15, 1e-3);
+            let mut fc = foaw(fit, 1.0, 15, 1e-3);
+            for k in 0..3000 {
+                let x = 3e-4 * (2.0 * std::f64::consts::PI * 1.3 * k as f64 * 1e-3).sin();
+                let counts = (x / q).round();
+                let (vm, vc) = (fm.update(counts * q), fc.update(counts));
+                assert_eq!(fm.last_window(), fc.last_window(), "{fit:?} k={k}");
+                assert!(
+                    (vm / q - vc).abs() <= 1e-6 * vc.abs().max(1.0),
+                    "{fit:?} k={k}: {vm} vs {vc}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -19,6 +19,10 @@
 //!   `u1_{k+1}`, the integrator state (Levant's later notation, z1): on the
 //!   sliding set it takes every value in between instead of switching by
 //!   ±Tα every sample, which is the numerical chattering the explicit scheme has.
+//!   With `"implicit_output":"eq7"` it is instead the 2011 paper's eq. 7 at
+//!   the new state, `u = u1_{k+1} − λ·√|e_{k+1}|·sign(e_{k+1})`: equal while
+//!   sliding (e = 0), different while reaching. The Z-width figures use the
+//!   default, `state` (docs/estimators.md).
 
 use serde::{Deserialize, Serialize};
 
@@ -31,6 +35,23 @@ pub enum Discretization {
     #[default]
     Explicit,
     Implicit,
+}
+
+/// What the implicit scheme outputs (the explicit one always outputs eq. 7's u).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum ImplicitOutput {
+    /// `u1_{k+1}`, the integrator state (Levant's later z1).
+    #[default]
+    State,
+    /// The 2011 paper's eq. 7 at the new state: `u1_{k+1} − λ√|e_{k+1}|·sign(e_{k+1})`.
+    Eq7,
+}
+
+impl ImplicitOutput {
+    fn is_state(&self) -> bool {
+        *self == ImplicitOutput::State
+    }
 }
 
 /// Gain rules of the 2018 paper §III, all proportional to the Lipschitz bound C.
@@ -91,6 +112,9 @@ pub struct LevantSpec {
     pub lipschitz: Option<f64>,
     #[serde(default)]
     pub discretization: Discretization,
+    /// Implicit scheme only: `state` (default) or `eq7`.
+    #[serde(default, skip_serializing_if = "ImplicitOutput::is_state")]
+    pub implicit_output: ImplicitOutput,
 }
 
 /// Resolved gains, with C when known.
@@ -118,6 +142,9 @@ impl LevantSpec {
         };
         match self.discretization {
             Discretization::Explicit => g,
+            Discretization::Implicit if !self.implicit_output.is_state() => {
+                format!("{g}, implicit, eq. 7 output")
+            }
             Discretization::Implicit => format!("{g}, implicit"),
         }
     }
@@ -266,6 +293,7 @@ fn sign(e: f64) -> f64 {
 pub struct Levant {
     gains: LevantGains,
     discretization: Discretization,
+    output: ImplicitOutput,
     t: f64,
     x: f64,
     u1: f64,
@@ -278,11 +306,18 @@ impl Levant {
         Self {
             gains,
             discretization,
+            output: ImplicitOutput::State,
             t,
             x: 0.0,
             u1: 0.0,
             started: false,
         }
+    }
+
+    /// What the implicit scheme outputs.
+    pub fn with_output(mut self, output: ImplicitOutput) -> Self {
+        self.output = output;
+        self
     }
 
     pub fn gains(&self) -> LevantGains {
@@ -325,7 +360,11 @@ impl VelocityEstimator for Levant {
                 };
                 self.u1 -= t * a * s;
                 self.x = y + s * r2;
-                self.u1
+                match self.output {
+                    ImplicitOutput::State => self.u1,
+                    // e_{k+1} = x_{k+1} − y_{k+1} = s·r², so √|e|·sign(e) = s·√r².
+                    ImplicitOutput::Eq7 => self.u1 - l * r2.sqrt() * s,
+                }
             }
         }
     }
@@ -416,6 +455,36 @@ mod tests {
         assert!((u3 - (u - 1.0)).abs() < 1e-15, "{u3}");
         assert!(l.x > -2.0);
         assert_backward_euler(before, &l, -2.0);
+    }
+
+    #[test]
+    fn eq7_output_differs_only_while_reaching() {
+        // Same steps as `hand_computed_implicit_steps_of_both_branches`:
+        // y1 = 1 is reached (e = −r², r = (−1.5 + √4.25)/2), so eq. 7 gives
+        // u1 − λ·√|e|·sign(e) = 1 + 3r; y2 = 1.2 slides (e = 0): equal to u1.
+        let eq7 = |l: Levant| l.with_output(ImplicitOutput::Eq7);
+        let mut a = eq7(implicit(2.0, 3.0, 0.5));
+        let mut b = implicit(2.0, 3.0, 0.5);
+        assert_eq!(a.update(0.0), 0.0);
+        b.update(0.0);
+        let r = (-1.5 + 4.25f64.sqrt()) / 2.0;
+        let (ua, ub) = (a.update(1.0), b.update(1.0));
+        assert_eq!(ub, 1.0);
+        assert!((ua - (1.0 + 3.0 * r)).abs() < 1e-15, "{ua}");
+        let (ua, ub) = (a.update(1.2), b.update(1.2));
+        assert_eq!(ua, ub);
+        // The state itself is the same either way.
+        assert_eq!((a.x, a.u1), (b.x, b.u1));
+        // The spec field reaches the estimator; the default is not written out.
+        let spec: LevantSpec = serde_json::from_str(
+            r#"{"alpha":2,"lambda":3,"discretization":"implicit","implicit_output":"eq7"}"#,
+        )
+        .unwrap();
+        assert_eq!(spec.implicit_output, ImplicitOutput::Eq7);
+        let plain: LevantSpec = serde_json::from_str(r#"{"alpha":2,"lambda":3}"#).unwrap();
+        assert!(!serde_json::to_string(&plain)
+            .unwrap()
+            .contains("implicit_output"));
     }
 
     #[test]

@@ -239,9 +239,10 @@ impl EstimatorKind {
                 require_non_negative("d", d, "m")?;
                 Core::Foaw(Foaw::new(spec, d, t)?)
             }
-            EstimatorKind::Levant(spec) => {
-                Core::Levant(Levant::new(spec.gains()?, spec.discretization, t))
-            }
+            EstimatorKind::Levant(spec) => Core::Levant(
+                Levant::new(spec.gains()?, spec.discretization, t)
+                    .with_output(spec.implicit_output),
+            ),
         })
     }
 }

@@ -224,7 +224,9 @@ pub struct CoarseToFine {
     pub search_accuracy: String,
     pub final_accuracy: String,
     pub finalists: Vec<Finalist>,
-    /// The finalists keep their order at the final accuracy.
+    /// The finalists keep their order at the final accuracy, wherever the
+    /// search ordered them (finalists tied at the search's resolution may
+    /// come out in either order).
     pub ranking_held: bool,
     /// The search's best is still the best.
     pub best_held: bool,

@@ -193,6 +193,18 @@ impl Accuracy {
                 "must be 1 to 1000",
             ));
         }
+        // A noisy-scene trial runs up to realizations × (1 + periods) periods:
+        // the same bound as max_periods, so no accepted trial runs for hours.
+        let bla_periods = u64::from(r.probe.realizations) * (1 + u64::from(r.probe.periods));
+        if bla_periods > 100_000 {
+            return Err(SpecError::new(
+                "accuracy.realizations",
+                r.probe.realizations,
+                format!(
+                    "realizations × (1 + periods) = {bla_periods} probe periods per trial; at most 100000"
+                ),
+            ));
+        }
         if !(2..=100_000).contains(&r.probe.max_periods) {
             return Err(SpecError::new(
                 "accuracy.max_periods",
