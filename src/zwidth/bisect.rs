@@ -57,26 +57,39 @@ pub(super) fn bisect_k(
 
 fn bisect_between(
     classify: &mut impl FnMut(f64) -> Point,
+    lo: f64,
+    hi: f64,
+    rel_tol: f64,
+    points: &mut Vec<Point>,
+) -> f64 {
+    bisect_edge(classify, lo, hi, rel_tol, points, Point::ok).0
+}
+
+/// Bisect `[lo, hi]`, where `keep` holds at `lo` and not at `hi`, until
+/// `hi − lo ≤ rel_tol·hi` (or no f64 lies between them); the final pair.
+fn bisect_edge(
+    classify: &mut impl FnMut(f64) -> Point,
     mut lo: f64,
     mut hi: f64,
     rel_tol: f64,
     points: &mut Vec<Point>,
-) -> f64 {
+    keep: impl Fn(&Point) -> bool,
+) -> (f64, f64) {
     while (hi - lo) > rel_tol * hi {
         let mid = 0.5 * (lo + hi);
         if !(mid > lo && mid < hi) {
             break; // no f64 between them: as fine as it gets
         }
         let p = classify(mid);
-        let ok = p.ok();
+        let kept = keep(&p);
         points.push(p);
-        if ok {
+        if kept {
             lo = mid;
         } else {
             hi = mid;
         }
     }
-    lo
+    (lo, hi)
 }
 
 fn bisect_once(
@@ -170,36 +183,17 @@ pub(super) fn interval(
     let mut lo = max_k(points, &|p| p.surely_ok() && p.k < first_fail);
     // Refine: bisect between lo and the next point above it that is not
     // decided passive.
-    let mut lo_top = min_k(points, &|p| !p.surely_ok() && p.k > lo);
+    let lo_top = min_k(points, &|p| !p.surely_ok() && p.k > lo);
     if lo > 0.0 && lo_top.is_finite() {
-        while lo_top - lo > rel_tol * lo_top {
-            let mid = 0.5 * (lo + lo_top);
-            let p = classify(mid);
-            let sure = p.surely_ok();
-            points.push(p);
-            if sure {
-                lo = mid;
-            } else {
-                lo_top = mid;
-            }
-        }
+        lo = bisect_edge(&mut classify, lo, lo_top, rel_tol, points, Point::surely_ok).0;
     }
-    let mut hi = min_k(points, &|p| p.surely_not_ok() && p.k > lo);
+    let hi = min_k(points, &|p| p.surely_not_ok() && p.k > lo);
     if hi.is_infinite() {
         return (lo, None);
     }
-    let mut hi_bottom = max_k(points, &|p| !p.surely_not_ok() && p.k < hi).max(lo);
-    while hi - hi_bottom > rel_tol * hi {
-        let mid = 0.5 * (hi_bottom + hi);
-        let p = classify(mid);
-        let sure = p.surely_not_ok();
-        points.push(p);
-        if sure {
-            hi = mid;
-        } else {
-            hi_bottom = mid;
-        }
-    }
+    let hi_bottom = max_k(points, &|p| !p.surely_not_ok() && p.k < hi).max(lo);
+    let keep = |p: &Point| !p.surely_not_ok();
+    let hi = bisect_edge(&mut classify, hi_bottom, hi, rel_tol, points, keep).1;
     (lo, Some(hi))
 }
 
@@ -296,5 +290,68 @@ mod tests {
         // 1000, 2000, 3000 (capped), then the robust checks at or above k0:
         // 0.45…0.9 of 3000 (0.3·3000 = 900 < k0 is not checked).
         assert_eq!(pts.len(), 3 + 4);
+    }
+
+    /// A scripted three-way verdict: decided passive below 1000 N/m,
+    /// undecided in [1000, 1200) with the estimate's sign changing at 1100,
+    /// decided not passive from 1200.
+    fn three_way(k: f64) -> Point {
+        Point {
+            k,
+            passive: Some(k < 1100.0),
+            decided: Some(!(1000.0..1200.0).contains(&k)),
+            ..Point::default()
+        }
+    }
+
+    #[test]
+    fn interval_brackets_the_undecided_band() {
+        let b = Bracket {
+            k0: 100.0,
+            k_cap: 1e6,
+            rel_tol: 0.001,
+        };
+        let mut pts = Vec::new();
+        let est = bisect_k(three_way, b, false, &mut pts).unwrap();
+        assert!((est - 1100.0).abs() <= 1.1, "{est}");
+        let (lo, hi) = interval(three_way, est, b, &mut pts);
+        let hi = hi.unwrap();
+        // Each edge to rel_tol: lo just below 1000, hi at or just above 1200.
+        assert!(lo < 1000.0 && lo >= 1000.0 * (1.0 - 0.001) - 1e-9, "{lo}");
+        assert!(hi >= 1200.0 && hi <= 1200.0 * (1.0 + 0.0011), "{hi}");
+        // Every point is a scripted one, and the new ones lie by the edges.
+        assert!(pts.iter().all(|p| *p == three_way(p.k)));
+    }
+
+    #[test]
+    fn interval_looks_above_when_nothing_was_refuted() {
+        // Undecided (sign positive) from 1000 up to the cap: no upper bound.
+        let never_refuted = |k: f64| Point {
+            k,
+            passive: Some(true),
+            decided: Some(k < 1000.0),
+            ..Point::default()
+        };
+        let b = Bracket {
+            k0: 100.0,
+            k_cap: 6400.0,
+            rel_tol: 0.01,
+        };
+        let mut pts = Vec::new();
+        let est = bisect_k(never_refuted, b, false, &mut pts).unwrap();
+        assert_eq!(est, 6400.0);
+        let (lo, hi) = interval(never_refuted, est, b, &mut pts);
+        assert_eq!(hi, None);
+        assert!(lo < 1000.0 && lo > 990.0 - 1e-9, "{lo}");
+        // A refutation above the estimate is found by doubling from it.
+        let refuted_at_2k = |k: f64| Point {
+            decided: Some(k < 1000.0 || k >= 2000.0),
+            passive: Some(k < 1500.0),
+            ..never_refuted(k)
+        };
+        let mut pts = vec![refuted_at_2k(1000.0), refuted_at_2k(1400.0)];
+        let (_, hi) = interval(refuted_at_2k, 1400.0, b, &mut pts);
+        let hi = hi.unwrap();
+        assert!((2000.0..=2000.0 * 1.011).contains(&hi), "{hi}");
     }
 }

@@ -117,12 +117,7 @@ pub fn table(rows: &[TradeoffRow]) -> String {
         "overlap"
     );
     for r in rows {
-        let interval = r.k_width_interval.map_or("-".to_string(), |[lo, hi]| {
-            format!(
-                "[{lo:.0}, {hi:.0}] ±{:.1}%",
-                50.0 * (hi - lo) / r.k_width.max(f64::MIN_POSITIVE)
-            )
-        });
+        let interval = interval_cell(r.k_width, r.k_width_interval);
         let overlap = r
             .overlaps_reference
             .map_or("-", |o| if o { "yes" } else { "no" });
@@ -141,4 +136,15 @@ pub fn table(rows: &[TradeoffRow]) -> String {
         ));
     }
     s
+}
+
+/// `[lo, hi] ±h%` for a K-width interval (h: half its width relative to
+/// the K-width), or `-` where the map has none.
+pub fn interval_cell(k_width: f64, interval: Option<[f64; 2]>) -> String {
+    interval.map_or("-".to_string(), |[lo, hi]| {
+        format!(
+            "[{lo:.0}, {hi:.0}] ±{:.1}%",
+            50.0 * (hi - lo) / k_width.max(f64::MIN_POSITIVE)
+        )
+    })
 }

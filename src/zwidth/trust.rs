@@ -9,7 +9,7 @@ use std::time::Instant;
 use super::scene::SceneSpec;
 use super::search::map;
 use super::settings::{Accuracy, Criterion, MapSpec, Method, Preset, SearchKind};
-use super::tradeoff::EXAMPLES;
+use super::tradeoff::{interval_cell, EXAMPLES};
 use crate::error::SpecError;
 
 #[derive(Debug, Clone, Serialize)]
@@ -105,12 +105,7 @@ pub fn table(rows: &[TrustRow]) -> String {
         "vary", "value", "K-width", "interval (±%)", "change", "spike", "wall (s)"
     );
     for r in rows {
-        let interval = r.k_width_interval.map_or("-".to_string(), |[lo, hi]| {
-            format!(
-                "[{lo:.0}, {hi:.0}] ±{:.1}%",
-                50.0 * (hi - lo) / r.k_width.max(f64::MIN_POSITIVE)
-            )
-        });
+        let interval = interval_cell(r.k_width, r.k_width_interval);
         let change = r
             .change_from_previous
             .map_or("-".to_string(), |c| format!("{:+.1}%", 100.0 * c));
