@@ -317,8 +317,11 @@ mod tests {
         let (lo, hi) = interval(three_way, est, b, &mut pts);
         let hi = hi.unwrap();
         // Each edge to rel_tol: lo just below 1000, hi at or just above 1200.
-        assert!(lo < 1000.0 && lo >= 1000.0 * (1.0 - 0.001) - 1e-9, "{lo}");
-        assert!(hi >= 1200.0 && hi <= 1200.0 * (1.0 + 0.0011), "{hi}");
+        assert!(
+            (1000.0 * (1.0 - 0.001) - 1e-9..1000.0).contains(&lo),
+            "{lo}"
+        );
+        assert!((1200.0..=1200.0 * (1.0 + 0.0011)).contains(&hi), "{hi}");
         // Every point is a scripted one, and the new ones lie by the edges.
         assert!(pts.iter().all(|p| *p == three_way(p.k)));
     }
@@ -345,7 +348,7 @@ mod tests {
         assert!(lo < 1000.0 && lo > 990.0 - 1e-9, "{lo}");
         // A refutation above the estimate is found by doubling from it.
         let refuted_at_2k = |k: f64| Point {
-            decided: Some(k < 1000.0 || k >= 2000.0),
+            decided: Some(!(1000.0..2000.0).contains(&k)),
             passive: Some(k < 1500.0),
             ..never_refuted(k)
         };
