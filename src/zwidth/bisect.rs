@@ -357,4 +357,118 @@ mod tests {
         let hi = hi.unwrap();
         assert!((2000.0..=2000.0 * 1.011).contains(&hi), "{hi}");
     }
+
+    /// Undecided in [1013, 1234) with the sign changing at 1100, and an
+    /// isolated undecided (positive) point at 400: neither edge lies on the
+    /// bisection's dyadic points, so both must be refined.
+    fn ragged(k: f64) -> Point {
+        Point {
+            k,
+            passive: Some(k < 1100.0),
+            decided: Some(!(1013.0..1234.0).contains(&k) && k != 400.0),
+            ..Point::default()
+        }
+    }
+
+    #[test]
+    fn interval_refines_both_edges_past_undecided_points() {
+        let b = Bracket {
+            k0: 100.0,
+            k_cap: 1e6,
+            rel_tol: 0.001,
+        };
+        // The search visits 400 (undecided) on its way up.
+        let mut pts = Vec::new();
+        let est = bisect_k(ragged, b, false, &mut pts).unwrap();
+        assert!(pts.iter().any(|p| p.k == 400.0 && p.decided == Some(false)));
+        let before = pts.len();
+        let (lo, hi) = interval(ragged, est, b, &mut pts);
+        let hi = hi.unwrap();
+        assert!((1013.0 * 0.999 - 1e-9..1013.0).contains(&lo), "{lo}");
+        assert!((1234.0..=1234.0 * 1.0011).contains(&hi), "{hi}");
+        // Each edge by bisection from the search's points: a handful of
+        // trials, log2 of the gap over the tolerance.
+        assert!(
+            pts.len() - before <= 2 * 10,
+            "{} new trials",
+            pts.len() - before
+        );
+    }
+
+    #[test]
+    fn interval_has_no_lower_bound_when_nothing_was_decided_passive() {
+        // Decided passive only below 50; the search starts at 100, where
+        // everything up to 1234 is undecided: nothing bounds the boundary
+        // from below among the points searched, and none is added below k0.
+        let low = |k: f64| Point {
+            k,
+            passive: Some(k < 1100.0),
+            decided: Some(!(50.0..1234.0).contains(&k)),
+            ..Point::default()
+        };
+        let b = Bracket {
+            k0: 100.0,
+            k_cap: 1e6,
+            rel_tol: 0.001,
+        };
+        let mut pts = Vec::new();
+        let est = bisect_k(low, b, false, &mut pts).unwrap();
+        let (lo, hi) = interval(low, est, b, &mut pts);
+        assert_eq!(lo, 0.0);
+        assert!(pts.iter().all(|p| p.k >= 100.0), "nothing below k0");
+        assert!((1234.0..=1234.0 * 1.0011).contains(&hi.unwrap()));
+    }
+
+    #[test]
+    fn interval_doubles_up_to_a_refutation() {
+        // Nothing refuted among the given points; refuted from 5000: the
+        // look above doubles from the estimate 1400 (2800, 5600), so two
+        // new points, then the edge is bisected between 2800 and 5600.
+        let v = |k: f64| Point {
+            k,
+            passive: Some(k < 1500.0),
+            decided: Some(!(1000.0..5000.0).contains(&k)),
+            ..Point::default()
+        };
+        let b = Bracket {
+            k0: 100.0,
+            k_cap: 1e6,
+            rel_tol: 0.01,
+        };
+        let mut pts = vec![v(1000.0), v(1400.0)];
+        let (_, hi) = interval(v, 1400.0, b, &mut pts);
+        assert_eq!((pts[2].k, pts[3].k), (2800.0, 5600.0));
+        assert!((5000.0..=5000.0 * 1.011).contains(&hi.unwrap()));
+        assert!(pts.len() <= 4 + 7, "{}", pts.len());
+    }
+
+    #[test]
+    fn interval_bisects_each_edge_from_its_nearest_points() {
+        // Given points close around both edges, the refinement starts from
+        // them: the lower edge between 1012 (decided passive) and 1014
+        // (undecided), the upper between 1233 (undecided) and 1240
+        // (refuted): ⌈log2(7/1.24)⌉ = 3 trials for the upper edge, and one
+        // for the lower (a gap of 2 against 0.001·1014). Starting from the
+        // far bound instead (lo, or 0) would take 8 or more.
+        let b = Bracket {
+            k0: 100.0,
+            k_cap: 1e6,
+            rel_tol: 0.001,
+        };
+        // And an undecided island far above (3000): noise, not an edge.
+        let v = |k: f64| Point {
+            decided: Some(ragged(k).decided == Some(true) && k != 3000.0),
+            ..ragged(k)
+        };
+        let mut pts: Vec<Point> = [
+            500.0, 1012.0, 1014.0, 1100.0, 1233.0, 1240.0, 2000.0, 3000.0,
+        ]
+        .iter()
+        .map(|&k| v(k))
+        .collect();
+        let (lo, hi) = interval(v, 1100.0, b, &mut pts);
+        assert!((1012.0..1013.0).contains(&lo), "{lo}");
+        assert!((1234.0..=1236.0).contains(&hi.unwrap()), "{hi:?}");
+        assert_eq!(pts.len() - 8, 1 + 3, "{:?}", &pts[8..]);
+    }
 }
