@@ -292,6 +292,13 @@ mod tests {
         assert_eq!(pts.len(), 3 + 4);
     }
 
+    /// The bracket of the three-way tests below.
+    const NOISY: Bracket = Bracket {
+        k0: 100.0,
+        k_cap: 1e6,
+        rel_tol: 0.001,
+    };
+
     /// A scripted three-way verdict: decided passive below 1000 N/m,
     /// undecided in [1000, 1200) with the estimate's sign changing at 1100,
     /// decided not passive from 1200.
@@ -306,11 +313,7 @@ mod tests {
 
     #[test]
     fn interval_brackets_the_undecided_band() {
-        let b = Bracket {
-            k0: 100.0,
-            k_cap: 1e6,
-            rel_tol: 0.001,
-        };
+        let b = NOISY;
         let mut pts = Vec::new();
         let est = bisect_k(three_way, b, false, &mut pts).unwrap();
         assert!((est - 1100.0).abs() <= 1.1, "{est}");
@@ -372,11 +375,7 @@ mod tests {
 
     #[test]
     fn interval_refines_both_edges_past_undecided_points() {
-        let b = Bracket {
-            k0: 100.0,
-            k_cap: 1e6,
-            rel_tol: 0.001,
-        };
+        let b = NOISY;
         // The search visits 400 (undecided) on its way up.
         let mut pts = Vec::new();
         let est = bisect_k(ragged, b, false, &mut pts).unwrap();
@@ -406,11 +405,7 @@ mod tests {
             decided: Some(!(50.0..1234.0).contains(&k)),
             ..Point::default()
         };
-        let b = Bracket {
-            k0: 100.0,
-            k_cap: 1e6,
-            rel_tol: 0.001,
-        };
+        let b = NOISY;
         let mut pts = Vec::new();
         let est = bisect_k(low, b, false, &mut pts).unwrap();
         let (lo, hi) = interval(low, est, b, &mut pts);
@@ -450,11 +445,7 @@ mod tests {
         // (refuted): ⌈log2(7/1.24)⌉ = 3 trials for the upper edge, and one
         // for the lower (a gap of 2 against 0.001·1014). Starting from the
         // far bound instead (lo, or 0) would take 8 or more.
-        let b = Bracket {
-            k0: 100.0,
-            k_cap: 1e6,
-            rel_tol: 0.001,
-        };
+        let b = NOISY;
         // And an undecided island far above (3000): noise, not an edge.
         let v = |k: f64| Point {
             decided: Some(ragged(k).decided == Some(true) && k != 3000.0),
