@@ -1,26 +1,22 @@
 //! zwidth: how stiff and how damped a virtual wall a haptic device can render
 //! (its Z-width), for each velocity estimator.
 //!
-//! Pure numerics live in [`estimators`], [`signals`], [`accuracy`] and
-//! [`lipschitz`]; the CLI in `cli` only reads, calls them and prints.
+//! Pure numerics live in the `zwidth-core` crate (re-exported here: [`estimators`],
+//! [`zwidth`], [`tune`], …); the CLI in `cli` only reads, calls them and prints.
 
-pub mod accuracy;
 pub mod cli;
 pub mod client;
-pub mod error;
-pub mod estimators;
 pub mod experiment;
 pub mod http;
 pub mod jobs;
-pub mod lipschitz;
-pub mod plant;
-pub mod plot;
 pub mod report;
 pub mod rig;
-pub mod signals;
-pub mod spectral;
 pub mod store;
-pub mod tune;
-pub mod zwidth;
+
+// The numerics live in `zwidth-core` (crates/zwidth-core); they keep their
+// paths here (`zwidth::estimators`, `crate::zwidth::search`, …).
+pub use zwidth_core::{
+    accuracy, error, estimators, lipschitz, plant, plot, signals, spectral, tune, zwidth,
+};
 
 pub use error::SpecError;

@@ -1,9 +1,9 @@
 //! The engines against the analytic anchors (DESIGN.md) and each other.
 
-use zwidth::zwidth::analytic::LinearModel;
-use zwidth::zwidth::scene::SceneSpec;
-use zwidth::zwidth::search::{map, Evaluator, MapResult};
-use zwidth::zwidth::settings::{
+use zwidth_core::zwidth::analytic::LinearModel;
+use zwidth_core::zwidth::scene::SceneSpec;
+use zwidth_core::zwidth::search::{map, Evaluator, MapResult};
+use zwidth_core::zwidth::settings::{
     Accuracy, AccuracyKnobs, Criterion, MapSpec, Method, Preset, SearchKind,
 };
 

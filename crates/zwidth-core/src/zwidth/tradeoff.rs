@@ -14,22 +14,22 @@ use crate::error::SpecError;
 pub const EXAMPLES: [(&str, &str, Criterion); 4] = [
     (
         "linear_1khz (analytic)",
-        include_str!("../../examples/linear_1khz.json"),
+        include_str!("../../../../examples/linear_1khz.json"),
         Criterion::Impedance,
     ),
     (
         "seed_2018 (frequency)",
-        include_str!("../../examples/seed_2018.json"),
+        include_str!("../../../../examples/seed_2018.json"),
         Criterion::Impedance,
     ),
     (
         "seed_2011 (time)",
-        include_str!("../../examples/seed_2011.json"),
+        include_str!("../../../../examples/seed_2011.json"),
         Criterion::Stability,
     ),
     (
         "linear_1khz (time)",
-        include_str!("../../examples/linear_1khz.json"),
+        include_str!("../../../../examples/linear_1khz.json"),
         Criterion::Stability,
     ),
 ];

@@ -4,8 +4,8 @@
 
 use proptest::prelude::*;
 use rayon::prelude::*;
-use zwidth::estimators::{Core, EstimatorSpec, Sampling, VelocityEstimator};
-use zwidth::signals::quantize;
+use zwidth_core::estimators::{Core, EstimatorSpec, Sampling, VelocityEstimator};
+use zwidth_core::signals::quantize;
 
 fn specs() -> Vec<String> {
     let mut v: Vec<String> = vec![
@@ -161,9 +161,9 @@ proptest! {
 }
 
 mod scenes {
-    use zwidth::zwidth::hit::{wall_hit, HitKnobs, NoTrace};
-    use zwidth::zwidth::probe::{probe, ProbeKnobs};
-    use zwidth::zwidth::scene::SceneSpec;
+    use zwidth_core::zwidth::hit::{wall_hit, HitKnobs, NoTrace};
+    use zwidth_core::zwidth::probe::{probe, ProbeKnobs};
+    use zwidth_core::zwidth::scene::SceneSpec;
 
     /// Scenes at the extremes the issue names: no NaN, no panic.
     #[test]
@@ -221,7 +221,7 @@ mod scenes {
     /// Colgate & Schenkel's strict passivity, by brute force over θ:
     /// b ≥ (T/2)·Re{(1 − e^{−jθ})·H(e^{jθ})}/(1 − cos θ) for θ in (0, π],
     /// H = (K + B·V)·e^{−jdθ}.
-    fn colgate_ok(m: &zwidth::zwidth::analytic::LinearModel, k: f64, b: f64) -> bool {
+    fn colgate_ok(m: &zwidth_core::zwidth::analytic::LinearModel, k: f64, b: f64) -> bool {
         use num_complex::Complex64 as C;
         (1..=4096).all(|i| {
             let th = std::f64::consts::PI * i as f64 / 4096.0;
@@ -234,7 +234,7 @@ mod scenes {
 
     #[test]
     fn analytic_engine_at_the_extremes() {
-        use zwidth::zwidth::analytic::LinearModel;
+        use zwidth_core::zwidth::analytic::LinearModel;
         for json in [
             r#"{"device":{"mass":0.001,"damping":0,"coulomb":0,"quantization":0},"loop":{"sample_hz":1000000,"render_hz":1000000},"probe":{"f_max_hz":1000}}"#,
             r#"{"device":{"mass":100,"damping":0,"coulomb":0,"quantization":0},"loop":{"sample_hz":100,"render_hz":100},"probe":{"f_max_hz":40}}"#,
