@@ -49,6 +49,7 @@ fn spec(
         accuracy: Accuracy::Preset(Preset::Standard),
         final_accuracy: Accuracy::Preset(Preset::Standard),
         finalists: 3,
+        replicates: 3,
         solver,
         seed: 0,
         max_evaluations: evals,

@@ -165,6 +165,11 @@ pub enum Command {
         final_accuracy: String,
         #[arg(long, default_value_t = 3)]
         finalists: usize,
+        /// Noisy scenes: maps per finalist at the final accuracy, each with
+        /// other random-phase realizations (more, up to twice this, where
+        /// finalists' intervals overlap). 1: one map each.
+        #[arg(long, default_value_t = 3)]
+        replicates: usize,
         #[arg(long, default_value_t = 40)]
         max_evaluations: usize,
         /// levant | lyapunov (Levant gains only).

@@ -104,6 +104,13 @@ pub struct TuneSpec {
     /// How many of the best are re-evaluated at `final_accuracy` (0: none).
     #[serde(default = "d_finalists")]
     pub finalists: usize,
+    /// Noisy scenes (friction, quantization): each finalist is mapped this
+    /// many times at `final_accuracy`, each time with other random-phase
+    /// realizations (probe seeds derived from the scene's), and scored by
+    /// the mean; finalists whose intervals still overlap the best's get more,
+    /// up to twice this. 1: one map each, as on exact scenes (default 3).
+    #[serde(default = "d_replicates")]
+    pub replicates: usize,
     #[serde(default)]
     pub solver: SolverKind,
     /// Seeds the particle swarm and the Halton design: same seed, same result.
@@ -136,6 +143,11 @@ fn reference() -> Accuracy {
 fn d_finalists() -> usize {
     3
 }
+fn d_replicates() -> usize {
+    3
+}
+/// Most replicates a tune may ask for per finalist.
+pub const MAX_REPLICATES: usize = 20;
 fn d_max_evaluations() -> usize {
     40
 }
@@ -159,6 +171,12 @@ pub struct Metrics {
     pub b_width: f64,
     pub max_fidelity_error: Option<f64>,
     pub area: f64,
+    /// Noisy scenes: the map's confidence intervals of K-width (N/m) and
+    /// B-width (N·s/m); a tune scores these metrics by the interval's middle.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub k_width_interval: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub b_width_interval: Option<[f64; 2]>,
 }
 
 /// A fidelity error standing in for "no passive point" (N·s/m), so such a
@@ -166,11 +184,15 @@ pub struct Metrics {
 pub const NO_FIDELITY: f64 = 1e12;
 
 impl Metrics {
-    /// The value to maximize for one metric.
-    fn signed(&self, m: Metric) -> f64 {
+    /// The value to maximize for one metric. K-width and B-width with an
+    /// interval count by its middle: a map whose boundary sits at the top
+    /// of an undecided stretch (a lucky point) ranks no higher than the
+    /// evidence allows.
+    /// `caps`: the map's K and B range ([`TuneSpec::k_max`], `b_max`).
+    fn signed(&self, m: Metric, caps: [f64; 2]) -> f64 {
         match m {
-            Metric::KWidth => self.k_width,
-            Metric::BWidth => self.b_width,
+            Metric::KWidth => middle(self.k_width, self.k_width_interval, caps[0]),
+            Metric::BWidth => middle(self.b_width, self.b_width_interval, caps[1]),
             Metric::Area => self.area,
             Metric::MaxFidelityError => -self.max_fidelity_error.unwrap_or(NO_FIDELITY),
         }
@@ -183,6 +205,16 @@ impl Metrics {
             Metric::Area => Some(self.area),
             Metric::MaxFidelityError => self.max_fidelity_error,
         }
+    }
+}
+
+/// The middle of `interval`, or `point` without one or when its upper end
+/// is the search's range (`cap`: nothing up to it was decided not passive,
+/// so the middle would measure the range, not the device).
+fn middle(point: f64, interval: Option<[f64; 2]>, cap: f64) -> f64 {
+    match interval {
+        Some([lo, hi]) if hi < cap => 0.5 * (lo + hi),
+        _ => point,
     }
 }
 
@@ -207,15 +239,31 @@ pub struct Evaluation {
     pub cached: bool,
     pub trials: usize,
     pub elapsed_s: f64,
+    /// Final phase on a noisy scene: which replicate (0: the scene's own
+    /// probe seed; n: the n-th derived seed).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub replicate: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct Finalist {
     pub params: BTreeMap<String, f64>,
     pub search_score: f64,
+    /// The mean score over its replicates at the final accuracy.
     pub final_score: f64,
     pub search_rank: usize,
     pub final_rank: usize,
+    /// Maps made at the final accuracy (1 on exact scenes).
+    pub replicates: usize,
+    /// Noisy scenes, a K-width or B-width objective: the final score's
+    /// 95 % interval (one map: the map's interval; more: the replicates'
+    /// mean ± t·s/√n, at least as wide as their mean interval).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub final_interval: Option<[f64; 2]>,
 }
 
 /// What the coarse-to-fine split cost and saved.
@@ -247,6 +295,12 @@ pub struct Best {
     pub score: f64,
     /// "final" when it was re-evaluated at the final accuracy.
     pub phase: String,
+    /// Maps its objectives are the mean of (replicates at the final
+    /// accuracy on a noisy scene; 1 otherwise).
+    pub replicates: usize,
+    /// The score's interval, as for a finalist.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interval: Option<[f64; 2]>,
     /// The scene with the best parameters, ready to map.
     pub scene: SceneSpec,
     /// Levant only: which gain conditions it meets, in words.
@@ -329,6 +383,13 @@ impl TuneSpec {
                 format!("must be 1 to {MAX_EVALUATIONS}"),
             ));
         }
+        if !(1..=MAX_REPLICATES).contains(&self.replicates) {
+            return Err(SpecError::new(
+                "replicates",
+                self.replicates,
+                format!("must be 1 to {MAX_REPLICATES} (1: one map per finalist)"),
+            ));
+        }
         if self.finalists > 20 {
             return Err(SpecError::new(
                 "finalists",
@@ -385,9 +446,12 @@ impl TuneSpec {
         for (c, acc) in costs.iter_mut().zip([&self.accuracy, &self.final_accuracy]) {
             *c = crate::zwidth::search::validate(&self.map_spec(self.scene.clone(), acc.clone()))?;
         }
+        // Replicates (up to twice `replicates` each) only on noisy scenes.
+        let noisy = crate::zwidth::search::noisy(&self.map_spec(self.scene.clone(), reference()))?;
+        let per_finalist = if noisy { 2 * self.replicates } else { 1 };
         let cost = costs[0]
             .times(self.max_evaluations as u64)
-            .plus(costs[1].times(self.finalists as u64))
+            .plus(costs[1].times((self.finalists * per_finalist) as u64))
             .check("max_evaluations")?;
         Ok(Tune {
             spec: self.clone(),
@@ -483,11 +547,12 @@ impl TuneResult {
     }
 
     /// Every evaluation as CSV: index, phase, each parameter, the four
-    /// measures, score, feasible, cached, elapsed.
+    /// measures, score, feasible, cached, elapsed, replicate (final maps on
+    /// a noisy scene: which probe seed), the K-width interval.
     pub fn csv(&self) -> String {
         let names: Vec<&String> = self.best.params.keys().collect();
         let mut s = format!(
-            "index,phase,{},k_width,b_width,max_fidelity_error,area,score,feasible,cached,elapsed_s\n",
+            "index,phase,{},k_width,b_width,max_fidelity_error,area,score,feasible,cached,elapsed_s,replicate,k_width_lo,k_width_hi\n",
             names.iter().map(|n| n.as_str()).collect::<Vec<_>>().join(",")
         );
         for e in &self.history {
@@ -497,7 +562,7 @@ impl TuneResult {
                 .collect();
             let m = &e.metrics;
             s.push_str(&format!(
-                "{},{},{},{},{},{},{},{},{},{},{}\n",
+                "{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
                 e.index,
                 e.phase,
                 p.join(","),
@@ -510,7 +575,12 @@ impl TuneResult {
                 e.score,
                 e.feasible,
                 e.cached,
-                e.elapsed_s
+                e.elapsed_s,
+                e.replicate,
+                m.k_width_interval
+                    .map_or(String::new(), |i| i[0].to_string()),
+                m.k_width_interval
+                    .map_or(String::new(), |i| i[1].to_string()),
             ));
         }
         s
@@ -534,6 +604,12 @@ impl TuneResult {
                 v.map_or("-".into(), |v| format!("{v:.6e}"))
             ));
         }
+        if let Some([lo, hi]) = self.best.interval {
+            s.push_str(&format!(
+                "  score {:.6e}, 95 % interval [{lo:.6e}, {hi:.6e}], mean of {} map(s)\n",
+                self.best.score, self.best.replicates
+            ));
+        }
         if let Some(g) = &self.best.gains {
             s.push_str(&format!("  gains: {g}\n"));
         }
@@ -547,6 +623,23 @@ impl TuneResult {
                 c.search_accuracy, c.mean_search_evaluation_s, c.finalists.len(), c.final_accuracy, c.mean_final_evaluation_s, c.ranking_held, c.best_held,
                 c.saved_s.map_or(String::new(), |s| format!("; saved {s:.1} s"))
             ));
+            for f in &c.finalists {
+                s.push_str(&format!(
+                    "  finalist {}: search {:.6e} (#{}), final {:.6e} (#{}){}, {} map(s)\n",
+                    f.params
+                        .iter()
+                        .map(|(n, x)| format!("{n} = {x:.6}"))
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    f.search_score,
+                    f.search_rank + 1,
+                    f.final_score,
+                    f.final_rank + 1,
+                    f.final_interval
+                        .map_or(String::new(), |[lo, hi]| format!(" [{lo:.6e}, {hi:.6e}]")),
+                    f.replicates
+                ));
+            }
         }
         if let Some(f) = &self.pareto_front {
             s.push_str(&format!(
@@ -555,5 +648,31 @@ impl TuneResult {
             ));
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_interval_scores_by_its_middle_below_the_cap() {
+        assert_eq!(middle(440.0, Some([420.0, 444.0]), 1e7), 432.0);
+        // The upper end at the search's range: not a verdict, the point.
+        assert_eq!(middle(440.0, Some([420.0, 1e7]), 1e7), 440.0);
+        assert_eq!(middle(440.0, None, 1e7), 440.0);
+        let m = Metrics {
+            k_width: 440.0,
+            b_width: 30.0,
+            max_fidelity_error: Some(2.0),
+            area: 7.0,
+            k_width_interval: Some([420.0, 444.0]),
+            b_width_interval: Some([20.0, 60.0]),
+        };
+        assert_eq!(m.signed(Metric::KWidth, [1e7, 1000.0]), 432.0);
+        assert_eq!(m.signed(Metric::BWidth, [1e7, 1000.0]), 40.0);
+        assert_eq!(m.signed(Metric::BWidth, [1e7, 60.0]), 30.0);
+        assert_eq!(m.signed(Metric::MaxFidelityError, [1e7, 1000.0]), -2.0);
+        assert_eq!(m.signed(Metric::Area, [1e7, 1000.0]), 7.0);
     }
 }

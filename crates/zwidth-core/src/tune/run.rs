@@ -10,9 +10,11 @@ use std::time::Instant;
 use super::*;
 use crate::error::SpecError;
 use crate::estimators::EstimatorKind;
+use crate::zwidth::bla::replicate_seed;
 use crate::zwidth::scene::SceneSpec;
 use crate::zwidth::search::{map_observed, Observer};
 use crate::zwidth::settings::Accuracy;
+use crate::zwidth::stats::student_t_quantile;
 
 /// Why the solver was stopped (not an error of the tune).
 #[derive(Debug, thiserror::Error)]
@@ -38,12 +40,40 @@ struct Run<'a> {
 }
 
 impl Run<'_> {
-    fn key(&self, phase_acc: &Accuracy, params: &BTreeMap<String, f64>) -> String {
+    /// The cache and store key of an evaluation (replicate 0 keeps the key
+    /// tunes stored before replicates existed).
+    fn key(
+        &self,
+        phase_acc: &Accuracy,
+        params: &BTreeMap<String, f64>,
+        replicate: usize,
+    ) -> String {
         let p: Vec<String> = params
             .iter()
             .map(|(n, x)| format!("{n}={:016x}", x.to_bits()))
             .collect();
-        format!("{}|{}", accuracy_name(phase_acc), p.join(","))
+        let r = if replicate > 0 {
+            format!("|r{replicate}")
+        } else {
+            String::new()
+        };
+        format!("{}|{}{r}", accuracy_name(phase_acc), p.join(","))
+    }
+
+    /// The map's K and B range: an interval reaching them was not bounded.
+    fn caps(&self) -> [f64; 2] {
+        [self.tune.spec.k_max, self.tune.spec.b_max]
+    }
+
+    /// The score's interval when the objective is one metric with one
+    /// (K-width or B-width on a noisy scene), bounded below the caps.
+    fn score_interval(&self, m: &Metrics) -> Option<[f64; 2]> {
+        let (iv, cap) = match &self.tune.spec.objective {
+            Objective::Single(Metric::KWidth) => (m.k_width_interval, self.caps()[0]),
+            Objective::Single(Metric::BWidth) => (m.b_width_interval, self.caps()[1]),
+            _ => return None,
+        };
+        iv.filter(|[_, hi]| *hi < cap)
     }
 
     fn score(&self, m: &Metrics, feasible_violation: f64) -> f64 {
@@ -52,9 +82,9 @@ impl Run<'_> {
             return -1e15 - feasible_violation;
         }
         match &self.tune.spec.objective {
-            Objective::Single(x) => m.signed(*x),
-            Objective::Weighted(w) => w.iter().map(|(x, wt)| wt * m.signed(*x)).sum(),
-            Objective::Pareto(list) => m.signed(list[0]),
+            Objective::Single(x) => m.signed(*x, self.caps()),
+            Objective::Weighted(w) => w.iter().map(|(x, wt)| wt * m.signed(*x, self.caps())).sum(),
+            Objective::Pareto(list) => m.signed(list[0], self.caps()),
         }
     }
 
@@ -92,15 +122,21 @@ impl Run<'_> {
             .count()
     }
 
-    /// Evaluate at these parameter values in `phase` ("search" / "final").
-    fn evaluate(&self, params: BTreeMap<String, f64>, phase: &str) -> Result<Evaluation, Stop> {
+    /// Evaluate at these parameter values in `phase` ("search" / "final"),
+    /// `replicate` naming the probe seed (0: the scene's; `bla::replicate_seed`).
+    fn evaluate(
+        &self,
+        params: BTreeMap<String, f64>,
+        phase: &str,
+        replicate: usize,
+    ) -> Result<Evaluation, Stop> {
         let spec = &self.tune.spec;
         let acc = if phase == "final" {
             &spec.final_accuracy
         } else {
             &spec.accuracy
         };
-        let key = self.key(acc, &params);
+        let key = self.key(acc, &params, replicate);
         let index = self.log.lock().unwrap_or_else(|e| e.into_inner()).len();
         let calls = self
             .calls
@@ -148,7 +184,8 @@ impl Run<'_> {
                 return Err(Stop::Budget);
             }
             let start = Instant::now();
-            let scene = self.tune.space.scene_at(&params).map_err(Stop::Spec)?;
+            let mut scene = self.tune.space.scene_at(&params).map_err(Stop::Spec)?;
+            scene.probe.seed = replicate_seed(scene.probe.seed, replicate);
             let violation = self.violation(&scene);
             let (metrics, trials) = if violation > 0.0 {
                 // Infeasible gains: no map is run.
@@ -158,6 +195,8 @@ impl Run<'_> {
                         b_width: 0.0,
                         max_fidelity_error: None,
                         area: 0.0,
+                        k_width_interval: None,
+                        b_width_interval: None,
                     },
                     0,
                 )
@@ -177,6 +216,8 @@ impl Run<'_> {
                         b_width: m.b_width,
                         max_fidelity_error: m.max_fidelity_error,
                         area: m.area,
+                        k_width_interval: m.k_width_interval,
+                        b_width_interval: m.b_width_interval,
                     },
                     m.trials,
                 )
@@ -201,6 +242,7 @@ impl Run<'_> {
                 cached: false,
                 trials,
                 elapsed_s: start.elapsed().as_secs_f64(),
+                replicate,
             };
             if let Some(o) = &self.observer {
                 o.record_evaluation(key.clone(), serde_json::to_value(&e).unwrap_or_default());
@@ -232,7 +274,7 @@ impl Run<'_> {
 
 impl solvers::Cost for Run<'_> {
     fn cost(&self, u: &[f64]) -> Result<f64, argmin::core::Error> {
-        match self.evaluate(self.tune.space.values(u), "search") {
+        match self.evaluate(self.tune.space.values(u), "search", 0) {
             Ok(e) => Ok(-e.score),
             Err(Stop::Spec(e)) => {
                 *self.failure.lock().unwrap_or_else(|x| x.into_inner()) = Some(e.clone());
@@ -257,7 +299,7 @@ impl Tune {
         let start = Instant::now();
         let spec = &self.spec;
         if let Some(o) = &observer {
-            o.set_scopes(spec.max_evaluations + spec.finalists);
+            o.set_scopes(spec.max_evaluations + spec.finalists * 2 * spec.replicates);
         }
         let run = Run {
             tune: self,
@@ -376,7 +418,7 @@ impl Tune {
                 ranked.push(e);
             }
         }
-        let front = pareto.then(|| pareto_front(&history, &self.metrics));
+        let front = pareto.then(|| pareto_front(&history, &self.metrics, run.caps()));
         // Finalists: the best few (Pareto: front members by the first metric).
         let candidates: Vec<&Evaluation> = match &front {
             Some(f) => ranked
@@ -391,23 +433,24 @@ impl Tune {
             .filter(|e| e.feasible)
             .take(spec.finalists)
             .collect();
-        let mut finals = Vec::new();
         let t_final = Instant::now();
-        for e in &picked {
-            match run.evaluate(e.params.clone(), "final") {
-                Ok(f) => finals.push(f),
-                Err(Stop::Spec(err)) => return Err(err),
-                Err(_) => break,
-            }
-        }
+        let replicates = run.finals(&picked)?;
+        let finals: Vec<Pooled> = replicates.iter().map(|r| run.pool(r)).collect();
         let final_s = t_final.elapsed().as_secs_f64();
+        let all_finals: Vec<&Evaluation> = replicates.iter().flatten().collect();
         let computed = history.iter().filter(|e| !e.cached).count()
-            + finals.iter().filter(|e| !e.cached).count();
+            + all_finals.iter().filter(|e| !e.cached).count();
         let cache_hits = history.iter().filter(|e| e.cached).count()
-            + finals.iter().filter(|e| e.cached).count();
+            + all_finals.iter().filter(|e| e.cached).count();
         let coarse_to_fine = (!finals.is_empty()).then(|| {
             let mut order: Vec<usize> = (0..finals.len()).collect();
-            order.sort_by(|&a, &b| finals[b].score.total_cmp(&finals[a].score).then(a.cmp(&b)));
+            order.sort_by(|&a, &b| {
+                finals[b]
+                    .eval
+                    .score
+                    .total_cmp(&finals[a].eval.score)
+                    .then(a.cmp(&b))
+            });
             let mut final_rank = vec![0; finals.len()];
             for (r, &i) in order.iter().enumerate() {
                 final_rank[i] = r;
@@ -425,7 +468,7 @@ impl Tune {
                 }
             };
             let mean_search = mean(&history.iter().collect::<Vec<_>>());
-            let mean_final = mean(&finals.iter().collect::<Vec<_>>());
+            let mean_final = mean(&all_finals);
             let n_search = history.iter().filter(|e| !e.cached).count() as f64;
             CoarseToFine {
                 search_accuracy: accuracy_name(&spec.accuracy),
@@ -435,16 +478,18 @@ impl Tune {
                     .zip(&picked)
                     .enumerate()
                     .map(|(i, (f, s))| Finalist {
-                        params: f.params.clone(),
+                        params: f.eval.params.clone(),
                         search_score: s.score,
-                        final_score: f.score,
+                        final_score: f.eval.score,
                         search_rank: i,
                         final_rank: final_rank[i],
+                        replicates: f.replicates,
+                        final_interval: f.interval,
                     })
                     .collect(),
                 ranking_held: ranking_held(
                     &picked.iter().map(|e| e.score).collect::<Vec<_>>(),
-                    &finals.iter().map(|e| e.score).collect::<Vec<_>>(),
+                    &finals.iter().map(|f| f.eval.score).collect::<Vec<_>>(),
                 ),
                 best_held: final_rank[0] == 0,
                 search_s,
@@ -455,25 +500,39 @@ impl Tune {
                     .then_some(n_search * mean_final - (search_s + final_s)),
             }
         });
-        let best_eval = finals
-            .iter()
-            .max_by(|a, b| a.score.total_cmp(&b.score).then(b.index.cmp(&a.index)))
-            .or_else(|| ranked.first().copied())
-            .cloned()
-            .ok_or_else(|| SpecError::new("tune", "(empty)", "no evaluation"))?;
+        let best_final = finals.iter().max_by(|a, b| {
+            a.eval
+                .score
+                .total_cmp(&b.eval.score)
+                .then(b.eval.index.cmp(&a.eval.index))
+        });
+        let (best_eval, best_replicates, best_interval) = match best_final {
+            Some(f) => (f.eval.clone(), f.replicates, f.interval),
+            None => {
+                let e = ranked
+                    .first()
+                    .copied()
+                    .cloned()
+                    .ok_or_else(|| SpecError::new("tune", "(empty)", "no evaluation"))?;
+                let iv = run.score_interval(&e.metrics);
+                (e, 1, iv)
+            }
+        };
         let scene = self.space.scene_at(&best_eval.params)?;
         let gains = match &scene.estimator.kind {
             EstimatorKind::Levant(l) => l.gains().ok().map(|g| g.report().to_string()),
             _ => None,
         };
         let mut history = history;
-        history.extend(finals);
+        history.extend(all_finals.into_iter().cloned());
         Ok(TuneResult {
             best: Best {
                 objectives: best_eval.objectives.clone(),
                 params: best_eval.params.clone(),
                 score: best_eval.score,
                 phase: best_eval.phase.clone(),
+                replicates: best_replicates,
+                interval: best_interval,
                 scene,
                 gains,
             },
@@ -489,6 +548,161 @@ impl Tune {
     }
 }
 
+/// A finalist's maps at the final accuracy, pooled: the mean of each
+/// measure and of the score, with the score's interval.
+struct Pooled {
+    eval: Evaluation,
+    replicates: usize,
+    interval: Option<[f64; 2]>,
+}
+
+impl Run<'_> {
+    /// Evaluate each finalist at the final accuracy. On a noisy scene with
+    /// an objective that has an interval, map each `replicates` times (the
+    /// scene's probe seed, then derived ones), then add replicates — up to
+    /// twice that — to the finalists whose interval still overlaps the
+    /// best's, until the ranking is decided. Stops early (with what it has)
+    /// on cancellation; a spec error is returned.
+    fn finals(&self, picked: &[&Evaluation]) -> Result<Vec<Vec<Evaluation>>, SpecError> {
+        let spec = &self.tune.spec;
+        let mut out: Vec<Vec<Evaluation>> = Vec::new();
+        for e in picked {
+            match self.evaluate(e.params.clone(), "final", 0) {
+                Ok(f) => out.push(vec![f]),
+                Err(Stop::Spec(err)) => return Err(err),
+                Err(_) => return Ok(out),
+            }
+        }
+        let replicable = !out.is_empty()
+            && spec.replicates > 1
+            && out
+                .iter()
+                .all(|r| self.score_interval(&r[0].metrics).is_some());
+        if !replicable {
+            return Ok(out);
+        }
+        loop {
+            let pooled: Vec<Pooled> = out.iter().map(|r| self.pool(r)).collect();
+            let want = more_replicates(&pooled, spec.replicates);
+            if want.is_empty() {
+                return Ok(out);
+            }
+            for i in want {
+                let params = out[i][0].params.clone();
+                match self.evaluate(params, "final", out[i].len()) {
+                    Ok(f) => out[i].push(f),
+                    Err(Stop::Spec(err)) => return Err(err),
+                    Err(_) => return Ok(out),
+                }
+            }
+        }
+    }
+
+    /// One finalist's replicates as one evaluation (see [`Pooled`]).
+    fn pool(&self, reps: &[Evaluation]) -> Pooled {
+        let n = reps.len();
+        let mean = |f: &dyn Fn(&Evaluation) -> f64| reps.iter().map(f).sum::<f64>() / n as f64;
+        let mean_iv = |f: &dyn Fn(&Metrics) -> Option<[f64; 2]>| {
+            let ivs: Option<Vec<[f64; 2]>> = reps.iter().map(|e| f(&e.metrics)).collect();
+            ivs.map(|v| {
+                [
+                    v.iter().map(|x| x[0]).sum::<f64>() / n as f64,
+                    v.iter().map(|x| x[1]).sum::<f64>() / n as f64,
+                ]
+            })
+        };
+        let fidelity: Option<Vec<f64>> =
+            reps.iter().map(|e| e.metrics.max_fidelity_error).collect();
+        let metrics = Metrics {
+            k_width: mean(&|e| e.metrics.k_width),
+            b_width: mean(&|e| e.metrics.b_width),
+            max_fidelity_error: fidelity.map(|v| v.iter().sum::<f64>() / n as f64),
+            area: mean(&|e| e.metrics.area),
+            k_width_interval: mean_iv(&|m| m.k_width_interval),
+            b_width_interval: mean_iv(&|m| m.b_width_interval),
+        };
+        let scores: Vec<f64> = reps.iter().map(|e| e.score).collect();
+        let score = scores.iter().sum::<f64>() / n as f64;
+        // One map: its own interval. More: the replicates' t interval of
+        // the mean, never narrower than their mean interval (replicates on
+        // one K lattice can agree exactly).
+        let own: Option<Vec<[f64; 2]>> = reps
+            .iter()
+            .map(|e| self.score_interval(&e.metrics))
+            .collect();
+        let interval = own.map(|v| {
+            let lo = v.iter().map(|x| x[0]).sum::<f64>() / n as f64;
+            let hi = v.iter().map(|x| x[1]).sum::<f64>() / n as f64;
+            if n < 2 {
+                return [lo, hi];
+            }
+            let var = scores.iter().map(|s| (s - score).powi(2)).sum::<f64>() / (n - 1) as f64;
+            // Student t, 95 % two-sided, n − 1 degrees of freedom.
+            let half = student_t_quantile(0.975, (n - 1) as f64) * (var / n as f64).sqrt();
+            [lo.min(score - half), hi.max(score + half)]
+        });
+        let mut objectives: BTreeMap<String, Option<f64>> = BTreeMap::new();
+        for m in [
+            Metric::KWidth,
+            Metric::BWidth,
+            Metric::MaxFidelityError,
+            Metric::Area,
+        ] {
+            objectives.insert(metric_name(m).into(), metrics.get(m));
+        }
+        Pooled {
+            eval: Evaluation {
+                index: reps[0].index,
+                phase: "final".into(),
+                params: reps[0].params.clone(),
+                objectives,
+                metrics,
+                score,
+                feasible: reps.iter().all(|e| e.feasible),
+                cached: reps.iter().all(|e| e.cached),
+                trials: reps.iter().map(|e| e.trials).sum(),
+                elapsed_s: reps.iter().map(|e| e.elapsed_s).sum(),
+                replicate: 0,
+            },
+            replicates: n,
+            interval,
+        }
+    }
+}
+
+/// Which finalists need another replicate: every one below `replicates`;
+/// then, up to twice that, each whose interval overlaps the best's (the
+/// best too, while any does). Empty: the ranking is decided.
+fn more_replicates(pooled: &[Pooled], replicates: usize) -> Vec<usize> {
+    let below: Vec<usize> = (0..pooled.len())
+        .filter(|&i| pooled[i].replicates < replicates)
+        .collect();
+    if !below.is_empty() {
+        return below;
+    }
+    let Some(best) = (0..pooled.len()).max_by(|&a, &b| {
+        pooled[a]
+            .eval
+            .score
+            .total_cmp(&pooled[b].eval.score)
+            .then(b.cmp(&a))
+    }) else {
+        return Vec::new();
+    };
+    let overlaps = |i: usize| match (pooled[i].interval, pooled[best].interval) {
+        (Some([lo, hi]), Some([blo, bhi])) => i != best && lo <= bhi && blo <= hi,
+        _ => false,
+    };
+    let rivals: Vec<usize> = (0..pooled.len()).filter(|&i| overlaps(i)).collect();
+    if rivals.is_empty() {
+        return Vec::new();
+    }
+    std::iter::once(best)
+        .chain(rivals)
+        .filter(|&i| pooled[i].replicates < 2 * replicates)
+        .collect()
+}
+
 /// Tolerance in u for the 1-D solvers: finer with a bigger budget.
 fn tolerance(budget: usize) -> f64 {
     (1.0 / (budget as f64 * 8.0)).clamp(1e-5, 1e-2)
@@ -500,14 +714,14 @@ fn internal(e: argmin::core::Error) -> SpecError {
 
 /// Indices of the feasible search evaluations no other one dominates
 /// (at least as good in every metric, better in one).
-fn pareto_front(history: &[Evaluation], metrics: &[Metric]) -> Vec<usize> {
+fn pareto_front(history: &[Evaluation], metrics: &[Metric], caps: [f64; 2]) -> Vec<usize> {
     let pts: Vec<(usize, Vec<f64>)> = history
         .iter()
         .filter(|e| e.phase == "search" && e.feasible)
         .map(|e| {
             (
                 e.index,
-                metrics.iter().map(|&m| e.metrics.signed(m)).collect(),
+                metrics.iter().map(|&m| e.metrics.signed(m, caps)).collect(),
             )
         })
         .collect();
@@ -535,6 +749,65 @@ fn pareto_front(history: &[Evaluation], metrics: &[Metric]) -> Vec<usize> {
 fn ranking_held(search: &[f64], finals: &[f64]) -> bool {
     let n = search.len().min(finals.len());
     (0..n).all(|i| (i + 1..n).all(|j| search[i] <= search[j] || finals[i] >= finals[j]))
+}
+
+#[cfg(test)]
+mod replicate_tests {
+    use super::*;
+
+    fn pooled(score: f64, interval: [f64; 2], replicates: usize) -> Pooled {
+        Pooled {
+            eval: Evaluation {
+                index: 0,
+                phase: "final".into(),
+                params: BTreeMap::new(),
+                objectives: BTreeMap::new(),
+                metrics: Metrics {
+                    k_width: score,
+                    b_width: 0.0,
+                    max_fidelity_error: None,
+                    area: 0.0,
+                    k_width_interval: Some(interval),
+                    b_width_interval: None,
+                },
+                score,
+                feasible: true,
+                cached: false,
+                trials: 0,
+                elapsed_s: 0.0,
+                replicate: 0,
+            },
+            replicates,
+            interval: Some(interval),
+        }
+    }
+
+    #[test]
+    fn replicates_go_to_the_finalists_whose_interval_overlaps_the_best() {
+        // Below the minimum: every finalist below it, whatever the intervals.
+        let p = [pooled(10.0, [9.0, 11.0], 3), pooled(5.0, [4.0, 6.0], 2)];
+        assert_eq!(more_replicates(&p, 3), vec![1]);
+        // The best (index 1) overlaps index 2, not index 0: both of the
+        // overlapping pair get one more, the separated one none.
+        let p = [
+            pooled(5.0, [4.0, 6.0], 3),
+            pooled(10.0, [9.0, 11.0], 3),
+            pooled(8.5, [7.0, 9.0], 3),
+        ];
+        assert_eq!(more_replicates(&p, 3), vec![1, 2]);
+        // Touching intervals overlap (closed); disjoint ones decide.
+        let p = [pooled(10.0, [9.0, 11.0], 3), pooled(8.0, [7.0, 8.999], 3)];
+        assert!(more_replicates(&p, 3).is_empty());
+        // Up to twice the minimum, then the ranking stands as it is.
+        let p = [pooled(10.0, [9.0, 11.0], 6), pooled(9.5, [9.0, 10.0], 5)];
+        assert_eq!(more_replicates(&p, 3), vec![1]);
+        let p = [pooled(10.0, [9.0, 11.0], 6), pooled(9.5, [9.0, 10.0], 6)];
+        assert!(more_replicates(&p, 3).is_empty());
+        // Equal scores: the first is the best (as the final ranking orders).
+        let p = [pooled(10.0, [9.0, 11.0], 3), pooled(10.0, [9.0, 11.0], 3)];
+        assert_eq!(more_replicates(&p, 3), vec![0, 1]);
+        assert!(more_replicates(&[], 3).is_empty());
+    }
 }
 
 #[cfg(test)]

@@ -93,6 +93,8 @@ fn tune_spec(
         accuracy: Accuracy::Preset(acc),
         final_accuracy: Accuracy::Preset(acc),
         finalists: 3,
+        // The study compares searches: one map per finalist.
+        replicates: 1,
         solver,
         seed: 0,
         max_evaluations: evals,

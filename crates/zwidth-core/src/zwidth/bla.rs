@@ -62,6 +62,17 @@ pub fn realization(design: &Multisine, seed: u64, m: u32) -> Multisine {
     }
 }
 
+/// The probe seed of replicate `r` of a scene whose seed is `seed`: the
+/// seed itself for r = 0, else a SplitMix draw from both, so replicates
+/// see realizations independent of each other's and of neighbouring seeds'
+/// (seed 1's second replicate is not seed 2).
+pub fn replicate_seed(seed: u64, r: usize) -> u64 {
+    if r == 0 {
+        return seed;
+    }
+    SplitMix64::new(seed ^ (r as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)).next_u64()
+}
+
 /// What a point's realizations say.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BlaVerdict {
@@ -397,6 +408,21 @@ mod tests {
             s.push(&[vec![C::new(0.01, 0.02); 100]]);
         }
         assert_eq!(s.verdict(0.05, 10).bands, 20);
+    }
+
+    #[test]
+    fn replicate_seeds_are_the_seed_then_independent_draws() {
+        assert_eq!(replicate_seed(1, 0), 1);
+        assert_eq!(replicate_seed(7, 0), 7);
+        // SplitMix64 (Steele, Lea & Flood 2014) of 1 ^ 0x9E3779B97F4A7C15:
+        // its first output, by the reference algorithm (stats.rs's test of
+        // SplitMix64 pins that algorithm to published outputs).
+        let mut r = SplitMix64::new(1 ^ 0x9E37_79B9_7F4A_7C15);
+        assert_eq!(replicate_seed(1, 1), r.next_u64());
+        let seeds: std::collections::BTreeSet<u64> = (1..4u64)
+            .flat_map(|s| (0..4).map(move |r| replicate_seed(s, r)))
+            .collect();
+        assert_eq!(seeds.len(), 12, "seed 1's replicates are not seeds 2 and 3");
     }
 
     #[test]

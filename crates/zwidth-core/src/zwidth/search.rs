@@ -91,6 +91,14 @@ impl BoundaryPoint {
             ..Self::default()
         }
     }
+
+    /// Nothing renders at this B, surely: no K rendered and, on a noisy
+    /// scene, the smallest K searched (`k_floor`) was decided not passive.
+    /// An empty column whose upper bound lies above `k_floor` may still
+    /// render (its verdicts there were undecided).
+    pub fn surely_empty(&self, k_floor: f64) -> bool {
+        self.k_max == 0.0 && self.k_hi.is_none_or(|h| h <= k_floor)
+    }
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -366,6 +374,12 @@ pub fn map(spec: &MapSpec) -> Result<MapResult, SpecError> {
     map_observed(spec, None, 0)
 }
 
+/// Whether a map's verdicts are noisy (friction or quantization probed in
+/// the frequency domain: the BLA verdict with intervals).
+pub fn noisy(spec: &MapSpec) -> Result<bool, SpecError> {
+    prepare(spec).map(|(ev, _)| ev.noisy())
+}
+
 /// Validate a map request completely without running it; what it will cost.
 pub fn validate(spec: &MapSpec) -> Result<Cost, SpecError> {
     prepare(spec).map(|(_, cost)| cost)
@@ -455,7 +469,7 @@ pub fn map_observed(
         .filter(|p| p.k_max > 0.0)
         .map(|p| p.b)
         .fold(0.0, f64::max);
-    let (k_width_interval, b_width_interval) = widths_interval(&boundary);
+    let (k_width_interval, b_width_interval) = widths_interval(&boundary, res.k_step);
     let max_fidelity_error = points
         .iter()
         .filter(|p| p.passive == Some(true))
@@ -496,9 +510,15 @@ pub fn map_observed(
 
 /// The K-width and B-width intervals from the boundary's: K-width lies
 /// between the largest lower and the largest upper bound; B-width between
-/// the largest B whose lower bound renders and the largest whose upper
-/// bound does. `None` when the boundary has no intervals.
-fn widths_interval(boundary: &[BoundaryPoint]) -> (Option<[f64; 2]>, Option<[f64; 2]>) {
+/// the largest B whose lower bound renders and the largest B that is not
+/// surely empty (its upper bound above the smallest K searched, `k_floor`).
+/// The automatic B range runs until two columns are surely empty, so the
+/// upper end is not cut short by the columns searched, except at `b_max`.
+/// `None` when the boundary has no intervals.
+fn widths_interval(
+    boundary: &[BoundaryPoint],
+    k_floor: f64,
+) -> (Option<[f64; 2]>, Option<[f64; 2]>) {
     if boundary.is_empty()
         || boundary
             .iter()
@@ -520,7 +540,7 @@ fn widths_interval(boundary: &[BoundaryPoint]) -> (Option<[f64; 2]>, Option<[f64
     };
     let b = [
         b_of(&|p| p.k_lo.unwrap_or(0.0)),
-        b_of(&|p| p.k_hi.unwrap_or(0.0)),
+        b_of(&|p| p.k_hi.map_or(0.0, |h| if h > k_floor { h } else { 0.0 })),
     ];
     (Some(k), Some(b))
 }
@@ -576,7 +596,11 @@ fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPo
         let points = r.iter().flat_map(|(_, p)| p.clone()).collect();
         return (r.into_iter().map(|(b, _)| b).collect(), points);
     }
-    // Batches of B in parallel; stop after two B values in a row render nothing.
+    // Batches of B in parallel; stop after two B values in a row surely
+    // render nothing (on a noisy scene, an empty column whose verdicts at
+    // the smallest K were undecided does not count: B-width's interval
+    // needs the columns beyond it).
+    let k_floor = ev.res.k_step;
     let batch = rayon::current_num_threads().max(2);
     let (mut boundary, mut points) = (Vec::new(), Vec::new());
     for chunk in b_auto.chunks(batch) {
@@ -586,15 +610,16 @@ fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPo
             points.extend(pts);
         }
         let n = boundary.len();
-        if n >= 2 && boundary[n - 1].k_max == 0.0 && boundary[n - 2].k_max == 0.0 {
+        if n >= 2 && boundary[n - 1].surely_empty(k_floor) && boundary[n - 2].surely_empty(k_floor)
+        {
             break;
         }
         ev.report(n as f64 / planned_b(&boundary, b_auto.len(), ev.res.b_step) as f64);
     }
     // Drop the trailing B values that render nothing but the first.
     while boundary.len() >= 2
-        && boundary[boundary.len() - 1].k_max == 0.0
-        && boundary[boundary.len() - 2].k_max == 0.0
+        && boundary[boundary.len() - 1].surely_empty(k_floor)
+        && boundary[boundary.len() - 2].surely_empty(k_floor)
     {
         boundary.pop();
     }
@@ -686,6 +711,44 @@ mod tests {
 
     fn bp(b: f64, k_max: f64) -> BoundaryPoint {
         BoundaryPoint::new(b, k_max)
+    }
+
+    fn iv(b: f64, k_max: f64, lo: f64, hi: f64) -> BoundaryPoint {
+        BoundaryPoint {
+            k_lo: Some(lo),
+            k_hi: Some(hi),
+            ..BoundaryPoint::new(b, k_max)
+        }
+    }
+
+    #[test]
+    fn b_width_upper_end_counts_columns_not_surely_empty() {
+        // k_floor = 100 N/m (the smallest K searched). B = 20: nothing
+        // rendered, but the verdicts up to 400 N/m were undecided, so the
+        // column may render: B-width is at most 20, at least 10 (its
+        // largest column with a K decided passive). B = 30 is surely empty
+        // (decided not passive at the floor), so it bounds nothing.
+        let boundary = [
+            iv(0.0, 900.0, 850.0, 950.0),
+            iv(10.0, 500.0, 450.0, 520.0),
+            iv(20.0, 0.0, 0.0, 400.0),
+            iv(30.0, 0.0, 0.0, 100.0),
+        ];
+        let (k, b) = widths_interval(&boundary, 100.0);
+        assert_eq!(k, Some([850.0, 950.0]));
+        assert_eq!(b, Some([10.0, 20.0]));
+        assert!(!boundary[2].surely_empty(100.0));
+        assert!(boundary[3].surely_empty(100.0));
+        // A column without intervals (a deterministic verdict) is empty
+        // exactly when nothing rendered.
+        assert!(bp(40.0, 0.0).surely_empty(100.0));
+        assert!(!bp(40.0, 1.0).surely_empty(100.0));
+        // Any column without an interval: no intervals at all.
+        assert_eq!(
+            widths_interval(&[boundary[0], bp(10.0, 5.0)], 100.0),
+            (None, None)
+        );
+        assert_eq!(widths_interval(&[], 100.0), (None, None));
     }
 
     #[test]

@@ -1,0 +1,171 @@
+//! A tune on a noisy scene (the 2018 paper's device: friction and 1 µm
+//! quantization, the BLA verdict): finalists are replicated with other
+//! probe seeds and scored by the mean, each replicate equal to a plain map.
+
+use std::collections::BTreeMap;
+
+use zwidth_core::tune::{Bounds, Metric, Objective, SolverKind, TuneResult, TuneSpec};
+use zwidth_core::zwidth::bla::replicate_seed;
+use zwidth_core::zwidth::scene::SceneSpec;
+use zwidth_core::zwidth::search::map;
+use zwidth_core::zwidth::settings::{Accuracy, Criterion, MapSpec, Method, Preset, SearchKind};
+use zwidth_core::zwidth::sweep::Scale;
+
+const SEED_2018: &str = include_str!("../../../examples/seed_2018.json");
+
+fn seed_scene(cutoff: f64) -> SceneSpec {
+    let mut s = SceneSpec::from_json(SEED_2018).unwrap();
+    s.estimator = serde_json::from_str(&format!(
+        r#"{{"kind":"butterworth","cutoff_hz":{cutoff},"order":2}}"#
+    ))
+    .unwrap();
+    s
+}
+
+/// One damping column, draft: a few seconds per map in a test build.
+fn spec(replicates: usize) -> TuneSpec {
+    TuneSpec {
+        scene: seed_scene(499.0),
+        params: BTreeMap::from([(
+            "cutoff_hz".to_string(),
+            Bounds {
+                min: 300.0,
+                max: 499.0,
+                scale: Scale::Linear,
+                step: Some(1.0),
+            },
+        )]),
+        objective: Objective::Single(Metric::KWidth),
+        method: Method::Auto,
+        criterion: Criterion::Impedance,
+        search: SearchKind::Bisect,
+        accuracy: Accuracy::Preset(Preset::Draft),
+        final_accuracy: Accuracy::Preset(Preset::Draft),
+        finalists: 2,
+        replicates,
+        solver: SolverKind::Grid,
+        seed: 0,
+        max_evaluations: 3,
+        constraint: None,
+        b: Some(vec![20.0]),
+        b_max: 1000.0,
+        k_max: 1e7,
+    }
+}
+
+/// K-width of a plain map of the seed device at `cutoff` with `seed`.
+fn plain(cutoff: f64, seed: u64) -> zwidth_core::zwidth::search::MapResult {
+    let mut scene = seed_scene(cutoff);
+    scene.probe.seed = seed;
+    map(&MapSpec {
+        scene,
+        method: Method::Auto,
+        criterion: Criterion::Impedance,
+        search: SearchKind::Bisect,
+        accuracy: Accuracy::Preset(Preset::Draft),
+        b: Some(vec![20.0]),
+        b_max: 1000.0,
+        k_max: 1e7,
+    })
+    .unwrap()
+}
+
+/// Student t 97.5 % quantiles (NIST/SEMATECH e-Handbook §1.3.6.7.2).
+fn t975(dof: usize) -> f64 {
+    match dof {
+        1 => 12.706,
+        2 => 4.303,
+        3 => 3.182,
+        4 => 2.776,
+        5 => 2.571,
+        _ => panic!("no table entry for {dof} degrees of freedom"),
+    }
+}
+
+#[test]
+fn noisy_finalists_are_the_mean_of_replicate_maps_with_a_t_interval() {
+    let r: TuneResult = spec(2).validate().unwrap().run(None).unwrap();
+    let c = r.coarse_to_fine.as_ref().expect("finalists");
+    assert_eq!(c.finalists.len(), 2);
+    for f in &c.finalists {
+        let cutoff = f.params["cutoff_hz"];
+        let reps: Vec<_> = r
+            .history
+            .iter()
+            .filter(|e| e.phase == "final" && e.params == f.params)
+            .collect();
+        let n = reps.len();
+        assert_eq!(n, f.replicates);
+        assert!(
+            (2..=4).contains(&n),
+            "{n} replicates, between replicates and twice that"
+        );
+        let mut scores = Vec::new();
+        for (i, e) in reps.iter().enumerate() {
+            assert_eq!(e.replicate, i, "replicates in order");
+            // Each replicate is the plain map with the derived probe seed.
+            let m = plain(cutoff, replicate_seed(1, i));
+            assert_eq!(e.metrics.k_width, m.k_width, "{cutoff} Hz replicate {i}");
+            let [lo, hi] = m.k_width_interval.expect("a noisy map has intervals");
+            assert_eq!(e.metrics.k_width_interval, Some([lo, hi]));
+            // Scored by the interval's middle (its upper end is a verdict
+            // well below the 1e7 N/m range here).
+            assert!(hi < 1e6, "{hi}");
+            assert_eq!(e.score, 0.5 * (lo + hi));
+            scores.push(e.score);
+        }
+        // The final score: the mean; its interval: mean ± t·s/√n, widened
+        // to the replicates' mean interval.
+        let mean = scores.iter().sum::<f64>() / n as f64;
+        assert!((f.final_score - mean).abs() <= 1e-9 * mean);
+        let s = (scores.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
+        let half = t975(n - 1) * s / (n as f64).sqrt();
+        let lo = reps
+            .iter()
+            .map(|e| e.metrics.k_width_interval.unwrap()[0])
+            .sum::<f64>()
+            / n as f64;
+        let hi = reps
+            .iter()
+            .map(|e| e.metrics.k_width_interval.unwrap()[1])
+            .sum::<f64>()
+            / n as f64;
+        let [flo, fhi] = f.final_interval.expect("an interval");
+        // The t table has 4 digits: 1e-3 relative on the half-width.
+        assert!(
+            (flo - lo.min(mean - half)).abs() <= 1e-3 * half.max(1.0),
+            "{flo}"
+        );
+        assert!(
+            (fhi - hi.max(mean + half)).abs() <= 1e-3 * half.max(1.0),
+            "{fhi}"
+        );
+    }
+    // The ranking is decided, or every overlapping finalist has twice the
+    // minimum of replicates.
+    let best = c.finalists.iter().find(|f| f.final_rank == 0).unwrap();
+    let [blo, bhi] = best.final_interval.unwrap();
+    for f in &c.finalists {
+        let [lo, hi] = f.final_interval.unwrap();
+        if f.final_rank != 0 && lo <= bhi && blo <= hi {
+            assert_eq!(f.replicates, 4);
+        }
+    }
+    assert_eq!(r.best.replicates, best.replicates);
+    assert_eq!(r.best.score, best.final_score);
+    assert_eq!(r.best.interval, best.final_interval);
+}
+
+#[test]
+fn one_replicate_is_one_map_and_the_count_is_checked() {
+    let r = spec(1).validate().unwrap().run(None).unwrap();
+    let finals: Vec<_> = r.history.iter().filter(|e| e.phase == "final").collect();
+    assert_eq!(finals.len(), 2);
+    assert!(finals.iter().all(|e| e.replicate == 0));
+    for n in [0, 21] {
+        let e = spec(n).validate().err().expect("refused");
+        assert_eq!(e.field, "replicates");
+        assert_eq!(e.value, n.to_string());
+        assert!(e.allowed.contains("1 to 20"), "{}", e.allowed);
+    }
+}
