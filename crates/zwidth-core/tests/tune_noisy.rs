@@ -108,10 +108,10 @@ fn noisy_finalists_are_the_mean_of_replicate_maps_with_a_t_interval() {
             assert_eq!(e.metrics.k_width, m.k_width, "{cutoff} Hz replicate {i}");
             let [lo, hi] = m.k_width_interval.expect("a noisy map has intervals");
             assert_eq!(e.metrics.k_width_interval, Some([lo, hi]));
-            // Scored by the interval's middle (its upper end is a verdict
-            // well below the 1e7 N/m range here).
-            assert!(hi < 1e6, "{hi}");
-            assert_eq!(e.score, 0.5 * (lo + hi));
+            // Scored by the map's K-width; the interval's upper end is a
+            // verdict well below the 1e7 N/m range here.
+            assert!(lo <= m.k_width && m.k_width <= hi && hi < 1e6, "{lo} {hi}");
+            assert_eq!(e.score, m.k_width);
             scores.push(e.score);
         }
         // The final score: the mean; its interval: mean ± t·s/√n, widened

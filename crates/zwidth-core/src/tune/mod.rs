@@ -172,7 +172,7 @@ pub struct Metrics {
     pub max_fidelity_error: Option<f64>,
     pub area: f64,
     /// Noisy scenes: the map's confidence intervals of K-width (N/m) and
-    /// B-width (N·s/m); a tune scores these metrics by the interval's middle.
+    /// B-width (N·s/m). A finalist's replicates are compared by them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub k_width_interval: Option<[f64; 2]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -184,15 +184,15 @@ pub struct Metrics {
 pub const NO_FIDELITY: f64 = 1e12;
 
 impl Metrics {
-    /// The value to maximize for one metric. K-width and B-width with an
-    /// interval count by its middle: a map whose boundary sits at the top
-    /// of an undecided stretch (a lucky point) ranks no higher than the
-    /// evidence allows.
-    /// `caps`: the map's K and B range ([`TuneSpec::k_max`], `b_max`).
-    fn signed(&self, m: Metric, caps: [f64; 2]) -> f64 {
+    /// The value to maximize for one metric: the map's point estimate.
+    /// (Scoring K-width by its interval's middle was measured and dropped:
+    /// the best cutoffs sit where draft intervals are widest, and the middle
+    /// ranked the seed device's best cutoff, 499 Hz, out of the finalists;
+    /// docs/tuning.md.)
+    fn signed(&self, m: Metric) -> f64 {
         match m {
-            Metric::KWidth => middle(self.k_width, self.k_width_interval, caps[0]),
-            Metric::BWidth => middle(self.b_width, self.b_width_interval, caps[1]),
+            Metric::KWidth => self.k_width,
+            Metric::BWidth => self.b_width,
             Metric::Area => self.area,
             Metric::MaxFidelityError => -self.max_fidelity_error.unwrap_or(NO_FIDELITY),
         }
@@ -205,16 +205,6 @@ impl Metrics {
             Metric::Area => Some(self.area),
             Metric::MaxFidelityError => self.max_fidelity_error,
         }
-    }
-}
-
-/// The middle of `interval`, or `point` without one or when its upper end
-/// is the search's range (`cap`: nothing up to it was decided not passive,
-/// so the middle would measure the range, not the device).
-fn middle(point: f64, interval: Option<[f64; 2]>, cap: f64) -> f64 {
-    match interval {
-        Some([lo, hi]) if hi < cap => 0.5 * (lo + hi),
-        _ => point,
     }
 }
 
@@ -331,6 +321,9 @@ pub struct Tune {
     space: Space,
     metrics: Vec<Metric>,
     lipschitz: Option<f64>,
+    /// Most maps per finalist at the final accuracy: twice `replicates` on
+    /// a noisy scene, else 1.
+    per_finalist: usize,
     /// What every evaluation and finalist together may cost.
     pub cost: Cost,
 }
@@ -458,6 +451,7 @@ impl TuneSpec {
             space,
             metrics,
             lipschitz,
+            per_finalist,
             cost,
         })
     }
@@ -648,31 +642,5 @@ impl TuneResult {
             ));
         }
         s
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn an_interval_scores_by_its_middle_below_the_cap() {
-        assert_eq!(middle(440.0, Some([420.0, 444.0]), 1e7), 432.0);
-        // The upper end at the search's range: not a verdict, the point.
-        assert_eq!(middle(440.0, Some([420.0, 1e7]), 1e7), 440.0);
-        assert_eq!(middle(440.0, None, 1e7), 440.0);
-        let m = Metrics {
-            k_width: 440.0,
-            b_width: 30.0,
-            max_fidelity_error: Some(2.0),
-            area: 7.0,
-            k_width_interval: Some([420.0, 444.0]),
-            b_width_interval: Some([20.0, 60.0]),
-        };
-        assert_eq!(m.signed(Metric::KWidth, [1e7, 1000.0]), 432.0);
-        assert_eq!(m.signed(Metric::BWidth, [1e7, 1000.0]), 40.0);
-        assert_eq!(m.signed(Metric::BWidth, [1e7, 60.0]), 30.0);
-        assert_eq!(m.signed(Metric::MaxFidelityError, [1e7, 1000.0]), -2.0);
-        assert_eq!(m.signed(Metric::Area, [1e7, 1000.0]), 7.0);
     }
 }

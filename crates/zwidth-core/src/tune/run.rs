@@ -66,7 +66,9 @@ impl Run<'_> {
     }
 
     /// The score's interval when the objective is one metric with one
-    /// (K-width or B-width on a noisy scene), bounded below the caps.
+    /// (K-width or B-width on a noisy scene) and the interval's upper end is
+    /// a verdict, not the map's range (`k_max`, `b_max`: nothing up to it
+    /// was decided not passive).
     fn score_interval(&self, m: &Metrics) -> Option<[f64; 2]> {
         let (iv, cap) = match &self.tune.spec.objective {
             Objective::Single(Metric::KWidth) => (m.k_width_interval, self.caps()[0]),
@@ -82,9 +84,9 @@ impl Run<'_> {
             return -1e15 - feasible_violation;
         }
         match &self.tune.spec.objective {
-            Objective::Single(x) => m.signed(*x, self.caps()),
-            Objective::Weighted(w) => w.iter().map(|(x, wt)| wt * m.signed(*x, self.caps())).sum(),
-            Objective::Pareto(list) => m.signed(list[0], self.caps()),
+            Objective::Single(x) => m.signed(*x),
+            Objective::Weighted(w) => w.iter().map(|(x, wt)| wt * m.signed(*x)).sum(),
+            Objective::Pareto(list) => m.signed(list[0]),
         }
     }
 
@@ -299,7 +301,7 @@ impl Tune {
         let start = Instant::now();
         let spec = &self.spec;
         if let Some(o) = &observer {
-            o.set_scopes(spec.max_evaluations + spec.finalists * 2 * spec.replicates);
+            o.set_scopes(spec.max_evaluations + spec.finalists * self.per_finalist);
         }
         let run = Run {
             tune: self,
@@ -418,7 +420,7 @@ impl Tune {
                 ranked.push(e);
             }
         }
-        let front = pareto.then(|| pareto_front(&history, &self.metrics, run.caps()));
+        let front = pareto.then(|| pareto_front(&history, &self.metrics));
         // Finalists: the best few (Pareto: front members by the first metric).
         let candidates: Vec<&Evaluation> = match &front {
             Some(f) => ranked
@@ -714,14 +716,14 @@ fn internal(e: argmin::core::Error) -> SpecError {
 
 /// Indices of the feasible search evaluations no other one dominates
 /// (at least as good in every metric, better in one).
-fn pareto_front(history: &[Evaluation], metrics: &[Metric], caps: [f64; 2]) -> Vec<usize> {
+fn pareto_front(history: &[Evaluation], metrics: &[Metric]) -> Vec<usize> {
     let pts: Vec<(usize, Vec<f64>)> = history
         .iter()
         .filter(|e| e.phase == "search" && e.feasible)
         .map(|e| {
             (
                 e.index,
-                metrics.iter().map(|&m| e.metrics.signed(m, caps)).collect(),
+                metrics.iter().map(|&m| e.metrics.signed(m)).collect(),
             )
         })
         .collect();
