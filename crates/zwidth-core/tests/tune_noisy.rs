@@ -154,6 +154,59 @@ fn noisy_finalists_are_the_mean_of_replicate_maps_with_a_t_interval() {
     assert_eq!(r.best.replicates, best.replicates);
     assert_eq!(r.best.score, best.final_score);
     assert_eq!(r.best.interval, best.final_interval);
+
+    // What a user reads: the history's JSON names the replicate of final
+    // maps only (0 is left out); the CSV has one row per evaluation with
+    // the replicate and the K-width interval; the table a line per
+    // finalist with its map count.
+    let finals: Vec<_> = r.history.iter().filter(|e| e.phase == "final").collect();
+    for e in &r.history {
+        let v = serde_json::to_value(e).unwrap();
+        assert_eq!(v.get("replicate").is_some(), e.replicate > 0, "{v}");
+    }
+    assert!(finals.iter().any(|e| e.replicate > 0));
+    let csv = r.csv();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(
+        &header[header.len() - 3..],
+        ["replicate", "k_width_lo", "k_width_hi"]
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), r.history.len());
+    for (row, e) in rows.iter().zip(&r.history) {
+        assert_eq!(row.len(), header.len());
+        assert_eq!(row[header.len() - 3], e.replicate.to_string());
+        let [lo, hi] = e.metrics.k_width_interval.unwrap();
+        assert_eq!(row[header.len() - 2], lo.to_string());
+        assert_eq!(row[header.len() - 1], hi.to_string());
+    }
+    let table = r.table();
+    for f in &c.finalists {
+        let line = format!("cutoff_hz = {:.6}", f.params["cutoff_hz"]);
+        let l = table
+            .lines()
+            .find(|l| l.contains("finalist") && l.contains(&line))
+            .unwrap_or_else(|| panic!("{line} in {table}"));
+        assert!(l.ends_with(&format!("{} map(s)", f.replicates)), "{l}");
+    }
+    assert!(
+        table.contains(&format!("mean of {} map(s)", r.best.replicates)),
+        "{table}"
+    );
+}
+
+#[test]
+fn the_cost_counts_twice_the_replicates_per_finalist_on_noisy_scenes_only() {
+    // 3 search maps at draft + 2 finalists × up to 2 × 3 replicates.
+    let noisy = spec(3).validate().unwrap();
+    assert_eq!(noisy.cost.maps, 3 + 2 * 2 * 3);
+    // The same tune on the device without friction and quantization: one
+    // map per finalist (exact verdicts, nothing to replicate).
+    let mut exact = spec(3);
+    exact.scene.device.coulomb = 0.0;
+    exact.scene.device.quantization = 0.0;
+    assert_eq!(exact.validate().unwrap().cost.maps, 3 + 2);
 }
 
 #[test]
@@ -162,6 +215,14 @@ fn one_replicate_is_one_map_and_the_count_is_checked() {
     let finals: Vec<_> = r.history.iter().filter(|e| e.phase == "final").collect();
     assert_eq!(finals.len(), 2);
     assert!(finals.iter().all(|e| e.replicate == 0));
+    // Left out, a request gets the documented default (docs/tuning.md: 3).
+    let json = serde_json::json!({
+        "scene": serde_json::from_str::<serde_json::Value>(SEED_2018).unwrap(),
+        "params": {"cutoff_hz": {"min": 300, "max": 499}},
+        "objective": "k_width"
+    });
+    let parsed: TuneSpec = serde_json::from_value(json).unwrap();
+    assert_eq!(parsed.replicates, 3);
     for n in [0, 21] {
         let e = spec(n).validate().err().expect("refused");
         assert_eq!(e.field, "replicates");
