@@ -230,3 +230,62 @@ fn one_replicate_is_one_map_and_the_count_is_checked() {
         assert!(e.allowed.contains("1 to 20"), "{}", e.allowed);
     }
 }
+
+#[test]
+fn stored_keys_name_replicates_after_the_first_and_keep_the_old_form() {
+    // A tune stored before replicates existed keyed its evaluations
+    // "<accuracy>|<name>=<f64 bits>"; replicate 0 keeps that key (so those
+    // tunes resume from their stored maps), later ones add "|r<n>".
+    let o = std::sync::Arc::new(zwidth_core::zwidth::search::Observer::default());
+    let r = spec(2).validate().unwrap().run(Some(o.clone())).unwrap();
+    let keys: Vec<String> = o
+        .take_new_evaluations()
+        .into_iter()
+        .map(|e| e.key)
+        .collect();
+    for e in r.history.iter().filter(|e| !e.cached) {
+        let bits = format!("cutoff_hz={:016x}", e.params["cutoff_hz"].to_bits());
+        let want = match e.replicate {
+            0 => format!("draft|{bits}"),
+            n => format!("draft|{bits}|r{n}"),
+        };
+        assert!(keys.contains(&want), "{want} in {keys:?}");
+    }
+}
+
+#[test]
+fn b_width_objectives_replicate_and_unbounded_intervals_do_not() {
+    // B-width has an interval on a noisy scene: replicated like K-width.
+    let mut b = spec(2);
+    b.objective = Objective::Single(Metric::BWidth);
+    let r = b.validate().unwrap().run(None).unwrap();
+    let c = r.coarse_to_fine.unwrap();
+    assert!(c
+        .finalists
+        .iter()
+        .all(|f| f.replicates >= 2 && f.final_interval.is_some()));
+    // K up to 30 000 N/m only (the boundary at B = 20 lies far above):
+    // nothing is decided not passive, so every
+    // K-width interval reaches k_max — the search's range, not a verdict:
+    // no interval to rank by, one map per finalist.
+    let mut k = spec(3);
+    k.k_max = 30_000.0;
+    let r = k.validate().unwrap().run(None).unwrap();
+    let finals: Vec<_> = r.history.iter().filter(|e| e.phase == "final").collect();
+    let ivs: Vec<_> = finals
+        .iter()
+        .map(|e| (e.metrics.k_width, e.metrics.k_width_interval))
+        .collect();
+    assert!(
+        finals.iter().all(|e| e
+            .metrics
+            .k_width_interval
+            .is_some_and(|[_, hi]| hi == 30_000.0)),
+        "{ivs:?}"
+    );
+    let c = r.coarse_to_fine.unwrap();
+    assert!(c
+        .finalists
+        .iter()
+        .all(|f| f.replicates == 1 && f.final_interval.is_none()));
+}
