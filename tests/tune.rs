@@ -576,4 +576,23 @@ fn zwidth_tune_contract_and_bad_requests() {
         );
         assert!(!err.contains("panicked"));
     }
+    // The finalists' replicate count: 1 to 20 (docs/tuning.md).
+    for n in ["0", "21"] {
+        let (code, _, err) = zwidth(&[
+            "tune",
+            "--scene",
+            sc,
+            "--params",
+            r#"{"q":{"min":1,"max":10}}"#,
+            "--objective",
+            "k_width",
+            "--replicates",
+            n,
+        ]);
+        assert_eq!(code, 2, "--replicates {n}: {err}");
+        assert!(
+            err.contains(&format!("replicates = {n}")) && err.contains("1 to 20"),
+            "{err}"
+        );
+    }
 }
