@@ -151,6 +151,26 @@ fn noisy_finalists_are_the_mean_of_replicate_maps_with_a_t_interval() {
             assert_eq!(f.replicates, 4);
         }
     }
+    // The best's measures are its replicates' means.
+    let best_reps: Vec<_> = r
+        .history
+        .iter()
+        .filter(|e| e.phase == "final" && e.params == best.params)
+        .collect();
+    let mean_of = |f: &dyn Fn(&zwidth_core::tune::Evaluation) -> f64| {
+        best_reps.iter().map(|e| f(e)).sum::<f64>() / best_reps.len() as f64
+    };
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs().max(1.0);
+    let k = mean_of(&|e| e.metrics.k_width);
+    let fid = mean_of(&|e| e.metrics.max_fidelity_error.unwrap());
+    assert!(close(r.best.objectives["k_width"].unwrap(), k));
+    assert!(close(r.best.objectives["max_fidelity_error"].unwrap(), fid));
+    // Counts: maps computed and cache hits, over the search and every replicate.
+    assert_eq!(
+        r.evaluations,
+        r.history.iter().filter(|e| !e.cached).count()
+    );
+    assert_eq!(r.cache_hits, r.history.iter().filter(|e| e.cached).count());
     assert_eq!(r.best.replicates, best.replicates);
     assert_eq!(r.best.score, best.final_score);
     assert_eq!(r.best.interval, best.final_interval);
@@ -243,6 +263,14 @@ fn stored_keys_name_replicates_after_the_first_and_keep_the_old_form() {
         .into_iter()
         .map(|e| e.key)
         .collect();
+    // Progress: each computed map reports its scope done, out of the
+    // search budget plus twice the replicates per finalist (3 + 2·2·2).
+    let computed = r.history.iter().filter(|e| !e.cached).count();
+    assert!(
+        (o.fraction() - computed as f64 / 11.0).abs() < 1e-12,
+        "{}",
+        o.fraction()
+    );
     for e in r.history.iter().filter(|e| !e.cached) {
         let bits = format!("cutoff_hz={:016x}", e.params["cutoff_hz"].to_bits());
         let want = match e.replicate {
