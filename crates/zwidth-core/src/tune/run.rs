@@ -604,15 +604,6 @@ impl Run<'_> {
     fn pool(&self, reps: &[Evaluation]) -> Pooled {
         let n = reps.len();
         let mean = |f: &dyn Fn(&Evaluation) -> f64| reps.iter().map(f).sum::<f64>() / n as f64;
-        let mean_iv = |f: &dyn Fn(&Metrics) -> Option<[f64; 2]>| {
-            let ivs: Option<Vec<[f64; 2]>> = reps.iter().map(|e| f(&e.metrics)).collect();
-            ivs.map(|v| {
-                [
-                    v.iter().map(|x| x[0]).sum::<f64>() / n as f64,
-                    v.iter().map(|x| x[1]).sum::<f64>() / n as f64,
-                ]
-            })
-        };
         let fidelity: Option<Vec<f64>> =
             reps.iter().map(|e| e.metrics.max_fidelity_error).collect();
         let metrics = Metrics {
@@ -620,8 +611,10 @@ impl Run<'_> {
             b_width: mean(&|e| e.metrics.b_width),
             max_fidelity_error: fidelity.map(|v| v.iter().sum::<f64>() / n as f64),
             area: mean(&|e| e.metrics.area),
-            k_width_interval: mean_iv(&|m| m.k_width_interval),
-            b_width_interval: mean_iv(&|m| m.b_width_interval),
+            // The pooled score's interval is `Pooled::interval`; the maps'
+            // own stay with each replicate in the history.
+            k_width_interval: None,
+            b_width_interval: None,
         };
         let scores: Vec<f64> = reps.iter().map(|e| e.score).collect();
         let score = scores.iter().sum::<f64>() / n as f64;
@@ -782,6 +775,52 @@ mod replicate_tests {
             replicates,
             interval: Some(interval),
         }
+    }
+
+    #[test]
+    fn pooled_replicates_are_the_mean_with_a_student_t_interval() {
+        let spec: TuneSpec = serde_json::from_value(serde_json::json!({
+            "scene": {"device": {"coulomb": 0, "quantization": 0},
+                      "estimator": {"kind": "butterworth", "cutoff_hz": 200}},
+            "params": {"cutoff_hz": {"min": 100, "max": 400}},
+            "objective": "k_width"
+        }))
+        .unwrap();
+        let tune = spec.validate().unwrap();
+        let run = Run {
+            tune: &tune,
+            observer: None,
+            log: Mutex::new(Vec::new()),
+            cache: Mutex::new(HashMap::new()),
+            calls: Default::default(),
+            failure: Mutex::new(None),
+        };
+        let rep = |k: f64, lo: f64, hi: f64, fid: f64| {
+            let mut e = pooled(k, [lo, hi], 1).eval;
+            e.metrics.max_fidelity_error = Some(fid);
+            e.metrics.area = 2.0 * k;
+            e
+        };
+        // Two maps: 100 [99, 101] and 104 [103, 105]. Mean 102, s = 2√2,
+        // t(0.975, 1) = 12.706 (NIST table): half-width 12.706·2√2/√2 =
+        // 25.41, wider than the mean map interval [101, 103].
+        let p = run.pool(&[rep(100.0, 99.0, 101.0, 3.0), rep(104.0, 103.0, 105.0, 5.0)]);
+        assert_eq!(p.replicates, 2);
+        assert_eq!(p.eval.score, 102.0);
+        assert_eq!(p.eval.metrics.k_width, 102.0);
+        assert_eq!(p.eval.metrics.area, 204.0);
+        assert_eq!(p.eval.metrics.max_fidelity_error, Some(4.0));
+        let [lo, hi] = p.interval.unwrap();
+        assert!(
+            (lo - (102.0 - 25.412)).abs() < 2e-3 && (hi - (102.0 + 25.412)).abs() < 2e-3,
+            "{lo} {hi}"
+        );
+        // Three identical maps: s = 0, the mean map interval stands.
+        let p = run.pool(&vec![rep(100.0, 98.0, 101.0, 1.0); 3]);
+        assert_eq!(p.interval, Some([98.0, 101.0]));
+        // One map: its own interval.
+        let p = run.pool(&[rep(100.0, 97.0, 100.5, 1.0)]);
+        assert_eq!(p.interval, Some([97.0, 100.5]));
     }
 
     #[test]
