@@ -224,15 +224,7 @@ impl Run<'_> {
                     m.trials,
                 )
             };
-            let mut objectives: BTreeMap<String, Option<f64>> = BTreeMap::new();
-            for m in [
-                Metric::KWidth,
-                Metric::BWidth,
-                Metric::MaxFidelityError,
-                Metric::Area,
-            ] {
-                objectives.insert(metric_name(m).into(), metrics.get(m));
-            }
+            let objectives = objectives_of(&metrics);
             let e = Evaluation {
                 index,
                 phase: phase.into(),
@@ -636,15 +628,7 @@ impl Run<'_> {
             let half = student_t_quantile(0.975, (n - 1) as f64) * (var / n as f64).sqrt();
             [lo.min(score - half), hi.max(score + half)]
         });
-        let mut objectives: BTreeMap<String, Option<f64>> = BTreeMap::new();
-        for m in [
-            Metric::KWidth,
-            Metric::BWidth,
-            Metric::MaxFidelityError,
-            Metric::Area,
-        ] {
-            objectives.insert(metric_name(m).into(), metrics.get(m));
-        }
+        let objectives = objectives_of(&metrics);
         Pooled {
             eval: Evaluation {
                 index: reps[0].index,
@@ -696,6 +680,19 @@ fn more_replicates(pooled: &[Pooled], replicates: usize) -> Vec<usize> {
         .chain(rivals)
         .filter(|&i| pooled[i].replicates < 2 * replicates)
         .collect()
+}
+
+/// Every measure of a map by its name (an evaluation's `objectives`).
+fn objectives_of(metrics: &Metrics) -> BTreeMap<String, Option<f64>> {
+    [
+        Metric::KWidth,
+        Metric::BWidth,
+        Metric::MaxFidelityError,
+        Metric::Area,
+    ]
+    .into_iter()
+    .map(|m| (metric_name(m).into(), metrics.get(m)))
+    .collect()
 }
 
 /// Tolerance in u for the 1-D solvers: finer with a bigger budget.
