@@ -60,19 +60,14 @@ impl Run<'_> {
         format!("{}|{}{r}", accuracy_name(phase_acc), p.join(","))
     }
 
-    /// The map's K and B range: an interval reaching them was not bounded.
-    fn caps(&self) -> [f64; 2] {
-        [self.tune.spec.k_max, self.tune.spec.b_max]
-    }
-
     /// The score's interval when the objective is one metric with one
     /// (K-width or B-width on a noisy scene) and the interval's upper end is
     /// a verdict, not the map's range (`k_max`, `b_max`: nothing up to it
     /// was decided not passive).
     fn score_interval(&self, m: &Metrics) -> Option<[f64; 2]> {
         let (iv, cap) = match &self.tune.spec.objective {
-            Objective::Single(Metric::KWidth) => (m.k_width_interval, self.caps()[0]),
-            Objective::Single(Metric::BWidth) => (m.b_width_interval, self.caps()[1]),
+            Objective::Single(Metric::KWidth) => (m.k_width_interval, self.tune.spec.k_max),
+            Objective::Single(Metric::BWidth) => (m.b_width_interval, self.tune.spec.b_max),
             _ => return None,
         };
         iv.filter(|[_, hi]| *hi < cap)
