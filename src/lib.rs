@@ -16,7 +16,7 @@ pub mod store;
 // The numerics live in `zwidth-core` (crates/zwidth-core); they keep their
 // paths here (`zwidth::estimators`, `crate::zwidth::search`, …).
 pub use zwidth_core::{
-    accuracy, error, estimators, lipschitz, plant, plot, signals, spectral, tune, zwidth,
+    accuracy, error, estimators, identify, lipschitz, plant, plot, signals, spectral, tune, zwidth,
 };
 
 pub use error::SpecError;

@@ -493,3 +493,138 @@ fn compare_default_path_pins_c_and_the_ranking() {
         assert!(got / want > 1.0 / 1.5 && got / want < 1.5, "{k:?}");
     }
 }
+
+#[test]
+fn record_then_identify_round_trips_the_seed_device() {
+    // Reference: examples/seed_2018.json's device (the 2018 paper §V: 0.52 kg,
+    // 13.2 N·s/m, 0.19 N, 1 µm encoder) made the trace; identify must give
+    // it back within 2 % (issue 12's target) and write it as a scene.
+    let s = Scratch::new("identify");
+    let seed = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/seed_2018.json");
+    let trace = s.path("trace.csv");
+    let (trace, out) = (trace.to_str().unwrap(), s.path("scene.json"));
+    let o = zwidth(&["record", "--scene", seed, "--out", trace], "");
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert!(o.stdout.contains("20000 samples"), "{}", o.stdout);
+    let id = json_ok(
+        &[
+            "identify",
+            trace,
+            "--json",
+            "--out",
+            out.to_str().unwrap(),
+            "--scene",
+            seed,
+        ],
+        "",
+    );
+    for (name, want) in [("mass", 0.52), ("damping", 13.2), ("coulomb", 0.19)] {
+        let v = id[name]["value"].as_f64().unwrap();
+        assert!((v / want - 1.0).abs() < 0.02, "{name}: {v} vs {want}");
+        let (lo, hi) = (
+            id[name]["lo"].as_f64().unwrap(),
+            id[name]["hi"].as_f64().unwrap(),
+        );
+        assert!(
+            lo <= want && want <= hi,
+            "{name}: {want} outside [{lo}, {hi}]"
+        );
+    }
+    let scene: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(scene["device"]["mass"], id["mass"]["value"]);
+    assert_eq!(scene["device"]["coulomb"], id["coulomb"]["value"]);
+    // Everything else comes from the base scene.
+    assert_eq!(scene["estimator"]["cutoff_hz"], 499.0);
+    // The written scene runs.
+    let o = zwidth(
+        &[
+            "trial",
+            "--scene",
+            out.to_str().unwrap(),
+            "--k",
+            "1000",
+            "--b",
+            "0",
+        ],
+        "",
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    // The text report names the parameters and units.
+    let o = zwidth(&["identify", trace], "");
+    assert!(
+        o.stdout.contains("mass") && o.stdout.contains("N·s/m") && o.stdout.contains("95 %"),
+        "{}",
+        o.stdout
+    );
+}
+
+#[test]
+fn record_and_identify_reject_bad_input() {
+    let s = Scratch::new("identify-bad");
+    let seed = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/seed_2018.json");
+    let t = s.path("t.csv");
+    let t = t.to_str().unwrap();
+    rejects(
+        &["record", "--scene", seed, "--out", t, "--f-max", "900"],
+        "",
+        "--f-max = 900",
+    );
+    rejects(
+        &["record", "--scene", seed, "--out", t, "--peak-force", "0"],
+        "",
+        "--peak-force = 0",
+    );
+    rejects(
+        &["record", "--scene", seed, "--out", t, "--duration", "0.5"],
+        "",
+        "--duration = 0.5",
+    );
+    let limited = s.scene(
+        "limited",
+        r#"{"device":{"force_limit":0.5},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+    );
+    rejects(
+        &[
+            "record",
+            "--scene",
+            &limited,
+            "--out",
+            t,
+            "--peak-force",
+            "1",
+        ],
+        "",
+        "force_limit",
+    );
+    assert!(
+        !std::path::Path::new(t).exists(),
+        "nothing written on bad input"
+    );
+    rejects(&["identify", t], "", "cannot be read");
+    let mut rows = String::from("t_s,force_n,position_m\n");
+    for k in 0..1500 {
+        rows += &format!(
+            "{},{},0\n",
+            k as f64 * 1e-3,
+            if k == 700 {
+                "inf".to_string()
+            } else {
+                "0.1".into()
+            }
+        );
+    }
+    std::fs::write(t, &rows).unwrap();
+    rejects(
+        &["identify", t],
+        "",
+        "trace line 702, column 2 (force_n) = inf",
+    );
+    std::fs::write(t, rows.replace("t_s,force_n,position_m", "time,force")).unwrap();
+    rejects(&["identify", t], "", "trace line 1 (header)");
+    rejects(
+        &["identify", t, "--model", "two_mass"],
+        "",
+        "--model = \"two_mass\"",
+    );
+}

@@ -450,6 +450,36 @@ pub(super) fn run(
                 writeln!(stdout, "{report}").map_err(io)
             }
         }
+        Command::Record {
+            scene,
+            out,
+            duration,
+            period,
+            f_max,
+            peak_force,
+        } => {
+            let ex = crate::identify::record::Excitation {
+                period_s: period,
+                f_max_hz: f_max,
+                peak_force,
+                duration_s: duration,
+            };
+            super::identify::run_record(&scene, ex, &out, stdout)
+        }
+        Command::Identify {
+            trace,
+            model,
+            scene,
+            out,
+            json,
+        } => super::identify::run_identify(
+            &trace,
+            &model,
+            scene.as_deref(),
+            out.as_deref(),
+            json,
+            stdout,
+        ),
         other => Err(CliError::Failure(format!("{other:?} is not handled here"))),
     }
 }

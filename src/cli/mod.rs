@@ -4,6 +4,7 @@
 //! shared helpers in `common`.
 
 mod common;
+mod identify;
 mod local;
 mod service;
 
@@ -199,6 +200,45 @@ pub enum Command {
         /// Write one map plot per estimator into this directory.
         #[arg(long)]
         svg_dir: Option<PathBuf>,
+    },
+    /// Record an open-loop identification trace from the scene's simulated
+    /// device: a Schroeder multisine force, CSV t_s,force_n,position_m.
+    Record {
+        #[arg(long)]
+        scene: PathBuf,
+        /// The CSV to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// Record length (s).
+        #[arg(long, default_value_t = 20.0)]
+        duration: f64,
+        /// Multisine period (s); the lowest line is its inverse.
+        #[arg(long, default_value_t = 2.0)]
+        period: f64,
+        /// Highest multisine line (Hz).
+        #[arg(long, default_value_t = 20.0)]
+        f_max: f64,
+        /// Peak force command (N).
+        #[arg(long, default_value_t = 1.0)]
+        peak_force: f64,
+    },
+    /// Identify the device (mass, damping, Coulomb friction, with 95 %
+    /// intervals) from an open-loop trace (CSV t_s,force_n,position_m).
+    Identify {
+        /// The trace CSV (as `zwidth record` writes, or from a rig).
+        trace: PathBuf,
+        /// mass_damper_coulomb | mass_damper
+        #[arg(long, default_value = "mass_damper_coulomb")]
+        model: String,
+        /// Scene to take everything but the device from (default: the
+        /// default scene at the trace's sample rate).
+        #[arg(long)]
+        scene: Option<PathBuf>,
+        /// Write the identified scene here.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[arg(long)]
+        json: bool,
     },
     /// Run the HTTP service: queue experiments, run them, store every run in SQLite.
     Serve {

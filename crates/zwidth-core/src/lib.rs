@@ -12,6 +12,7 @@
 pub mod accuracy;
 pub mod error;
 pub mod estimators;
+pub mod identify;
 pub mod lipschitz;
 pub mod plant;
 pub mod plot;

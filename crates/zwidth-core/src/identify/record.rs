@@ -1,0 +1,120 @@
+//! An open-loop identification run on the simulated device: a
+//! Schroeder-phased multisine force (the input the 2018 paper identified its
+//! device with, §V, ref. [35]) into the exact plant, the encoder quantized
+//! each sample. What `zwidth record` writes, so `identify` can be checked
+//! against the parameters that made the trace.
+
+use serde::{Deserialize, Serialize};
+
+use super::trace::Trace;
+use crate::error::{require_positive, require_range, SpecError};
+use crate::plant::{Plant, PlantState};
+use crate::signals::quantize;
+use crate::spectral::Multisine;
+use crate::zwidth::scene::Scene;
+
+/// The excitation: lines every `1/period_s` Hz up to `f_max_hz`, scaled so
+/// the command peaks at `peak_force` (N).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Excitation {
+    /// Length of one multisine period (s); its inverse is the lowest line.
+    pub period_s: f64,
+    /// Highest line (Hz), below the sample rate's Nyquist.
+    pub f_max_hz: f64,
+    /// Largest force command (N).
+    pub peak_force: f64,
+    /// Record length (s).
+    pub duration_s: f64,
+}
+
+impl Default for Excitation {
+    /// 2 s periods, lines 0.5–20 Hz (the seed device's 4 Hz corner m/b in
+    /// the middle), 1 N peak (≈ 5× its Coulomb friction), 20 s.
+    fn default() -> Self {
+        Self {
+            period_s: 2.0,
+            f_max_hz: 20.0,
+            peak_force: 1.0,
+            duration_s: 20.0,
+        }
+    }
+}
+
+impl Excitation {
+    pub fn validate(&self, scene: &Scene) -> Result<(), SpecError> {
+        require_range("period_s", self.period_s, 0.01, 1000.0, "s")?;
+        require_positive("peak_force", self.peak_force, "N")?;
+        let nyquist = 0.5 / scene.dt;
+        require_range(
+            "f_max_hz",
+            self.f_max_hz,
+            1.0 / self.period_s,
+            nyquist,
+            "Hz; from the lowest line 1/period_s to the Nyquist frequency",
+        )?;
+        require_range("duration_s", self.duration_s, 1.0, 3600.0, "s")?;
+        if (self.duration_s / scene.dt) < super::trace::MIN_SAMPLES as f64 {
+            return Err(SpecError::new(
+                "duration_s",
+                self.duration_s,
+                format!(
+                    "must hold at least {} samples at the scene's {} Hz",
+                    super::trace::MIN_SAMPLES,
+                    1.0 / scene.dt
+                ),
+            ));
+        }
+        if let Some(limit) = scene.spec.device.force_limit {
+            if self.peak_force > limit {
+                return Err(SpecError::new(
+                    "peak_force",
+                    self.peak_force,
+                    format!("must not exceed the device's force_limit {limit} N (a clipped command cannot be identified from)"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Simulate the scene's device (mass, damping, Coulomb friction with
+/// stick–slip, encoder quantization; the estimator and wall are not used)
+/// under the multisine, one force update per encoder sample.
+pub fn record(scene: &Scene, ex: &Excitation) -> Trace {
+    let d = &scene.spec.device;
+    let dt = scene.dt;
+    let n = (ex.duration_s / dt).round() as usize;
+    let per_period = (ex.period_s / dt).round().max(1.0) as usize;
+    let period_s = per_period as f64 * dt; // a whole number of samples
+    let ms = Multisine::schroeder(1.0 / period_s, ex.f_max_hz, ex.peak_force);
+    let one = ms.period(per_period);
+    let plant = Plant::new(d.mass, d.damping, d.coulomb, dt);
+    let mut s = PlantState::default();
+    let (mut t, mut force, mut position) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    for k in 0..n {
+        let f = one[k % per_period];
+        t.push(k as f64 * dt);
+        force.push(f);
+        position.push(if d.quantization > 0.0 {
+            quantize(s.x, d.quantization)
+        } else {
+            s.x
+        });
+        if d.coulomb > 0.0 {
+            plant.step_friction(&mut s, f);
+        } else {
+            plant.step_linear(&mut s, f);
+        }
+    }
+    Trace {
+        dt,
+        t,
+        force,
+        position,
+    }
+}

@@ -1,0 +1,133 @@
+//! `zwidth record` (an open-loop identification trace from the simulated
+//! device) and `zwidth identify` (the device's m, b, f_c back from a trace,
+//! written as a scene).
+
+use std::io::Write;
+use std::path::Path;
+
+use crate::identify::record::{record, Excitation};
+use crate::identify::{identify, Estimate, Identified, Model, Trace};
+use crate::zwidth::scene::SceneSpec;
+
+use super::common::*;
+use super::CliError;
+
+pub(super) fn run_record(
+    scene: &Path,
+    excitation: Excitation,
+    out: &Path,
+    stdout: &mut impl Write,
+) -> Result<(), CliError> {
+    let sc = read_scene(scene)?.validate()?;
+    excitation.validate(&sc).map_err(|mut e| {
+        // Name the flag the value came from.
+        e.field = match e.field.as_str() {
+            "period_s" => "--period",
+            "f_max_hz" => "--f-max",
+            "peak_force" => "--peak-force",
+            "duration_s" => "--duration",
+            other => other,
+        }
+        .to_string();
+        CliError::from(e)
+    })?;
+    let trace = record(&sc, &excitation);
+    write_file(out, &trace.to_csv())?;
+    writeln!(
+        stdout,
+        "wrote {} samples ({} s at {} Hz; multisine {}–{} Hz, peak {} N) to {}",
+        trace.t.len(),
+        excitation.duration_s,
+        trace.sample_hz(),
+        1.0 / excitation.period_s,
+        excitation.f_max_hz,
+        excitation.peak_force,
+        out.display()
+    )
+    .map_err(io)
+}
+
+/// The scene `identify` writes: the base (or the default scene at the
+/// trace's rate) with the identified device.
+fn identified_scene(id: &Identified, base: Option<SceneSpec>) -> SceneSpec {
+    let mut spec = base.unwrap_or_else(|| {
+        let mut s = SceneSpec::default();
+        s.control.sample_hz = id.sample_hz;
+        s.control.render_hz = id.sample_hz;
+        s
+    });
+    spec.device.mass = id.mass.value;
+    spec.device.damping = id.damping.value;
+    spec.device.coulomb = id.coulomb.value;
+    spec.device.quantization = id.quantization;
+    spec
+}
+
+fn row(name: &str, e: &Estimate, unit: &str) -> String {
+    format!(
+        "  {name:<9} {:>11.5} {unit:<6} 95 % [{:.5}, {:.5}]  (± {:.2} %)\n",
+        e.value,
+        e.lo,
+        e.hi,
+        if e.value != 0.0 {
+            100.0 * (e.hi - e.value) / e.value.abs()
+        } else {
+            0.0
+        }
+    )
+}
+
+pub(super) fn run_identify(
+    trace: &Path,
+    model: &str,
+    base: Option<&Path>,
+    out: Option<&Path>,
+    json: bool,
+    stdout: &mut impl Write,
+) -> Result<(), CliError> {
+    let model: Model = parse_choice("model", model)?;
+    let base = base.map(read_scene).transpose()?;
+    let text = std::fs::read_to_string(trace)
+        .map_err(|e| CliError::Input(format!("{} cannot be read: {e}", trace.display())))?;
+    let tr = Trace::parse_csv(&text)
+        .map_err(|e| CliError::Input(format!("{}: {e}", trace.display())))?;
+    let id =
+        identify(&tr, model).map_err(|e| CliError::Input(format!("{}: {e}", trace.display())))?;
+    let spec = identified_scene(&id, base);
+    // The identified device must make a valid scene before anything is written.
+    spec.validate().map_err(|e| {
+        CliError::Input(format!(
+            "{}: the identified device is not a valid scene ({e}); the trace does not determine it: excite a wider band or longer",
+            trace.display()
+        ))
+    })?;
+    if let Some(path) = out {
+        let text =
+            serde_json::to_string_pretty(&spec).map_err(|e| CliError::Failure(e.to_string()))?;
+        write_file(path, &(text + "\n"))?;
+    }
+    write_either(stdout, json, &id, || {
+        let mut s =
+            format!(
+            "{} from {} s at {} Hz ({} of {} windows moving one way; interval from {} blocks):\n",
+            match id.model {
+                Model::MassDamperCoulomb => "mass_damper_coulomb",
+                Model::MassDamper => "mass_damper",
+            },
+            id.duration_s, id.sample_hz, id.windows_used, id.windows_tried, id.blocks
+        );
+        s += &row("mass", &id.mass, "kg");
+        s += &row("damping", &id.damping, "N·s/m");
+        if id.model == Model::MassDamperCoulomb {
+            s += &row("coulomb", &id.coulomb, "N");
+        }
+        s += &format!(
+            "  encoder step {:e} m; fit residual {:.2e} N RMS\n",
+            id.quantization, id.residual_rms_n
+        );
+        if let Some(p) = out {
+            s += &format!("scene written to {}\n", p.display());
+        }
+        s
+    })
+}
