@@ -96,6 +96,20 @@ pub(super) fn parse_choice<T: serde::de::DeserializeOwned>(
         .map_err(|e| CliError::Input(format!("--{flag} = {value:?} is not allowed: {e}")))
 }
 
+/// A tune objective from a flag: a metric name or its JSON form.
+pub(super) fn parse_objective(flag: &str, value: &str) -> Result<crate::tune::Objective, CliError> {
+    if value.trim_start().starts_with('{') {
+        serde_json::from_str(value)
+    } else {
+        serde_json::from_value(serde_json::Value::String(value.to_string()))
+    }
+    .map_err(|e| {
+        CliError::Input(format!(
+            "--{flag} = {value:?} is not allowed: {e}; k_width, b_width, max_fidelity_error, area, {{\"weighted\":{{…}}}} or {{\"pareto\":[…]}}"
+        ))
+    })
+}
+
 pub(super) fn write_json(out: &mut impl Write, v: &impl serde::Serialize) -> Result<(), CliError> {
     serde_json::to_writer_pretty(&mut *out, v).map_err(|e| CliError::Failure(e.to_string()))?;
     writeln!(out).map_err(io)

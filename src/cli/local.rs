@@ -201,16 +201,7 @@ pub(super) fn run(
                     "--params = {params:?} is not allowed: {e}; e.g. '{{\"cutoff_hz\":{{\"min\":10,\"max\":500}}}}'"
                 ))
             })?;
-            let objective: crate::tune::Objective = if objective.trim_start().starts_with('{') {
-                serde_json::from_str(&objective)
-            } else {
-                serde_json::from_value(serde_json::Value::String(objective.clone()))
-            }
-            .map_err(|e| {
-                CliError::Input(format!(
-                    "--objective = {objective:?} is not allowed: {e}; k_width, b_width, max_fidelity_error, area, {{\"weighted\":{{…}}}} or {{\"pareto\":[…]}}"
-                ))
-            })?;
+            let objective = parse_objective("objective", &objective)?;
             let spec = crate::tune::TuneSpec {
                 scene: read_scene(&scene)?,
                 params,
@@ -248,15 +239,37 @@ pub(super) fn run(
             accuracy,
             json,
             svg_dir,
+            tuned,
+            max_evaluations,
+            seed,
         } => {
             let spec = match &scene {
                 Some(p) => read_scene(p)?,
                 None => compare::seed_2018_scene(),
             };
             let acc = Accuracy::Preset(parse_choice("accuracy", &accuracy)?);
+            let tuned = tuned
+                .map(|o| -> Result<_, CliError> {
+                    let t = crate::tune::fair::TunedCompare {
+                        objective: parse_objective("tuned", &o)?,
+                        max_evaluations,
+                        seed,
+                    };
+                    t.validate().map_err(|mut e| {
+                        e.field = e
+                            .field
+                            .replace("tuned.max_evaluations", "--max-evaluations")
+                            .replace("tuned.objective", "--tuned");
+                        CliError::from(e)
+                    })?;
+                    Ok(t)
+                })
+                .transpose()?;
+            spec.validate()?;
             let observer = std::sync::Arc::new(Observer::default());
-            let r = with_progress(&observer, || {
-                compare::compare_observed(&spec, &acc, None, Some(observer.clone()))
+            let r = with_progress(&observer, || match &tuned {
+                Some(t) => crate::tune::fair::compare_tuned(&spec, &acc, t, Some(observer.clone())),
+                None => compare::compare_observed(&spec, &acc, None, Some(observer.clone())),
             })?;
             if let Some(dir) = svg_dir {
                 std::fs::create_dir_all(&dir).map_err(|e| {

@@ -200,6 +200,17 @@ pub enum Command {
         /// Write one map plot per estimator into this directory.
         #[arg(long)]
         svg_dir: Option<PathBuf>,
+        /// Tune each estimator for this objective first (k_width, b_width,
+        /// max_fidelity_error, area or a weighted JSON), as the paper did;
+        /// without it the rows use the paper's fixed parameters.
+        #[arg(long)]
+        tuned: Option<String>,
+        /// With --tuned: maps each estimator's search may make (1–200).
+        #[arg(long, default_value_t = 24)]
+        max_evaluations: usize,
+        /// With --tuned: seeds the searches.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
     },
     /// Record an open-loop identification trace from the scene's simulated
     /// device: a Schroeder multisine force, CSV t_s,force_n,position_m.

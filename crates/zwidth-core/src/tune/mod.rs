@@ -7,6 +7,7 @@
 //! (same accuracy, same parameter values to the bit) come from a cache that
 //! a resumed run preloads from the store.
 
+pub mod fair;
 pub mod params;
 mod run;
 pub mod solvers;

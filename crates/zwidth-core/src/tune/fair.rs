@@ -1,0 +1,258 @@
+//! A fair comparison: each of the 2018 paper's estimators tuned for one
+//! objective before the comparison, as the paper did in simulation (§V:
+//! "the parameters of each method were tuned … to maximize the Z-width"),
+//! instead of the paper's fixed values taken over to another scene.
+//!
+//! What is tuned (the paper's tunable parameters, Table I): FDM + filter
+//! the Butterworth cutoff (10 Hz to 0.499·f_s), AKF its q (1e2–1e9, log),
+//! Levant μ1 and μ2 with the paper's C (1–40 and 0.5–60, log, as
+//! `bench tune`); FOAW has none and keeps its fixed row. Each tune searches
+//! at `draft` and re-maps its three finalists at the comparison's accuracy
+//! (one map each: the comparison's own map then gives the row's interval).
+
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use super::{Bounds, Objective, SolverKind, TuneResult, TuneSpec};
+use crate::error::SpecError;
+use crate::estimators::{EstimatorKind, EstimatorSpec};
+use crate::zwidth::compare::{self, CompareResult, RowTuning};
+use crate::zwidth::cost::Cost;
+use crate::zwidth::observer::Observer;
+use crate::zwidth::scene::SceneSpec;
+use crate::zwidth::settings::{Accuracy, Criterion, Method, Preset, SearchKind};
+use crate::zwidth::sweep::Scale;
+
+/// `"tuned": {"objective": "k_width", "max_evaluations": 24}` on a compare.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TunedCompare {
+    /// What each estimator is tuned for: a metric or a weighted sum (not a
+    /// Pareto front: a comparison needs one best per estimator).
+    pub objective: Objective,
+    /// Maps each estimator's search may make (1–200; default 24).
+    #[serde(default = "d_evaluations")]
+    pub max_evaluations: usize,
+    /// Seeds the searches' designs: same seed, same result.
+    #[serde(default)]
+    pub seed: u64,
+}
+
+fn d_evaluations() -> usize {
+    24
+}
+
+/// Most search maps per estimator in a tuned comparison.
+pub const MAX_COMPARE_EVALUATIONS: usize = 200;
+
+/// The parameters a comparison tunes for `estimator`, or None (nothing to tune).
+pub fn tunable(estimator: &EstimatorSpec, sample_hz: f64) -> Option<BTreeMap<String, Bounds>> {
+    let b = |min, max, scale| Bounds {
+        min,
+        max,
+        scale,
+        step: None,
+    };
+    let list = match &estimator.kind {
+        EstimatorKind::Butterworth { .. } => {
+            vec![("cutoff_hz", b(10.0, 0.499 * sample_hz, Scale::Linear))]
+        }
+        EstimatorKind::AdaptiveKalman { .. } | EstimatorKind::Kalman { .. } => {
+            vec![("q", b(1e2, 1e9, Scale::Log))]
+        }
+        EstimatorKind::Levant(_) => vec![
+            ("mu1", b(1.0, 40.0, Scale::Log)),
+            ("mu2", b(0.5, 60.0, Scale::Log)),
+        ],
+        _ => return None,
+    };
+    Some(list.into_iter().map(|(n, b)| (n.to_string(), b)).collect())
+}
+
+fn objective_name(o: &Objective) -> String {
+    serde_json::to_string(o)
+        .unwrap_or_default()
+        .trim_matches('"')
+        .to_string()
+}
+
+impl TunedCompare {
+    pub fn validate(&self) -> Result<(), SpecError> {
+        if let Objective::Pareto(_) = self.objective {
+            return Err(SpecError::new(
+                "tuned.objective",
+                objective_name(&self.objective),
+                "must be one metric or a weighted sum: a comparison needs one best per estimator",
+            ));
+        }
+        if !(1..=MAX_COMPARE_EVALUATIONS).contains(&self.max_evaluations) {
+            return Err(SpecError::new(
+                "tuned.max_evaluations",
+                self.max_evaluations,
+                format!("must be 1 to {MAX_COMPARE_EVALUATIONS}"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The tune for one estimator of the comparison.
+    fn spec(
+        &self,
+        scene: &SceneSpec,
+        estimator: &EstimatorSpec,
+        accuracy: &Accuracy,
+    ) -> Option<TuneSpec> {
+        let params = tunable(estimator, scene.control.sample_hz)?;
+        let m = compare::map_spec(scene.clone(), accuracy);
+        Some(TuneSpec {
+            scene: SceneSpec {
+                estimator: estimator.clone(),
+                ..scene.clone()
+            },
+            params,
+            objective: self.objective.clone(),
+            method: Method::Auto,
+            criterion: Criterion::Impedance,
+            search: SearchKind::RobustBisect,
+            accuracy: Accuracy::Preset(Preset::Draft),
+            final_accuracy: accuracy.clone(),
+            finalists: 3,
+            replicates: 1,
+            solver: SolverKind::Auto,
+            seed: self.seed,
+            max_evaluations: self.max_evaluations,
+            constraint: None,
+            b: None,
+            b_max: m.b_max,
+            k_max: m.k_max,
+        })
+    }
+
+    /// What the whole tuned comparison may cost: every tune, then the
+    /// comparison's maps. (Validates the tunes with a stand-in C; the
+    /// comparison estimates C from a wall hit when it runs.)
+    pub fn cost(&self, scene: &SceneSpec, accuracy: &Accuracy) -> Result<Cost, SpecError> {
+        self.validate()?;
+        let list = compare::paper_estimators(scene, 12.0);
+        let one = crate::zwidth::search::validate(&compare::map_spec(scene.clone(), accuracy))?;
+        let mut total = one.times(list.len() as u64);
+        for (_, _, e) in &list {
+            if let Some(spec) = self.spec(scene, e, accuracy) {
+                total = total.plus(spec.validate()?.cost);
+            }
+        }
+        Ok(total)
+    }
+}
+
+/// Run `spec` with its own observer, forwarding a cancel from `parent` and
+/// reporting the tune's progress to it as scope `scope` (the tune's
+/// trials are not stored: a resumed comparison tunes again).
+fn run_tune(
+    spec: &TuneSpec,
+    parent: Option<&Arc<Observer>>,
+    scope: u32,
+) -> Result<TuneResult, SpecError> {
+    let tune = spec.validate()?;
+    let Some(parent) = parent else {
+        return tune.run(None);
+    };
+    let child = Arc::new(Observer::default());
+    let done = AtomicBool::new(false);
+    std::thread::scope(|s| {
+        s.spawn(|| {
+            while !done.load(Ordering::Relaxed) {
+                if parent.cancelled() {
+                    child.cancel.store(true, Ordering::Relaxed);
+                }
+                parent.report(scope, child.fraction());
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+        });
+        let r = tune.run(Some(child.clone()));
+        done.store(true, Ordering::Relaxed);
+        parent.report(scope, 1.0);
+        r
+    })
+}
+
+fn describe(e: &EstimatorSpec, c: f64) -> String {
+    match &e.kind {
+        EstimatorKind::Butterworth { cutoff_hz, .. } => format!("ωc = {cutoff_hz:.1} Hz"),
+        EstimatorKind::AdaptiveKalman { q, .. } | EstimatorKind::Kalman { q, .. } => {
+            format!("q = {q:.3e}")
+        }
+        EstimatorKind::Levant(l) => match (l.mu1, l.mu2) {
+            (Some(mu1), Some(mu2)) => format!(
+                "α = {:.2} m/s², λ = {:.3} m^½/s (μ1 = {mu1:.3}, μ2 = {mu2:.3}, C = {c:.3})",
+                mu1 * c,
+                mu2 * c.sqrt()
+            ),
+            _ => e.label(),
+        },
+        _ => e.label(),
+    }
+}
+
+/// The paper's estimators on `scene`, each tuned for `tuned.objective`
+/// first, then mapped at `accuracy` side by side. Progress: one scope per
+/// tune, then one per map.
+pub fn compare_tuned(
+    scene: &SceneSpec,
+    accuracy: &Accuracy,
+    tuned: &TunedCompare,
+    observer: Option<Arc<Observer>>,
+) -> Result<CompareResult, SpecError> {
+    tuned.validate()?;
+    let start = Instant::now();
+    let c = compare::estimate_c(scene)?;
+    let list = compare::paper_estimators(scene, c.estimate.lipschitz);
+    if let Some(o) = &observer {
+        let tunes = list
+            .iter()
+            .filter(|(_, _, e)| tunable(e, scene.control.sample_hz).is_some())
+            .count();
+        o.set_scopes(list.len() + tunes);
+    }
+    let mut rows = Vec::with_capacity(list.len());
+    let mut tunings = Vec::with_capacity(list.len());
+    for (i, (name, parameters, estimator)) in list.into_iter().enumerate() {
+        match tuned.spec(scene, &estimator, accuracy) {
+            Some(spec) => {
+                let t = Instant::now();
+                let r = run_tune(&spec, observer.as_ref(), 1000 + i as u32)?;
+                let best = r.best.scene.estimator.clone();
+                rows.push((
+                    name,
+                    describe(&best, c.estimate.lipschitz) + " (tuned)",
+                    best,
+                ));
+                tunings.push(Some(RowTuning {
+                    params: r.best.params.clone(),
+                    bounds: spec
+                        .params
+                        .iter()
+                        .map(|(n, b)| format!("{n}: {}–{}", b.min, b.max))
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    evaluations: r.evaluations,
+                    elapsed_s: t.elapsed().as_secs_f64(),
+                }));
+            }
+            None => {
+                rows.push((name, parameters + " (nothing to tune)", estimator));
+                tunings.push(None);
+            }
+        }
+    }
+    let mut result = compare::compare_rows(scene, accuracy, c, rows, observer)?;
+    for (row, tuning) in result.rows.iter_mut().zip(tunings) {
+        row.tuning = tuning;
+    }
+    result.tuned_for = Some(objective_name(&tuned.objective));
+    result.elapsed_s = start.elapsed().as_secs_f64();
+    Ok(result)
+}
