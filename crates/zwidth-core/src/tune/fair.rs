@@ -162,6 +162,14 @@ fn run_tune(
     };
     let child = Arc::new(Observer::default());
     let done = AtomicBool::new(false);
+    /// Ends the forwarding loop however the tune ends (a panic included:
+    /// otherwise the scope would wait for the loop forever).
+    struct Done<'a>(&'a AtomicBool);
+    impl Drop for Done<'_> {
+        fn drop(&mut self) {
+            self.0.store(true, Ordering::Relaxed);
+        }
+    }
     std::thread::scope(|s| {
         s.spawn(|| {
             while !done.load(Ordering::Relaxed) {
@@ -172,8 +180,8 @@ fn run_tune(
                 std::thread::sleep(std::time::Duration::from_millis(50));
             }
         });
+        let _done = Done(&done);
         let r = tune.run(Some(child.clone()));
-        done.store(true, Ordering::Relaxed);
         parent.report(scope, 1.0);
         r
     })

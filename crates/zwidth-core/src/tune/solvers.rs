@@ -106,6 +106,15 @@ pub fn nelder_mead<C: Cost>(c: &C, start: &[f64], step: f64, max_iters: u64) -> 
         };
         simplex.push(p);
     }
+    // argmin's Nelder–Mead unwraps the costs of its first simplex (it would
+    // panic on a spent budget or a cancel): evaluate the vertices here first
+    // and stop quietly if one is refused. The tune caches evaluations, so
+    // argmin's own pass over them computes nothing again.
+    for p in &simplex {
+        if c.cost(p).is_err() {
+            return Ok(());
+        }
+    }
     let solver = NelderMead::new(simplex).with_sd_tolerance(1e-6)?;
     run_with_cancel!(
         c,
@@ -217,6 +226,35 @@ mod tests {
             (u[0] - 0.3).abs() < 1e-2 && (u[1] - 0.7).abs() < 1e-2,
             "{u:?}"
         );
+    }
+
+    /// Refuses every evaluation after the first `budget` (as a tune does
+    /// when its budget is spent or it is cancelled).
+    struct Budget(RefCell<usize>, usize);
+    impl Cost for Budget {
+        fn cost(&self, u: &[f64]) -> Result<f64, Error> {
+            let mut n = self.0.borrow_mut();
+            if *n >= self.1 {
+                return Err(Error::msg("evaluation budget spent"));
+            }
+            *n += 1;
+            Ok(u.iter().map(|x| x * x).sum())
+        }
+    }
+
+    #[test]
+    fn nelder_mead_stops_quietly_when_refused_during_its_first_simplex() {
+        // Two parameters: the simplex has 3 vertices. Refused at the 1st,
+        // 2nd or 3rd, argmin's init used to panic (unwrap on the cost).
+        for budget in 0..3 {
+            let c = Budget(RefCell::new(0), budget);
+            nelder_mead(&c, &[0.5, 0.5], 0.2, 100).unwrap();
+            assert_eq!(*c.0.borrow(), budget);
+        }
+        // With room, it runs past the simplex.
+        let c = Budget(RefCell::new(0), 50);
+        nelder_mead(&c, &[0.5, 0.5], 0.2, 100).unwrap();
+        assert!(*c.0.borrow() > 3);
     }
 
     #[test]
