@@ -39,6 +39,10 @@ pub struct CompareSpec {
     /// tuned parameters (Levant's C estimated from a wall hit).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimators: Option<Vec<crate::estimators::EstimatorSpec>>,
+    /// Tune each of the paper's estimators for this objective first (as the
+    /// paper did in simulation); absent: the paper's fixed parameters.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tuned: Option<crate::tune::fair::TunedCompare>,
 }
 
 impl ExperimentSpec {
@@ -96,6 +100,16 @@ impl ExperimentSpec {
                         })?;
                     }
                 }
+                if let Some(t) = &c.tuned {
+                    if c.estimators.is_some() {
+                        return Err(SpecError::new(
+                            "tuned",
+                            "(with estimators)",
+                            "tunes the paper's four estimators: leave `estimators` out, or tune a list with one `tune` experiment each",
+                        ));
+                    }
+                    return t.cost(&scene, &c.accuracy)?.check("tuned");
+                }
                 let one = search::validate(&compare::map_spec(scene, &c.accuracy))?;
                 let n = c.estimators.as_ref().map_or(4, Vec::len) as u64;
                 one.times(n).check("estimators")
@@ -113,12 +127,17 @@ impl ExperimentSpec {
                 .map(|r| serde_json::to_value(r).unwrap_or_default()),
             ExperimentSpec::Compare(c) => {
                 let scene = c.scene.clone().unwrap_or_else(compare::seed_2018_scene);
-                compare::compare_observed(
-                    &scene,
-                    &c.accuracy,
-                    c.estimators.as_deref(),
-                    Some(observer),
-                )
+                match &c.tuned {
+                    Some(t) => {
+                        crate::tune::fair::compare_tuned(&scene, &c.accuracy, t, Some(observer))
+                    }
+                    None => compare::compare_observed(
+                        &scene,
+                        &c.accuracy,
+                        c.estimators.as_deref(),
+                        Some(observer),
+                    ),
+                }
                 .map(|r| serde_json::to_value(r).unwrap_or_default())
             }
             ExperimentSpec::Sweep(s) => sweep_observed(s, Some(observer))
@@ -186,5 +205,45 @@ mod tests {
         assert_eq!(c[0].1.device.mass, 0.52);
         assert_eq!(compare.kind(), "compare");
         assert_eq!(sweep.kind(), "sweep");
+    }
+
+    #[test]
+    fn a_tuned_compare_costs_its_tunes_and_names_bad_fields() {
+        let spec = |json: &str| serde_json::from_str::<ExperimentSpec>(json).unwrap();
+        let plain = spec(r#"{"kind":"compare","accuracy":"draft"}"#)
+            .validate()
+            .unwrap();
+        let tuned = spec(r#"{"kind":"compare","accuracy":"draft","tuned":{"objective":"k_width","max_evaluations":6}}"#)
+            .validate()
+            .unwrap();
+        // Three tunes (FOAW has nothing to tune), each up to 6 search maps
+        // and 3 finalists, on top of the comparison's own 4 maps.
+        assert!(tuned.maps >= plain.maps + 3 * 6, "{tuned:?} vs {plain:?}");
+        // The defaults (standard accuracy, 24 search maps each) fit the limits.
+        spec(r#"{"kind":"compare","tuned":{"objective":"k_width"}}"#).validate().unwrap();
+        let bad = |json: &str, field: &str| {
+            let e = spec(json).validate().unwrap_err();
+            assert_eq!(e.field, field, "{e}");
+        };
+        bad(
+            r#"{"kind":"compare","tuned":{"objective":{"pareto":["k_width","b_width"]}}}"#,
+            "tuned.objective",
+        );
+        bad(
+            r#"{"kind":"compare","tuned":{"objective":"k_width","max_evaluations":0}}"#,
+            "tuned.max_evaluations",
+        );
+        bad(
+            r#"{"kind":"compare","tuned":{"objective":"k_width","max_evaluations":201}}"#,
+            "tuned.max_evaluations",
+        );
+        bad(
+            r#"{"kind":"compare","tuned":{"objective":"k_width"},"estimators":[{"kind":"fdm"}]}"#,
+            "tuned",
+        );
+        assert!(serde_json::from_str::<ExperimentSpec>(
+            r#"{"kind":"compare","tuned":{"objective":"k_width","extra":1}}"#
+        )
+        .is_err());
     }
 }
