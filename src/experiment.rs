@@ -220,7 +220,9 @@ mod tests {
         // and 3 finalists, on top of the comparison's own 4 maps.
         assert!(tuned.maps >= plain.maps + 3 * 6, "{tuned:?} vs {plain:?}");
         // The defaults (standard accuracy, 24 search maps each) fit the limits.
-        spec(r#"{"kind":"compare","tuned":{"objective":"k_width"}}"#).validate().unwrap();
+        spec(r#"{"kind":"compare","tuned":{"objective":"k_width"}}"#)
+            .validate()
+            .unwrap();
         let bad = |json: &str, field: &str| {
             let e = spec(json).validate().unwrap_err();
             assert_eq!(e.field, field, "{e}");

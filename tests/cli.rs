@@ -628,3 +628,100 @@ fn record_and_identify_reject_bad_input() {
         "--model = \"two_mass\"",
     );
 }
+
+#[test]
+fn compare_tuned_tunes_each_estimator_and_shows_its_parameters() {
+    // The linear seed device (examples/linear_1khz.json: the 2018 paper's
+    // m, b without friction or quantization), draft, 3 search maps each.
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/linear_1khz.json");
+    let args = ["compare", scene, "--accuracy", "draft", "--json"];
+    let fixed = json_ok(&args, "");
+    let tuned = json_ok(
+        &[&args[..], &["--tuned", "k_width", "--max-evaluations", "3"]].concat(),
+        "",
+    );
+    assert_eq!(tuned["tuned_for"], "k_width");
+    assert!(fixed.get("tuned_for").is_none());
+    let rows = tuned["rows"].as_array().unwrap();
+    let fixed_rows = fixed["rows"].as_array().unwrap();
+    for (i, name) in ["FDM+filter", "FOAW", "AKF", "Levant"].iter().enumerate() {
+        assert_eq!(rows[i]["name"], *name);
+        let t = &rows[i]["tuning"];
+        if *name == "FOAW" {
+            // The paper's FOAW has no tunable parameter: its fixed row.
+            assert!(t.is_null() && rows[i]["estimator"] == fixed_rows[i]["estimator"]);
+            continue;
+        }
+        // At most 3 search maps plus 3 finalists; the row's estimator
+        // carries the tuned values the tuning reports.
+        let evals = t["evaluations"].as_u64().unwrap();
+        assert!((1..=6).contains(&evals), "{name}: {t}");
+        for (p, v) in t["params"].as_object().unwrap() {
+            assert_eq!(
+                rows[i]["estimator"][p.as_str()].as_f64(),
+                v.as_f64(),
+                "{name}.{p}"
+            );
+        }
+        assert!(rows[i]["parameters"].as_str().unwrap().ends_with("(tuned)"));
+    }
+    // Each fixed value lies inside its tuned range, so no tune may end
+    // below it (5 %: draft's K resolution). Levant with the paper's μ1 = 6.6,
+    // μ2 = 2.45 renders 3.1e4 N/m here; tuned, 4.3e5 (measured when
+    // written; docs/tuning.md found the same order on the seed device):
+    // the fixed gains are far from this scene's best.
+    let k = |r: &serde_json::Value| r["map"]["k_width"].as_f64().unwrap();
+    for i in [0, 2, 3] {
+        assert!(
+            k(&rows[i]) >= 0.95 * k(&fixed_rows[i]),
+            "row {i}: {} vs {}",
+            k(&rows[i]),
+            k(&fixed_rows[i])
+        );
+    }
+    assert!(
+        k(&rows[3]) > 5.0 * k(&fixed_rows[3]),
+        "Levant: {} vs {}",
+        k(&rows[3]),
+        k(&fixed_rows[3])
+    );
+    // The text table says which parameters it used.
+    let o = zwidth(&["compare", scene, "--accuracy", "draft"], "");
+    assert!(
+        o.stdout.contains("the 2018 paper's fixed values"),
+        "{}",
+        o.stdout
+    );
+}
+
+#[test]
+fn compare_tuned_rejects_bad_input() {
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/linear_1khz.json");
+    rejects(
+        &["compare", scene, "--tuned", "fastest"],
+        "",
+        "--tuned = \"fastest\"",
+    );
+    rejects(
+        &[
+            "compare",
+            scene,
+            "--tuned",
+            r#"{"pareto":["k_width","b_width"]}"#,
+        ],
+        "",
+        "--tuned",
+    );
+    rejects(
+        &[
+            "compare",
+            scene,
+            "--tuned",
+            "k_width",
+            "--max-evaluations",
+            "0",
+        ],
+        "",
+        "--max-evaluations = 0",
+    );
+}
