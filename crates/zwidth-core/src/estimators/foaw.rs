@@ -566,6 +566,30 @@ mod tests {
         }
         assert_eq!(plain.last_window(), 5);
         assert_eq!(tol.last_window(), 10);
+        // Two adjacent spikes (k = 5, 6): §III-B stops growth at two
+        // consecutive misses. Windows ending on either spike fail (the
+        // end-fit line runs through it), so growth stops before them: the
+        // window of 4 (samples 7…11), as without tolerance.
+        let ys2: Vec<f64> = (0..12)
+            .map(|k| k as f64 + if k == 5 || k == 6 { 3.0 } else { 0.0 })
+            .collect();
+        let mut tol2 = Foaw::new(&spec, 0.1, 1.0).unwrap();
+        let mut plain2 = foaw(FoawFit::End, 0.1, 10, 1.0);
+        for &y in &ys2 {
+            tol2.update(y);
+            plain2.update(y);
+        }
+        assert_eq!((tol2.last_window(), plain2.last_window()), (4, 4));
+        // A spike inside the window that sits exactly on the band's edge
+        // (residual = d) is not a miss: the window is not cut there.
+        let ys3: Vec<f64> = (0..12)
+            .map(|k| k as f64 + if k == 8 { 0.1 } else { 0.0 })
+            .collect();
+        let mut tol3 = Foaw::new(&spec, 0.1, 1.0).unwrap();
+        for &y in &ys3 {
+            tol3.update(y);
+        }
+        assert_eq!(tol3.last_window(), 10);
         spec.max_window = 0;
         assert_eq!(Foaw::new(&spec, 0.1, 1.0).unwrap_err().field, "max_window");
     }

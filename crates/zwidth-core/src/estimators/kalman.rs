@@ -330,6 +330,29 @@ mod tests {
     }
 
     #[test]
+    fn covariance_is_reported_in_si_units() {
+        // The filter's state is scaled (x, ẋT, ẍT²) (the 2018 paper's
+        // white-jerk model in sample units), so its covariance entries
+        // scale by T^{-(i+j)}: P_xv = p01/T, P_xa = p02/T², P_vv = p11/T²,
+        // P_va = p12/T³, P_aa = p22/T⁴.
+        let t = 0.01;
+        let mut k = Kalman::new(1e4, QModel::WhiteJerk, None, sampling(1.0 / t, 1e-6)).unwrap();
+        k.p = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        let c = k.covariance();
+        let want = [
+            1.0,
+            2.0 / t,
+            3.0 / (t * t),
+            4.0 / (t * t),
+            5.0 / t.powi(3),
+            6.0 / t.powi(4),
+        ];
+        for (g, w) in c.iter().zip(want) {
+            assert!((g / w - 1.0).abs() < 1e-12, "{c:?} vs {want:?}");
+        }
+    }
+
+    #[test]
     fn equals_textbook_filter() {
         // At 1 kHz the unscaled textbook filter is still well conditioned.
         let ys: Vec<f64> = (0..400)

@@ -651,6 +651,31 @@ mod tests {
         }
         // Without C the conditions cannot be judged.
         assert_eq!(explicit(1.0, 1.0, 1.0).gains().report().levant_1998, None);
+        // The rules' normalized gains as their definitions give them
+        // (2018 eqs. 10, 11, 14 with a 10 % margin): hba_sc (1.1, 1),
+        // hba (2, √13.2), lfba (1.1·(3 + 2/2²), 2) = (3.85, 2).
+        assert_eq!(GainRule::HbaSc.normalized(), (1.1, 1.0));
+        let (h1, h2) = GainRule::Hba.normalized();
+        assert!(h1 == 2.0 && (h2 - 13.2f64.sqrt()).abs() < 1e-12, "{h1} {h2}");
+        let (m1, m2) = GainRule::Lfba.normalized();
+        assert!((m1 - 3.85).abs() < 1e-12 && m2 == 2.0, "{m1} {m2}");
+        // The report's μ's invert α = μ1·C, λ = μ2·√C: α = 13.2, λ = 3.46,
+        // C = 12 give μ1 = 1.1 and μ2 = 3.46/√12 = 0.99882.
+        let r = LevantGains {
+            alpha: 13.2,
+            lambda: 3.46,
+            lipschitz: Some(12.0),
+        }
+        .report();
+        assert!((r.mu1.unwrap() - 1.1).abs() < 1e-12, "{:?}", r.mu1);
+        assert!((r.mu2.unwrap() - 0.998_815).abs() < 1e-6, "{:?}", r.mu2);
+        // A rule spec's label names the rule and C.
+        let spec = LevantSpec {
+            rule: Some(GainRule::Hba),
+            lipschitz: Some(12.0),
+            ..Default::default()
+        };
+        assert!(spec.label().contains("hba, C=12"), "{}", spec.label());
     }
 
     #[test]
