@@ -669,6 +669,17 @@ mod tests {
         .report();
         assert!((r.mu1.unwrap() - 1.1).abs() < 1e-12, "{:?}", r.mu1);
         assert!((r.mu2.unwrap() - 0.998_815).abs() < 1e-6, "{:?}", r.mu2);
+        // Moreno–Osorio's bound 3C + 2C²/λ² at C = 12, λ = 1 is 36 + 288 =
+        // 324: α = 100 misses it (the C² term decides), α = 325 meets it.
+        for (alpha, want) in [(100.0, Some(false)), (325.0, Some(true))] {
+            let r = LevantGains {
+                alpha,
+                lambda: 1.0,
+                lipschitz: Some(12.0),
+            }
+            .report();
+            assert_eq!(r.moreno_osorio, want, "α = {alpha}");
+        }
         // A rule spec's label names the rule and C.
         let spec = LevantSpec {
             rule: Some(GainRule::Hba),
