@@ -656,7 +656,10 @@ mod tests {
         // hba (2, √13.2), lfba (1.1·(3 + 2/2²), 2) = (3.85, 2).
         assert_eq!(GainRule::HbaSc.normalized(), (1.1, 1.0));
         let (h1, h2) = GainRule::Hba.normalized();
-        assert!(h1 == 2.0 && (h2 - 13.2f64.sqrt()).abs() < 1e-12, "{h1} {h2}");
+        assert!(
+            h1 == 2.0 && (h2 - 13.2f64.sqrt()).abs() < 1e-12,
+            "{h1} {h2}"
+        );
         let (m1, m2) = GainRule::Lfba.normalized();
         assert!((m1 - 3.85).abs() < 1e-12 && m2 == 2.0, "{m1} {m2}");
         // The report's μ's invert α = μ1·C, λ = μ2·√C: α = 13.2, λ = 3.46,

@@ -645,3 +645,57 @@ impl TuneResult {
         s
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(extra: serde_json::Value) -> TuneSpec {
+        let mut v = serde_json::json!({
+            "scene": {"estimator": {"kind": "butterworth", "cutoff_hz": 200}},
+            "params": {"cutoff_hz": {"min": 100, "max": 400}},
+            "objective": "k_width"
+        });
+        for (k, x) in extra.as_object().unwrap() {
+            v[k] = x.clone();
+        }
+        serde_json::from_value(v).unwrap()
+    }
+
+    #[test]
+    fn defaults_are_the_documented_ones() {
+        // docs/tuning.md and the field docs: robust bisection, draft search,
+        // reference finals, 3 finalists, 3 replicates, 40 evaluations, the
+        // compare's B up to 1000 N·s/m and K up to 1e7 N/m.
+        let s = spec(serde_json::json!({}));
+        assert_eq!(s.search, SearchKind::RobustBisect);
+        assert_eq!(s.accuracy, Accuracy::Preset(Preset::Draft));
+        assert_eq!(s.final_accuracy, Accuracy::Preset(Preset::Reference));
+        assert_eq!((s.finalists, s.replicates, s.max_evaluations), (3, 3, 40));
+        assert_eq!((s.b_max, s.k_max), (1000.0, 1e7));
+        assert_eq!(
+            (s.solver, s.seed, s.constraint),
+            (SolverKind::Auto, 0, None)
+        );
+    }
+
+    #[test]
+    fn a_pareto_objective_needs_two_distinct_metrics() {
+        let field =
+            |o: serde_json::Value| match spec(serde_json::json!({ "objective": o })).validate() {
+                Ok(_) => panic!("accepted"),
+                Err(e) => e.field,
+            };
+        assert_eq!(
+            field(serde_json::json!({"pareto": ["k_width"]})),
+            "objective.pareto"
+        );
+        assert_eq!(
+            field(serde_json::json!({"pareto": ["k_width", "k_width"]})),
+            "objective.pareto"
+        );
+        spec(serde_json::json!({"objective": {"pareto": ["k_width", "b_width"]}}))
+            .validate()
+            .unwrap();
+    }
+}

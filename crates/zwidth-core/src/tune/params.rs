@@ -245,6 +245,28 @@ mod tests {
     }
 
     #[test]
+    fn steps_round_to_the_lattice_and_explicit_gains_are_dropped() {
+        // step 1 Hz over 10–499: u = 0.3 → 10 + 0.3·489 = 156.7 → 157 Hz.
+        let s = space(
+            r#"{"kind":"butterworth","cutoff_hz":100}"#,
+            r#"{"cutoff_hz":{"min":10,"max":499,"step":1}}"#,
+        )
+        .unwrap();
+        assert_eq!(s.values(&[0.3])["cutoff_hz"], 157.0);
+        // A base with explicit α, λ tuned over μ1, μ2: both explicit gains go.
+        let s = space(
+            r#"{"kind":"levant","alpha":20,"lambda":5,"lipschitz":2}"#,
+            r#"{"mu1":{"min":1.5,"max":10},"mu2":{"min":1,"max":8}}"#,
+        )
+        .unwrap();
+        let t = serde_json::to_string(&s.scene(&[0.0, 1.0]).unwrap().estimator).unwrap();
+        assert!(
+            !t.contains("alpha") && !t.contains("lambda") && t.contains(r#""mu2":8"#),
+            "{t}"
+        );
+    }
+
+    #[test]
     fn bad_spaces_name_the_field() {
         let f = |est: &str, p: &str| space(est, p).unwrap_err().field;
         let bw = r#"{"kind":"butterworth","cutoff_hz":100}"#;

@@ -770,6 +770,51 @@ mod replicate_tests {
     }
 
     #[test]
+    fn violation_measures_how_far_gains_miss_eqs_10_and_14() {
+        // C = 12 m/s². Eq. 10 (Levant 1998): α > C and λ² ≥ 4C(α + C)/(α − C);
+        // eq. 14 (Moreno–Osorio): α > 3C + 2C²/λ². Violations by hand.
+        let run_with = |cond: &str, check: &dyn Fn(&Run)| {
+            let spec: TuneSpec = serde_json::from_value(serde_json::json!({
+                "scene": {"device": {"coulomb": 0, "quantization": 0},
+                          "estimator": {"kind": "levant", "mu1": 2, "mu2": 4, "lipschitz": 12}},
+                "params": {"mu1": {"min": 1, "max": 40}, "mu2": {"min": 0.5, "max": 60}},
+                "objective": "k_width",
+                "constraint": cond
+            }))
+            .unwrap();
+            let tune = spec.validate().unwrap();
+            let run = Run {
+                tune: &tune,
+                observer: None,
+                log: Mutex::new(Vec::new()),
+                cache: Mutex::new(HashMap::new()),
+                calls: Default::default(),
+                failure: Mutex::new(None),
+            };
+            check(&run);
+        };
+        let gains = |a: f64, l: f64| -> SceneSpec {
+            serde_json::from_value(serde_json::json!({
+                "estimator": {"kind": "levant", "alpha": a, "lambda": l, "lipschitz": 12}
+            }))
+            .unwrap()
+        };
+        let close = |got: f64, want: f64| assert!((got - want).abs() < 1e-12, "{got} vs {want}");
+        run_with("levant", &|r| {
+            // α ≤ C: 1 + (C − α)/C = 1 + 6/12.
+            close(r.violation(&gains(6.0, 100.0)), 1.5);
+            // α = 24: λ² must reach 4·12·36/12 = 144; λ = 10 misses by 44/C² = 44/144.
+            close(r.violation(&gains(24.0, 10.0)), 44.0 / 144.0);
+            close(r.violation(&gains(24.0, 13.0)), 0.0);
+        });
+        run_with("lyapunov", &|r| {
+            // λ = 12: bound 36 + 2·144/144 = 38; α = 30 misses by 8/C.
+            close(r.violation(&gains(30.0, 12.0)), 8.0 / 12.0);
+            close(r.violation(&gains(40.0, 12.0)), 0.0);
+        });
+    }
+
+    #[test]
     fn pooled_replicates_are_the_mean_with_a_student_t_interval() {
         let spec: TuneSpec = serde_json::from_value(serde_json::json!({
             "scene": {"device": {"coulomb": 0, "quantization": 0},
