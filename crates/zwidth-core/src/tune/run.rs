@@ -770,6 +770,43 @@ mod replicate_tests {
     }
 
     #[test]
+    fn finals_are_mapped_at_the_final_accuracy_and_the_search_at_its_own() {
+        // Linear scene, analytic engine (deterministic): each evaluation's
+        // K-width must equal a map of its scene at its phase's accuracy,
+        // computed here independently of the tune (draft resolves K to 5 %,
+        // standard to 1 %, so the two differ).
+        let spec: TuneSpec = serde_json::from_value(serde_json::json!({
+            "scene": {"device": {"coulomb": 0, "quantization": 0},
+                      "loop": {"sample_hz": 1000, "render_hz": 1000},
+                      "estimator": {"kind": "butterworth", "cutoff_hz": 200}},
+            "params": {"cutoff_hz": {"min": 50, "max": 450}},
+            "objective": "k_width",
+            "accuracy": "draft",
+            "final_accuracy": "standard",
+            "finalists": 1,
+            "max_evaluations": 3,
+            "b": [0, 20]
+        }))
+        .unwrap();
+        let tune = spec.validate().unwrap();
+        let r = tune.run(None).unwrap();
+        let k_at = |e: &Evaluation, preset: &str| {
+            let scene = tune.space.scene_at(&e.params).unwrap();
+            let m: MapSpec = serde_json::from_value(serde_json::json!({
+                "scene": scene, "method": "auto", "criterion": "impedance",
+                "search": "robust_bisect", "accuracy": preset, "b": [0, 20]
+            }))
+            .unwrap();
+            crate::zwidth::search::map(&m).unwrap().k_width
+        };
+        let fin = r.history.iter().find(|e| e.phase == "final").expect("a final");
+        let search = r.history.iter().find(|e| e.phase == "search").unwrap();
+        assert_eq!(fin.metrics.k_width, k_at(fin, "standard"));
+        assert_ne!(fin.metrics.k_width, k_at(fin, "draft"));
+        assert_eq!(search.metrics.k_width, k_at(search, "draft"));
+    }
+
+    #[test]
     fn violation_measures_how_far_gains_miss_eqs_10_and_14() {
         // C = 12 m/s². Eq. 10 (Levant 1998): α > C and λ² ≥ 4C(α + C)/(α − C);
         // eq. 14 (Moreno–Osorio): α > 3C + 2C²/λ². Violations by hand.
