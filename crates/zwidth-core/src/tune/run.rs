@@ -799,7 +799,11 @@ mod replicate_tests {
             .unwrap();
             crate::zwidth::search::map(&m).unwrap().k_width
         };
-        let fin = r.history.iter().find(|e| e.phase == "final").expect("a final");
+        let fin = r
+            .history
+            .iter()
+            .find(|e| e.phase == "final")
+            .expect("a final");
         let search = r.history.iter().find(|e| e.phase == "search").unwrap();
         assert_eq!(fin.metrics.k_width, k_at(fin, "standard"));
         assert_ne!(fin.metrics.k_width, k_at(fin, "draft"));
