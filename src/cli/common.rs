@@ -201,5 +201,8 @@ criterion: {:?}, search: {:?}, resolution: {}
 ",
         r.trials, r.elapsed_s
     ));
+    if let Some(why) = &r.saturation {
+        s.push_str(&format!("saturation: {why}\n"));
+    }
     s
 }

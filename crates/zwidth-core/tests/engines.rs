@@ -444,3 +444,64 @@ fn analytic_impedance_test_needs_a_stable_loop() {
     );
     assert!(imp < 5e5, "{imp}: the band test alone gives ~1e6 here");
 }
+
+#[test]
+fn saturation_is_reported_and_a_limit_that_never_binds_changes_nothing() {
+    // Butterworth 100 Hz on the linear seed device, both simulations, draft.
+    let base = linear("", r#"{"kind":"butterworth","cutoff_hz":100,"order":2}"#);
+    let with_limit = |l: f64| {
+        let mut s = base.clone();
+        s.device.force_limit = Some(l);
+        s
+    };
+    let draft = Accuracy::Preset(Preset::Draft);
+    for (method, criterion) in [
+        (Method::Time, Criterion::Stability),
+        (Method::Frequency, Criterion::Impedance),
+    ] {
+        let free = run(base.clone(), method, criterion, &[0.0, 20.0], draft.clone());
+        // Exactness: a 1e9 N limit never binds (forces stay below
+        // K·x ≤ 1e7 N/m × the divergence bound), so every verdict is the
+        // unlimited one's, and nothing is reported.
+        let loose = run(
+            with_limit(1e9),
+            method,
+            criterion,
+            &[0.0, 20.0],
+            draft.clone(),
+        );
+        let verdicts = |r: &MapResult| -> Vec<(f64, f64, Option<bool>, Option<bool>)> {
+            r.points
+                .iter()
+                .map(|p| (p.k, p.b, p.stable, p.passive))
+                .collect()
+        };
+        assert_eq!(verdicts(&free), verdicts(&loose), "{method:?}");
+        assert_eq!((free.saturated_trials, loose.saturated_trials), (0, 0));
+        assert!(free.saturation.is_none() && loose.saturation.is_none());
+        // Extreme: 0.6 N, just above the probe's 0.5 N amplitude, binds on
+        // the stiff walls; every flagged trial is counted and named.
+        let tight = run(
+            with_limit(0.6),
+            method,
+            criterion,
+            &[0.0, 20.0],
+            draft.clone(),
+        );
+        let flagged = tight
+            .points
+            .iter()
+            .filter(|p| p.saturated == Some(true))
+            .count();
+        assert!(
+            flagged > 0 && flagged == tight.saturated_trials,
+            "{method:?}: {flagged}"
+        );
+        let why = tight.saturation.as_deref().unwrap();
+        assert!(
+            why.contains("±0.6 N") && why.contains(&format!("in {flagged} of {}", tight.trials)),
+            "{why}"
+        );
+        assert!(tight.k_width.is_finite() && tight.points.iter().all(|p| p.k.is_finite()));
+    }
+}

@@ -23,6 +23,8 @@ pub struct Controller {
     limit: Option<f64>,
     /// The motor force being held (N).
     pub applied: f64,
+    /// Render updates whose force the limit clipped.
+    pub saturated: u64,
 }
 
 impl Controller {
@@ -45,6 +47,7 @@ impl Controller {
             head: 0,
             limit,
             applied: limit.map_or(bias, |l| bias.clamp(-l, l)),
+            saturated: 0,
         }
     }
 
@@ -73,8 +76,11 @@ impl Controller {
             };
             let f = self.bias + delayed;
             self.applied = match self.limit {
-                Some(l) => f.clamp(-l, l),
-                None => f,
+                Some(l) if f.abs() > l => {
+                    self.saturated += 1;
+                    f.clamp(-l, l)
+                }
+                _ => f,
             };
         }
         self.phase = if self.phase + 1 == self.ratio {
@@ -118,8 +124,12 @@ mod tests {
         .unwrap();
         let mut c = Controller::new(&sc, 1e6, 0.0, 0.5, true);
         c.sample(-1.0); // before the wall: bias only
-        assert_eq!(c.applied, 0.5);
-        c.sample(1.0); // deep in: saturated
-        assert_eq!(c.applied, -4.0);
+        assert_eq!((c.applied, c.saturated), (0.5, 0));
+        c.sample(1.0); // deep in: saturated, and counted
+        assert_eq!((c.applied, c.saturated), (-4.0, 1));
+        // 4 N exactly is at the limit, not past it: not counted.
+        let mut c = Controller::new(&sc, 4.0, 0.0, 0.0, false);
+        c.sample(-1.0);
+        assert_eq!((c.applied, c.saturated), (4.0, 0));
     }
 }

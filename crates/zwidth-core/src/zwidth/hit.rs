@@ -46,6 +46,8 @@ pub struct HitOutcome {
     pub diverged: bool,
     /// Samples simulated.
     pub samples: usize,
+    /// Render updates whose force the device's force limit clipped.
+    pub saturated_renders: u64,
 }
 
 /// One row of a trial trace.
@@ -213,6 +215,7 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
                     mean_position: mean,
                     diverged: false,
                     samples: i + 1,
+                    saturated_renders: ctl.saturated,
                 };
             }
         } else {
@@ -225,6 +228,7 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
                 mean_position: mean,
                 diverged: true,
                 samples: i + 1,
+                saturated_renders: ctl.saturated,
             };
         }
         i += 1;
@@ -236,6 +240,7 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
         mean_position: mean,
         diverged: false,
         samples: total,
+        saturated_renders: ctl.saturated,
     }
 }
 

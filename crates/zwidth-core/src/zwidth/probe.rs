@@ -71,6 +71,8 @@ pub struct ProbeOutcome {
     /// deterministic scene, whose verdict is exact).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub confidence: Option<VerdictConfidence>,
+    /// Render updates whose force the device's force limit clipped.
+    pub saturated_renders: u64,
 }
 
 /// How sure a noisy scene's verdict is (`bla.rs`).
@@ -288,6 +290,7 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
                         realizations: m + 1,
                         bands: 0,
                     }),
+                    saturated_renders: lp.ctl.saturated,
                 };
             }
             if i < bla::TRANSIENT_PERIODS {
@@ -331,6 +334,7 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
             realizations: v.realizations,
             bands: v.bands,
         }),
+        saturated_renders: lp.ctl.saturated,
     }
 }
 
@@ -357,7 +361,12 @@ fn run(setup: &ProbeSetup, scene: &Scene, k: f64, b: f64, knobs: ProbeKnobs) -> 
     let mut last_change = f64::INFINITY;
     let z_of = |v: &[C]| -> Vec<C> { f_lines.iter().zip(v).map(|(f, v)| f / v).collect() };
 
-    let finish = |z: Vec<C>, settled: bool, diverged: bool, periods_run: u32, last_change: f64| {
+    let finish = |z: Vec<C>,
+                  settled: bool,
+                  diverged: bool,
+                  periods_run: u32,
+                  last_change: f64,
+                  saturated_renders: u64| {
         let z: Vec<C> = z
             .into_iter()
             .map(|z| if z.is_finite() { z } else { C::new(-1.0, 0.0) })
@@ -376,6 +385,7 @@ fn run(setup: &ProbeSetup, scene: &Scene, k: f64, b: f64, knobs: ProbeKnobs) -> 
             },
             impedance: imp,
             confidence: None,
+            saturated_renders,
         }
     };
 
@@ -389,6 +399,7 @@ fn run(setup: &ProbeSetup, scene: &Scene, k: f64, b: f64, knobs: ProbeKnobs) -> 
                 true,
                 periods_run,
                 last_change,
+                lp.ctl.saturated,
             );
         }
         fa.lines(&vbuf, &setup.lines, &mut v_lines);
@@ -402,7 +413,14 @@ fn run(setup: &ProbeSetup, scene: &Scene, k: f64, b: f64, knobs: ProbeKnobs) -> 
             averaged += 1;
             if averaged == knobs.periods {
                 let mean: Vec<C> = acc.iter().map(|a| a / averaged as f64).collect();
-                return finish(z_of(&mean), true, false, periods_run, last_change);
+                return finish(
+                    z_of(&mean),
+                    true,
+                    false,
+                    periods_run,
+                    last_change,
+                    lp.ctl.saturated,
+                );
             }
             continue;
         }
@@ -426,7 +444,14 @@ fn run(setup: &ProbeSetup, scene: &Scene, k: f64, b: f64, knobs: ProbeKnobs) -> 
     // Not periodic within the limit: judged on the last half of the periods.
     match tail_verdict(&history) {
         Some((mean, passive)) => {
-            let mut out = finish(mean, false, false, periods_run, last_change);
+            let mut out = finish(
+                mean,
+                false,
+                false,
+                periods_run,
+                last_change,
+                lp.ctl.saturated,
+            );
             out.impedance.passive = passive;
             out.passive = passive;
             out
@@ -437,6 +462,7 @@ fn run(setup: &ProbeSetup, scene: &Scene, k: f64, b: f64, knobs: ProbeKnobs) -> 
             false,
             periods_run,
             last_change,
+            lp.ctl.saturated,
         ),
     }
 }

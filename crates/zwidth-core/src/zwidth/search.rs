@@ -49,6 +49,10 @@ pub struct Point {
     /// Noisy scenes: random-phase realizations the verdict took.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub realizations: Option<u32>,
+    /// Simulations: true when the device's force limit clipped the wall
+    /// force during the trial (the verdict then reflects the actuator too).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub saturated: Option<bool>,
 }
 
 impl Point {
@@ -130,6 +134,12 @@ pub struct MapResult {
     pub area: f64,
     pub points: Vec<Point>,
     pub trials: usize,
+    /// Trials in which the device's force limit clipped the wall force
+    /// (0 without a limit; their verdicts reflect the actuator too).
+    pub saturated_trials: usize,
+    /// When any trial saturated: which, in words.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub saturation: Option<String>,
     pub elapsed_s: f64,
 }
 
@@ -292,7 +302,9 @@ impl Evaluator {
         match (self.criterion, &self.model) {
             (Criterion::Stability, Some(m)) => p.stable = Some(m.spectral_radius(k, b) < 1.0),
             (Criterion::Stability, None) => {
-                p.stable = Some(wall_hit(&self.scene, k, b, self.res.hit, &mut NoTrace).stable)
+                let o = wall_hit(&self.scene, k, b, self.res.hit, &mut NoTrace);
+                p.stable = Some(o.stable);
+                p.saturated = (o.saturated_renders > 0).then_some(true);
             }
             (Criterion::Impedance, Some(m)) => {
                 let c = m.impedance(k, b);
@@ -303,6 +315,7 @@ impl Evaluator {
                 let o = self.probe(k, b);
                 p.passive = Some(o.passive);
                 p.fidelity = Some(o.impedance.fidelity);
+                p.saturated = (o.saturated_renders > 0).then_some(true);
                 if let Some(c) = o.confidence {
                     p.decided = Some(c.decided);
                     p.margin = Some(c.margin);
@@ -488,6 +501,33 @@ pub fn map_observed(
         ),
         _ => format!("K step {} N/m, B step {} N·s/m", res.k_step, res.b_step),
     };
+    let saturated: Vec<&Point> = points
+        .iter()
+        .filter(|p| p.saturated == Some(true))
+        .collect();
+    let saturation = (!saturated.is_empty()).then(|| {
+        let k_min = saturated.iter().map(|p| p.k).fold(f64::INFINITY, f64::min);
+        // A boundary point is set by the first failure above its k_max:
+        // limited by the actuator when that trial saturated.
+        let on_boundary = boundary
+            .iter()
+            .filter(|bp| {
+                points
+                    .iter()
+                    .filter(|p| p.b == bp.b && p.k > bp.k_max && !p.ok())
+                    .min_by(|a, b| a.k.total_cmp(&b.k))
+                    .is_some_and(|p| p.saturated == Some(true))
+            })
+            .count();
+        format!(
+            "the force limit ±{} N clipped the wall force in {} of {} trials (from K = {k_min:.4e} N/m); {on_boundary} of {} boundary points were decided by such a trial: there the actuator limits the width, not the estimator",
+            ev.scene.spec.device.force_limit.unwrap_or(f64::INFINITY),
+            saturated.len(),
+            points.len(),
+            boundary.len()
+        )
+    });
+    let saturated_trials = saturated.len();
     Ok(MapResult {
         model: ev.model_description(),
         method: ev.method,
@@ -503,6 +543,8 @@ pub fn map_observed(
         max_fidelity_error,
         area,
         trials: points.len(),
+        saturated_trials,
+        saturation,
         points,
         elapsed_s: start.elapsed().as_secs_f64(),
     })
