@@ -136,15 +136,16 @@ fn rows(trace: &Trace) -> (Vec<Row>, usize) {
     rows_at(trace, &WINDOWS_S)
 }
 
-fn rows_at(trace: &Trace, windows_s: &[f64]) -> (Vec<Row>, usize) {
-    let (x, f, dt) = (&trace.position, &trace.force, trace.dt);
+/// The sign test's half-span h (samples) and the displacement over ±h a
+/// sample must exceed. A window is kept when the handle cannot have stopped
+/// (and so stuck) inside it: if v(τ) = 0 somewhere in [t − hΔ, t + hΔ],
+/// then |v| ≤ a_max·2hΔ there and the displacement over that span is at
+/// most a_max·(2hΔ)²; a displacement beyond that plus three encoder steps
+/// rules a stop out. h: ±1 ms; a_max: 1.5× the largest second difference
+/// over ±h, an acceleration bound read from the data.
+fn stop_test(trace: &Trace) -> (usize, f64) {
+    let (x, dt) = (&trace.position, trace.dt);
     let n = x.len();
-    // The sign test: a window is kept when the handle cannot have stopped
-    // (and so stuck) inside it. If v(τ) = 0 somewhere in [t − hΔ, t + hΔ],
-    // then |v| ≤ a_max·2hΔ there, and the displacement over that span is at
-    // most a_max·(2hΔ)²; a displacement beyond that plus three encoder
-    // steps rules a stop out. a_max: 1.5× the largest second difference
-    // over ±h (±1 ms), an acceleration bound read from the data.
     let h = ((0.001 / dt).round() as usize).max(1);
     let q = trace.quantization();
     let span = 2.0 * h as f64 * dt;
@@ -153,7 +154,13 @@ fn rows_at(trace: &Trace, windows_s: &[f64]) -> (Vec<Row>, usize) {
             .map(|k| (x[k + h] - 2.0 * x[k] + x[k - h]).abs())
             .fold(0.0, f64::max)
         / (h as f64 * dt).powi(2);
-    let v_min_step = a_max * span * span + 3.0 * q.max(1e-9);
+    (h, a_max * span * span + 3.0 * q.max(1e-9))
+}
+
+fn rows_at(trace: &Trace, windows_s: &[f64]) -> (Vec<Row>, usize) {
+    let (x, f, dt) = (&trace.position, &trace.force, trace.dt);
+    let n = x.len();
+    let (h, v_min_step) = stop_test(trace);
     let mut out = Vec::new();
     let mut tried = 0;
     for &len_s in windows_s {
@@ -376,6 +383,29 @@ mod tests {
             (dphi(0.0), dphi(1.0), ddphi(0.0), ddphi(1.0)),
             (0.0, 0.0, 0.0, 0.0)
         );
+    }
+
+    #[test]
+    fn stop_test_bound_by_hand() {
+        // x = ½·a·t² + v0·t + x0 at 2 kHz, a = 3 m/s², ideal sensor (v0, x0
+        // irrational: no encoder step fits every position): h = 1 ms / 0.5 ms =
+        // 2 samples; the second difference over ±h is exactly a·(hΔ)², so
+        // a_max = 1.5·3 = 4.5 m/s², and the bound is a_max·(2hΔ)² + 3 nm
+        // = 4.5·(2e-3)² + 3e-9 = 1.8003e-5 m.
+        let dt = 5e-4;
+        let t: Vec<f64> = (0..2000).map(|k| k as f64 * dt).collect();
+        let tr = Trace {
+            dt,
+            position: t
+                .iter()
+                .map(|t| 1.5 * t * t + 2f64.sqrt() * 1e-3 * t + std::f64::consts::PI * 1e-4)
+                .collect(),
+            force: vec![0.0; t.len()],
+            t,
+        };
+        let (h, bound) = stop_test(&tr);
+        assert_eq!(h, 2);
+        assert!((bound - 1.8003e-5).abs() < 1e-12, "{bound}");
     }
 
     #[test]
