@@ -505,3 +505,60 @@ fn saturation_is_reported_and_a_limit_that_never_binds_changes_nothing() {
         assert!(tight.k_width.is_finite() && tight.points.iter().all(|p| p.k.is_finite()));
     }
 }
+
+#[test]
+fn force_resolution_off_by_default_exact_when_fine_and_coarse_still_finite() {
+    let base = linear("", r#"{"kind":"butterworth","cutoff_hz":100,"order":2}"#);
+    assert!(base.device.force_resolution.is_none() && base.validate().unwrap().is_linear());
+    let step = |r: f64| {
+        let mut s = base.clone();
+        s.device.force_resolution = Some(r);
+        s
+    };
+    // Named, it makes the scene nonlinear: auto leaves the analytic engine.
+    assert_eq!(
+        step(1e-3).validate().unwrap().linear_reason().as_deref(),
+        Some("force command resolution")
+    );
+    let draft = Accuracy::Preset(Preset::Draft);
+    for (method, criterion) in [
+        (Method::Time, Criterion::Stability),
+        (Method::Frequency, Criterion::Impedance),
+    ] {
+        let verdicts = |r: &MapResult| -> Vec<(f64, f64, Option<bool>, Option<bool>)> {
+            r.points
+                .iter()
+                .map(|p| (p.k, p.b, p.stable, p.passive))
+                .collect()
+        };
+        let free = run(base.clone(), method, criterion, &[0.0, 20.0], draft.clone());
+        // A 1 nN step moves every force by under 0.5 nN: the same verdicts.
+        let fine = run(step(1e-9), method, criterion, &[0.0, 20.0], draft.clone());
+        assert_eq!(verdicts(&free), verdicts(&fine), "{method:?}");
+        assert!(
+            fine.model.contains("steps of 0.000000001 N"),
+            "{}",
+            fine.model
+        );
+        // Extreme: 0.2 N steps (the probe's 0.5 N peak in 5 steps) still
+        // give a finite map.
+        let coarse = run(step(0.2), method, criterion, &[0.0, 20.0], draft.clone());
+        assert!(coarse.k_width.is_finite() && coarse.points.iter().all(|p| p.k.is_finite()));
+    }
+    // Bad values name the field.
+    for (r, limit) in [
+        (0.0, None),
+        (-1.0, None),
+        (f64::NAN, None),
+        (1e3, None),
+        (2.0, Some(1.0)),
+    ] {
+        let mut s = step(r);
+        s.device.force_limit = limit;
+        assert_eq!(
+            s.validate().unwrap_err().field,
+            "device.force_resolution",
+            "{r}"
+        );
+    }
+}

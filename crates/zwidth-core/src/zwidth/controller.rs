@@ -2,8 +2,9 @@
 //! encoder sample; every render period the wall force
 //! `−(K(y − x_wall) + B·v̂)` is computed (only past the wall when the wall is
 //! unilateral, 2011 paper eq. 12), delayed by `delay_samples` render
-//! periods, added to a constant motor bias, saturated at the force limit and
-//! held (zero-order) until the next render.
+//! periods, added to a constant motor bias, rounded to the force command's
+//! resolution (a DAC step, when the scene names one), saturated at the force
+//! limit and held (zero-order) until the next render.
 
 use super::scene::Scene;
 use crate::estimators::{Estimator, VelocityEstimator};
@@ -21,6 +22,8 @@ pub struct Controller {
     line: Vec<f64>,
     head: usize,
     limit: Option<f64>,
+    /// The force command's step (N), if any.
+    resolution: Option<f64>,
     /// The motor force being held (N).
     pub applied: f64,
     /// Render updates whose force the limit clipped.
@@ -46,6 +49,7 @@ impl Controller {
             line: vec![0.0; delay + 1],
             head: 0,
             limit,
+            resolution: s.device.force_resolution,
             applied: limit.map_or(bias, |l| bias.clamp(-l, l)),
             saturated: 0,
         }
@@ -75,6 +79,12 @@ impl Controller {
                 self.line[self.head]
             };
             let f = self.bias + delayed;
+            // The DAC: a whole number of steps (round to nearest), then the
+            // actuator's limit.
+            let f = match self.resolution {
+                Some(r) => (f / r).round() * r,
+                None => f,
+            };
             self.applied = match self.limit {
                 Some(l) if f.abs() > l => {
                     self.saturated += 1;
@@ -127,6 +137,25 @@ mod tests {
         assert_eq!((c.applied, c.saturated), (0.5, 0));
         c.sample(1.0); // deep in: saturated, and counted
         assert_eq!((c.applied, c.saturated), (-4.0, 1));
+        // A 0.3 N command step: −(100·0.01) = −1 N rounds to −0.9 N
+        // (3 steps); with a 0.5 N limit, −5 N rounds to −5.1 and clips to −0.5.
+        let sc_dac = SceneSpec::from_json(
+            r#"{"device":{"force_limit":0.5,"force_resolution":0.3},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+        )
+        .unwrap()
+        .validate()
+        .unwrap();
+        let mut c = Controller::new(&sc_dac, 100.0, 0.0, 0.0, false);
+        c.sample(0.001); // −0.1 N: rounds to 0
+        assert_eq!((c.applied, c.saturated), (0.0, 0));
+        c.sample(0.002); // −0.2 N: rounds to −0.3 N
+        assert!(
+            (c.applied + 0.3).abs() < 1e-15 && c.saturated == 0,
+            "{}",
+            c.applied
+        );
+        c.sample(0.05); // −5 N: −5.1 N, clipped
+        assert_eq!((c.applied, c.saturated), (-0.5, 1));
         // 4 N exactly is at the limit, not past it: not counted.
         let mut c = Controller::new(&sc, 4.0, 0.0, 0.0, false);
         c.sample(-1.0);

@@ -5,7 +5,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{require_non_negative, require_positive, SpecError};
+use crate::error::{require_non_negative, require_positive, require_range, SpecError};
 use crate::estimators::{Estimator, EstimatorKind, EstimatorSpec, Sampling};
 
 /// The encoder step the estimators are built for when the scene's sensor is
@@ -38,6 +38,11 @@ pub struct DeviceSpec {
     /// Motor force saturation (N), or null for none.
     #[serde(default)]
     pub force_limit: Option<f64>,
+    /// Force command resolution (N): the DAC's step, the commanded force
+    /// rounded to a whole number of steps each render; null for none.
+    /// Off unless named.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub force_resolution: Option<f64>,
 }
 
 fn d_mass() -> f64 {
@@ -61,6 +66,7 @@ impl Default for DeviceSpec {
             coulomb: d_coulomb(),
             quantization: d_quantization(),
             force_limit: None,
+            force_resolution: None,
         }
     }
 }
@@ -304,6 +310,25 @@ impl SceneSpec {
         }
         if let Some(f) = d.force_limit {
             require_positive("force_limit", f, "N, or null for none").map_err(dev)?;
+        }
+        if let Some(r) = d.force_resolution {
+            require_range(
+                "force_resolution",
+                r,
+                1e-9,
+                100.0,
+                "N, the force command's step, or null for none",
+            )
+            .map_err(dev)?;
+            if let Some(f) = d.force_limit {
+                if r > f {
+                    return Err(SpecError::new(
+                        "device.force_resolution",
+                        r,
+                        format!("must not exceed device.force_limit = {f} N (the command would always round to 0)"),
+                    ));
+                }
+            }
         }
         let l = &self.control;
         let lp = |e: SpecError| e.within("loop");
@@ -555,6 +580,9 @@ impl Scene {
         }
         if d.force_limit.is_some() {
             return Some("force saturation".into());
+        }
+        if d.force_resolution.is_some() {
+            return Some("force command resolution".into());
         }
         if e.median_position.is_some() || e.median_velocity.is_some() {
             return Some("median smoothing".into());

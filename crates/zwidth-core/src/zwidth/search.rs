@@ -236,6 +236,9 @@ impl Evaluator {
                 if let Some(f) = s.device.force_limit {
                     parts.push(format!("saturation ±{f} N"));
                 }
+                if let Some(r) = s.device.force_resolution {
+                    parts.push(format!("force command in steps of {r} N"));
+                }
                 parts.push(format!("encoder {} Hz, render {} Hz, delay {}", s.control.sample_hz, s.control.render_hz, s.control.delay_samples));
                 parts.push(format!("estimator {est}"));
                 let noisy = self.noisy();
