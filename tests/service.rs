@@ -810,3 +810,32 @@ fn a_killed_tune_resumes_from_its_stored_evaluations() {
         );
     }
 }
+
+#[test]
+fn a_tuned_compare_reports_progress_and_its_cancel_reaches_the_tunes() {
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    // The seed device (friction, quantization): its tunes take minutes.
+    let (code, v, _) = post(
+        &url,
+        r#"{"kind":"compare","accuracy":"standard","tuned":{"objective":"k_width","max_evaluations":24}}"#,
+    );
+    assert_eq!(code, 202, "{v}");
+    let id = v["id"].as_str().unwrap().to_string();
+    // The first tune reports progress through the compare's observer.
+    wait_for("the first tune's progress", 60, || {
+        let v = get(&format!("{url}/{id}"));
+        v["state"] == "running" && v["progress"]["fraction"].as_f64().unwrap_or(0.0) > 0.0
+    });
+    let (code, v, _) = post(&format!("{url}/{id}/cancel"), "");
+    assert_eq!((code, v["state"].as_str()), (200, Some("cancelled")), "{v}");
+    // The rig runs one experiment at a time: the next one finishing within
+    // 30 s shows the cancel reached the running tune (uncancelled, the
+    // tunes alone run for minutes, docs/zwidth.md: 8 min).
+    let small = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"method":"analytic","criterion":"stability","b":[0,10]}"#;
+    let (code, v, _) = post(&url, small);
+    assert_eq!(code, 202, "{v}");
+    let next = wait_end(&s.base, v["id"].as_str().unwrap(), 30);
+    assert_eq!(next["state"], "succeeded", "{next}");
+    assert_eq!(get(&format!("{url}/{id}"))["state"], "cancelled");
+}
