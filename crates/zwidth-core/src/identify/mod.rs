@@ -409,6 +409,54 @@ mod tests {
     }
 
     #[test]
+    fn where_the_device_sits_does_not_matter() {
+        // The same motion 1 m further along the rail: the equation has no
+        // position term, so every estimate must agree (to rounding: each
+        // window's positions are taken about its first sample).
+        let sc = scene(r#"{"loop":{"sample_hz":1000,"render_hz":1000}}"#);
+        let tr = record(&sc, &Excitation::default());
+        let mut moved = tr.clone();
+        moved.position.iter_mut().for_each(|x| *x += 1.0);
+        let (a, b) = (
+            identify(&tr, Model::MassDamperCoulomb).unwrap(),
+            identify(&moved, Model::MassDamperCoulomb).unwrap(),
+        );
+        for (x, y) in [
+            (a.mass, b.mass),
+            (a.damping, b.damping),
+            (a.coulomb, b.coulomb),
+        ] {
+            assert!((x.value / y.value - 1.0).abs() < 1e-9, "{x:?} vs {y:?}");
+        }
+    }
+
+    #[test]
+    fn a_fit_needs_twice_as_many_windows_as_parameters() {
+        // Five consistent rows of m = 1, b = 2, f_c = 3 (y = a·θ): enough
+        // equations to solve, but fewer than 2·3, so no fit is claimed.
+        let rows: Vec<Row> = (0..6)
+            .map(|i| {
+                let a = [
+                    1.0 + i as f64,
+                    (i * i) as f64 - 2.0,
+                    if i % 2 == 0 { 1.0 } else { -1.0 },
+                ];
+                Row {
+                    start: 0,
+                    a,
+                    y: a[0] + 2.0 * a[1] + 3.0 * a[2],
+                }
+            })
+            .collect();
+        let refs: Vec<&Row> = rows.iter().collect();
+        assert!(fit(&refs[..5], 3).is_none());
+        let theta = fit(&refs, 3).unwrap();
+        for (got, want) in theta.iter().zip([1.0, 2.0, 3.0]) {
+            assert!((got - want).abs() < 1e-9, "{theta:?}");
+        }
+    }
+
+    #[test]
     fn recovers_a_linear_device_to_its_parameters() {
         // Reference: the m, b the trace was simulated with (exact ZOH plant,
         // ideal sensor): only the quadrature's O(h³) error remains.
