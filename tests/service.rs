@@ -145,12 +145,7 @@ fn idempotency_key_and_cancel() {
     // The rig is free: the next experiment on it (one at a time per rig)
     // starts and finishes, long before the cancelled reference-accuracy
     // trace could have ended (minutes).
-    let small = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"method":"analytic","criterion":"stability","b":[0,10]}"#;
-    let (code, v, _) = post(&url, small);
-    assert_eq!(code, 202, "{v}");
-    let next = wait_end(&s.base, v["id"].as_str().unwrap(), 10);
-    assert_eq!(next["state"], "succeeded", "{next}");
-    assert_eq!(get(&format!("{url}/{id}"))["state"], "cancelled");
+    the_rig_runs_the_next_and_the_cancelled_stays(&s.base, id, 10);
 }
 
 #[test]
@@ -832,10 +827,18 @@ fn a_tuned_compare_reports_progress_and_its_cancel_reaches_the_tunes() {
     // The rig runs one experiment at a time: the next one finishing within
     // 30 s shows the cancel reached the running tune (uncancelled, the
     // tunes alone run for minutes, docs/zwidth.md: 8 min).
+    the_rig_runs_the_next_and_the_cancelled_stays(&s.base, &id, 30);
+}
+
+/// After a cancel: a small analytic map on the same rig (one experiment at
+/// a time per rig) starts and succeeds within `seconds`, and the cancelled
+/// experiment stays cancelled.
+fn the_rig_runs_the_next_and_the_cancelled_stays(base: &str, cancelled: &str, seconds: u64) {
+    let url = format!("{base}/v1/experiments");
     let small = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"method":"analytic","criterion":"stability","b":[0,10]}"#;
     let (code, v, _) = post(&url, small);
     assert_eq!(code, 202, "{v}");
-    let next = wait_end(&s.base, v["id"].as_str().unwrap(), 30);
+    let next = wait_end(base, v["id"].as_str().unwrap(), seconds);
     assert_eq!(next["state"], "succeeded", "{next}");
-    assert_eq!(get(&format!("{url}/{id}"))["state"], "cancelled");
+    assert_eq!(get(&format!("{url}/{cancelled}"))["state"], "cancelled");
 }

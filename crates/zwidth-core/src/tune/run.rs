@@ -39,7 +39,19 @@ struct Run<'a> {
     failure: Mutex<Option<SpecError>>,
 }
 
-impl Run<'_> {
+impl<'a> Run<'a> {
+    /// A run of `tune` with nothing evaluated yet.
+    fn new(tune: &'a Tune, observer: Option<Arc<Observer>>) -> Self {
+        Run {
+            tune,
+            observer,
+            log: Mutex::new(Vec::new()),
+            cache: Mutex::new(HashMap::new()),
+            calls: Default::default(),
+            failure: Mutex::new(None),
+        }
+    }
+
     /// The cache and store key of an evaluation (replicate 0 keeps the key
     /// tunes stored before replicates existed).
     fn key(
@@ -290,14 +302,7 @@ impl Tune {
         if let Some(o) = &observer {
             o.set_scopes(spec.max_evaluations + spec.finalists * self.per_finalist);
         }
-        let run = Run {
-            tune: self,
-            observer,
-            log: Mutex::new(Vec::new()),
-            cache: Mutex::new(HashMap::new()),
-            calls: Default::default(),
-            failure: Mutex::new(None),
-        };
+        let run = Run::new(self, observer);
         let n = self.space.dim();
         let budget = spec.max_evaluations;
         let pareto = matches!(spec.objective, Objective::Pareto(_));
@@ -824,14 +829,7 @@ mod replicate_tests {
             }))
             .unwrap();
             let tune = spec.validate().unwrap();
-            let run = Run {
-                tune: &tune,
-                observer: None,
-                log: Mutex::new(Vec::new()),
-                cache: Mutex::new(HashMap::new()),
-                calls: Default::default(),
-                failure: Mutex::new(None),
-            };
+            let run = Run::new(&tune, None);
             check(&run);
         };
         let gains = |a: f64, l: f64| -> SceneSpec {
@@ -865,14 +863,7 @@ mod replicate_tests {
         }))
         .unwrap();
         let tune = spec.validate().unwrap();
-        let run = Run {
-            tune: &tune,
-            observer: None,
-            log: Mutex::new(Vec::new()),
-            cache: Mutex::new(HashMap::new()),
-            calls: Default::default(),
-            failure: Mutex::new(None),
-        };
+        let run = Run::new(&tune, None);
         let rep = |k: f64, lo: f64, hi: f64, fid: f64| {
             let mut e = pooled(k, [lo, hi], 1).eval;
             e.metrics.max_fidelity_error = Some(fid);
