@@ -409,6 +409,34 @@ mod tests {
     }
 
     #[test]
+    fn motion_one_way_only_is_refused_in_either_direction() {
+        // Steady sliding at ±10 mm/s under F = ±(b·v + f_c): every window
+        // moves the same way, so f_c cannot be told from a force offset.
+        for dir in [1.0, -1.0] {
+            let dt = 1e-3;
+            let t: Vec<f64> = (0..20_000).map(|k| k as f64 * dt).collect();
+            let tr = Trace {
+                dt,
+                position: t.iter().map(|t| dir * 0.01 * t).collect(),
+                force: vec![dir * (13.2 * 0.01 + 0.19); t.len()],
+                t,
+            };
+            let e = identify(&tr, Model::MassDamperCoulomb).unwrap_err();
+            assert!(e.allowed.contains("at least 30 windows each way"), "{e}");
+            let (fwd, back) = if dir > 0.0 {
+                ("forward", "0 backward")
+            } else {
+                ("0 windows moving forward", "backward")
+            };
+            assert!(
+                e.value.contains(fwd) && e.value.contains(back),
+                "{}",
+                e.value
+            );
+        }
+    }
+
+    #[test]
     fn where_the_device_sits_does_not_matter() {
         // The same motion 1 m further along the rail: the equation has no
         // position term, so every estimate must agree (to rounding: each
