@@ -410,15 +410,22 @@ mod tests {
 
     #[test]
     fn motion_one_way_only_is_refused_in_either_direction() {
-        // Steady sliding at ±10 mm/s under F = ±(b·v + f_c): every window
-        // moves the same way, so f_c cannot be told from a force offset.
+        // Sliding one way at v = ±(0.1 + 0.05·sin t) m/s under
+        // F = m·a + b·v ± f_c: every window moves the same way, so f_c cannot
+        // be told from a force offset.
         for dir in [1.0, -1.0] {
             let dt = 1e-3;
             let t: Vec<f64> = (0..20_000).map(|k| k as f64 * dt).collect();
             let tr = Trace {
                 dt,
-                position: t.iter().map(|t| dir * 0.01 * t).collect(),
-                force: vec![dir * (13.2 * 0.01 + 0.19); t.len()],
+                position: t
+                    .iter()
+                    .map(|t| dir * (0.1 * t + 0.05 * (1.0 - t.cos())))
+                    .collect(),
+                force: t
+                    .iter()
+                    .map(|t| dir * (0.52 * 0.05 * t.cos() + 13.2 * (0.1 + 0.05 * t.sin()) + 0.19))
+                    .collect(),
                 t,
             };
             let e = identify(&tr, Model::MassDamperCoulomb).unwrap_err();
