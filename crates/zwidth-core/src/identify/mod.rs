@@ -539,6 +539,26 @@ mod tests {
             id.windows_used > 300 && id.windows_used < id.windows_tried,
             "{id:?}"
         );
+        // The standard error is the batch-means one, recomputed here from
+        // the blocks' own fits: sd over the blocks / √(blocks).
+        let (all, _) = rows(&tr);
+        let block_len = tr.position.len().div_ceil(BLOCKS);
+        let masses: Vec<f64> = (0..BLOCKS)
+            .filter_map(|b| {
+                let mine: Vec<&Row> = all.iter().filter(|r| r.start / block_len == b).collect();
+                fit(&mine, 3).map(|t| t[0])
+            })
+            .collect();
+        let n = masses.len() as f64;
+        let mean = masses.iter().sum::<f64>() / n;
+        let sd = (masses.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        assert_eq!(id.blocks, masses.len());
+        let want = sd / n.sqrt();
+        assert!(
+            (id.mass.std_error / want - 1.0).abs() < 1e-9,
+            "{:?} vs {want}",
+            id.mass
+        );
     }
 
     #[test]

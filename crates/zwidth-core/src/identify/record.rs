@@ -118,3 +118,81 @@ pub fn record(scene: &Scene, ex: &Excitation) -> Trace {
         position,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::zwidth::scene::SceneSpec;
+
+    fn scene(json: &str) -> Scene {
+        SceneSpec::from_json(json).unwrap().validate().unwrap()
+    }
+
+    #[test]
+    fn bad_excitations_name_the_field() {
+        let at_1k = scene(r#"{"loop":{"sample_hz":1000,"render_hz":1000}}"#);
+        let field = |sc: &Scene, ex: Excitation| ex.validate(sc).map_err(|e| e.field);
+        let ex = Excitation::default();
+        assert_eq!(field(&at_1k, ex.clone()), Ok(()));
+        // The top line must be below Nyquist (500 Hz at 1 kHz).
+        assert_eq!(
+            field(
+                &at_1k,
+                Excitation {
+                    f_max_hz: 400.0,
+                    ..ex.clone()
+                }
+            ),
+            Ok(())
+        );
+        assert_eq!(
+            field(
+                &at_1k,
+                Excitation {
+                    f_max_hz: 600.0,
+                    ..ex.clone()
+                }
+            ),
+            Err("f_max_hz".into())
+        );
+        // At 100 Hz, 5 s is 500 samples, fewer than a trace needs (1 000);
+        // 10 s is exactly 1 000.
+        let at_100 = scene(r#"{"loop":{"sample_hz":100,"render_hz":100},"probe":{"f_max_hz":20}}"#);
+        let short = Excitation {
+            duration_s: 5.0,
+            f_max_hz: 20.0,
+            ..ex.clone()
+        };
+        assert_eq!(field(&at_100, short), Err("duration_s".into()));
+        let enough = Excitation {
+            duration_s: 10.0,
+            f_max_hz: 20.0,
+            ..ex.clone()
+        };
+        assert_eq!(field(&at_100, enough), Ok(()));
+        // The peak may reach the force limit, not pass it.
+        let limited = scene(
+            r#"{"device":{"force_limit":0.5},"loop":{"sample_hz":1000,"render_hz":1000},"probe":{"amplitude":0.4}}"#,
+        );
+        assert_eq!(
+            field(
+                &limited,
+                Excitation {
+                    peak_force: 0.5,
+                    ..ex.clone()
+                }
+            ),
+            Ok(())
+        );
+        assert_eq!(
+            field(
+                &limited,
+                Excitation {
+                    peak_force: 0.6,
+                    ..ex
+                }
+            ),
+            Err("peak_force".into())
+        );
+    }
+}
