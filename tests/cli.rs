@@ -663,7 +663,11 @@ fn compare_tuned_tunes_each_estimator_and_shows_its_parameters() {
                 "{name}.{p}"
             );
         }
-        assert!(rows[i]["parameters"].as_str().unwrap().ends_with("(tuned)"));
+        let shown = rows[i]["parameters"].as_str().unwrap();
+        assert!(shown.ends_with("(tuned)"), "{shown}");
+        // The row names the tuned value in the paper's terms.
+        let symbol = ["ωc = ", "", "q = ", "μ1 = "][i];
+        assert!(shown.contains(symbol), "{name}: {shown}");
     }
     // Each fixed value lies inside its tuned range, so no tune may end
     // below it (5 %: draft's K resolution). Levant with the paper's μ1 = 6.6,

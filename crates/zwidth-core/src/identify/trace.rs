@@ -292,6 +292,10 @@ mod tests {
             ("trace line 6, column 3 (position_m)", "abc")
         );
         // Too short.
+        assert_eq!(
+            Trace::parse_csv(&csv(1000, |_, r| r)).unwrap().t.len(),
+            1000
+        );
         let e = err(&csv(999, |_, r| r));
         assert_eq!((e.field.as_str(), e.value.as_str()), ("trace", "999 rows"));
         // A late sample: uneven spacing, named at its line.
