@@ -822,6 +822,15 @@ fn a_tuned_compare_reports_progress_and_its_cancel_reaches_the_tunes() {
         let v = get(&format!("{url}/{id}"));
         v["state"] == "running" && v["progress"]["fraction"].as_f64().unwrap_or(0.0) > 0.0
     });
+    // Seven parts (three tunes, then four maps): the first tune alone is at
+    // most 1/7 of the work.
+    let f = get(&format!("{url}/{id}"))["progress"]["fraction"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        f > 0.0 && f <= 1.0 / 7.0 + 1e-9,
+        "fraction {f} during the first tune"
+    );
     let (code, v, _) = post(&format!("{url}/{id}/cancel"), "");
     assert_eq!((code, v["state"].as_str()), (200, Some("cancelled")), "{v}");
     // The rig runs one experiment at a time: the next one finishing within
