@@ -562,3 +562,30 @@ fn force_resolution_off_by_default_exact_when_fine_and_coarse_still_finite() {
         );
     }
 }
+
+#[test]
+fn no_width_exceeds_k_max_even_below_the_first_step() {
+    // k_max = 1 000 N/m, below draft's K step: bisection stays under it,
+    // the lattice searches (trace, grid) refuse the map, naming k_max.
+    let draft = Accuracy::Preset(Preset::Draft);
+    let spec = |search| MapSpec {
+        scene: linear("", r#"{"kind":"fdm"}"#),
+        method: Method::Analytic,
+        criterion: Criterion::Stability,
+        search,
+        accuracy: draft.clone(),
+        b: Some(vec![0.0, 20.0]),
+        b_max: 1000.0,
+        k_max: 1000.0,
+    };
+    for search in [SearchKind::Bisect, SearchKind::RobustBisect] {
+        let r = map(&spec(search)).unwrap();
+        // FDM's Jury boundary is 26 512 N/m at B = 0: everything up to the
+        // cap renders, so the width is the cap.
+        assert_eq!(r.k_width, 1000.0, "{search:?}");
+        assert!(r.points.iter().all(|p| p.k <= 1000.0), "{search:?}");
+    }
+    for search in [SearchKind::Trace, SearchKind::Grid] {
+        assert_eq!(map(&spec(search)).unwrap_err().field, "k_max", "{search:?}");
+    }
+}

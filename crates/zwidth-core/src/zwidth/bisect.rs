@@ -98,6 +98,9 @@ fn bisect_once(
     points: &mut Vec<Point>,
 ) -> Option<f64> {
     let Bracket { k0, k_cap, rel_tol } = bounds;
+    // Never past the cap, even when the cap is below the first step (a
+    // map asked for K up to 1 000 N/m at a 2 976 N/m draft step).
+    let k0 = k0.min(k_cap);
     let mut eval = |k: f64| {
         let p = classify(k);
         let ok = p.ok();
@@ -218,6 +221,23 @@ mod tests {
         k_cap: 1e7,
         rel_tol: 1e-3,
     };
+
+    #[test]
+    fn the_result_never_exceeds_the_cap() {
+        // Everything renders below 1500 N/m; a cap of 1000 below the first
+        // step of 2976: the largest K searched is the cap itself.
+        let capped = Bracket {
+            k0: 2976.0,
+            k_cap: 1000.0,
+            rel_tol: 1e-3,
+        };
+        for robust in [false, true] {
+            let mut pts = Vec::new();
+            let k = bisect_k(scripted, capped, robust, &mut pts).unwrap();
+            assert_eq!(k, 1000.0, "robust {robust}");
+            assert!(pts.iter().all(|p| p.k <= 1000.0), "{pts:?}");
+        }
+    }
 
     #[test]
     fn robust_bisection_returns_the_first_failure_from_below() {

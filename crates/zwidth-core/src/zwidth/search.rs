@@ -418,6 +418,19 @@ fn prepare(spec: &MapSpec) -> Result<(Evaluator, Cost), SpecError> {
             "must be > 0 and at most 1e9 N/m",
         ));
     }
+    // The lattice searches step K by k_step: a k_max below one step leaves
+    // them nothing to search (and used to report a K-width above k_max).
+    if matches!(spec.search, SearchKind::Trace | SearchKind::Grid) && spec.k_max < res.k_step {
+        return Err(SpecError::new(
+            "k_max",
+            spec.k_max,
+            format!(
+                "must be at least the K step of the {} search, {} N/m at this accuracy (or search by bisection)",
+                if spec.search == SearchKind::Trace { "trace" } else { "grid" },
+                res.k_step
+            ),
+        ));
+    }
     if let Some(bs) = &spec.b {
         if bs.is_empty() {
             return Err(SpecError::new(
