@@ -447,30 +447,37 @@ mod tests {
     fn kalman_transfer_function_matches_simulation() {
         // Drive the time-varying filter with a sinusoid long enough to reach
         // steady state; its output amplitude/phase must match V(e^{jθ}).
+        // Two process noises on the ideal sensor (built for a 1 nm step, so
+        // r = d²/3 = 3.3e-19 m²): q = 2.5e4 (q·T⁵ = 2.5e-11 ≫ r: the gain
+        // hardly depends on q) and q = 1e-3 (q·T⁵ = 1e-18, comparable with
+        // r: it does).
         use crate::estimators::{EstimatorSpec, Sampling, VelocityEstimator};
-        let sc = SceneSpec::from_json(r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000},"estimator":{"kind":"kalman","q":2.5e4}}"#)
-            .unwrap()
-            .validate()
-            .unwrap();
-        let m = LinearModel::new(&sc).unwrap();
-        let spec = EstimatorSpec::from_json(r#"{"kind":"kalman","q":2.5e4}"#).unwrap();
-        let mut est = spec
-            .build(Sampling::new(1000.0, sc.sampling.quantization).unwrap())
-            .unwrap();
-        let w = 2.0 * std::f64::consts::PI * 37.0;
-        let theta = w * 1e-3;
-        let v = m.v(theta);
-        let n = 200_000;
-        let (mut last, mut want) = (0.0, 0.0);
-        for k in 0..n {
-            let y = 1e-3 * (theta * k as f64).sin();
-            last = est.update(y);
-            // Steady-state response to Im(e^{jθk}) is Im(V e^{jθk}).
-            want = 1e-3 * (v * C::from_polar(1.0, theta * k as f64)).im;
+        for q in [2.5e4, 1e-3] {
+            let sc = SceneSpec::from_json(&format!(r#"{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{{"kind":"kalman","q":{q}}}}}"#))
+                .unwrap()
+                .validate()
+                .unwrap();
+            let m = LinearModel::new(&sc).unwrap();
+            let spec =
+                EstimatorSpec::from_json(&format!(r#"{{"kind":"kalman","q":{q}}}"#)).unwrap();
+            let mut est = spec
+                .build(Sampling::new(1000.0, sc.sampling.quantization).unwrap())
+                .unwrap();
+            let w = 2.0 * std::f64::consts::PI * 37.0;
+            let theta = w * 1e-3;
+            let v = m.v(theta);
+            let n = 200_000;
+            let (mut last, mut want) = (0.0, 0.0);
+            for k in 0..n {
+                let y = 1e-3 * (theta * k as f64).sin();
+                last = est.update(y);
+                // Steady-state response to Im(e^{jθk}) is Im(V e^{jθk}).
+                want = 1e-3 * (v * C::from_polar(1.0, theta * k as f64)).im;
+            }
+            assert!(
+                (last - want).abs() < 1e-6 * v.norm() * 1e-3 + 1e-9,
+                "q = {q}: {last} vs {want}"
+            );
         }
-        assert!(
-            (last - want).abs() < 1e-6 * v.norm() * 1e-3 + 1e-9,
-            "{last} vs {want}"
-        );
     }
 }
