@@ -172,7 +172,7 @@ fn frequency_engine_lands_on_the_analytic_impedance_boundary() {
         .unwrap();
     let res = Accuracy::Preset(Preset::Standard).resolve(&sc).unwrap();
     let curve = |method| {
-        Evaluator::new(sc.clone(), method, Criterion::Impedance, res.clone())
+        Evaluator::new(sc.clone(), method, Criterion::Impedance, res)
             .unwrap()
             .impedance(3000.0, 5.0)
             .unwrap()
