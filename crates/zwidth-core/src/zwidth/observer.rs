@@ -188,3 +188,31 @@ impl Observer {
             });
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_run_is_stopped_only_past_its_trial_limit() {
+        // Limit 3: three trials are allowed, the fourth stops the run.
+        let o = Observer::default();
+        o.limit_trials(3);
+        for _ in 0..3 {
+            o.count_trial();
+        }
+        assert!(!o.cancelled() && o.runaway().is_none());
+        o.count_trial();
+        assert!(o.cancelled());
+        assert!(o
+            .runaway()
+            .unwrap()
+            .starts_with("stopped after 4 trials: more than 3"));
+        // No limit (0): never stopped.
+        let free = Observer::default();
+        for _ in 0..10 {
+            free.count_trial();
+        }
+        assert!(!free.cancelled());
+    }
+}

@@ -624,6 +624,30 @@ mod tests {
     use super::*;
 
     #[test]
+    fn quantization_up_to_a_centimetre_and_numbers_only_where_numbers_are() {
+        let with_q = |q: f64| {
+            let mut s = SceneSpec::default();
+            s.device.quantization = q;
+            s.validate().map(|_| ()).map_err(|e| e.field)
+        };
+        // The documented bound is "at most 0.01 m": 0.01 itself is allowed.
+        assert_eq!(with_q(0.01), Ok(()));
+        assert_eq!(with_q(0.010_000_1), Err("device.quantization".into()));
+        // A number cannot replace a non-number (the estimator's kind).
+        let e = SceneSpec::default()
+            .with_number("estimator.kind", 1.0, "params")
+            .unwrap_err();
+        assert!(
+            e.field == "params" && e.value.contains("estimator.kind"),
+            "{e}"
+        );
+        assert!(
+            e.allowed.starts_with("must name a number in the scene"),
+            "{e}"
+        );
+    }
+
+    #[test]
     fn issue_example_parses_and_defaults_fill_in() {
         let json = r#"{
           "device":   {"mass": 0.52, "damping": 13.2, "coulomb": 0.19, "quantization": 1e-6, "force_limit": null},
