@@ -196,3 +196,31 @@ pub fn of_map(spec: &MapSpec, res: &Resolved, exact: bool) -> Result<Cost, SpecE
     };
     Cost::of_trials(b_columns, trials).check("accuracy")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::zwidth::settings::{Accuracy, Criterion, Method, SearchKind};
+
+    #[test]
+    fn at_most_max_b_columns_damping_values() {
+        let spec = |n: usize| MapSpec {
+            scene: crate::zwidth::scene::SceneSpec::default(),
+            method: Method::Analytic,
+            criterion: Criterion::Stability,
+            search: SearchKind::Bisect,
+            accuracy: Accuracy::default(),
+            b: Some((0..n).map(|i| i as f64 * 0.01).collect()),
+            b_max: 1000.0,
+            k_max: 1e7,
+        };
+        let sc = spec(1).scene.validate().unwrap();
+        let res = Accuracy::default().resolve(&sc).unwrap();
+        let n = MAX_B_COLUMNS as usize;
+        assert_eq!(
+            of_map(&spec(n), &res, true).unwrap().b_columns,
+            MAX_B_COLUMNS
+        );
+        assert_eq!(of_map(&spec(n + 1), &res, true).unwrap_err().field, "b");
+    }
+}

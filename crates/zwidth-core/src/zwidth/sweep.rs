@@ -269,6 +269,28 @@ mod tests {
     }
 
     #[test]
+    fn ranges_give_the_documented_values() {
+        let range = |json: &str| {
+            serde_json::from_str::<ParameterRange>(json)
+                .unwrap()
+                .values()
+                .unwrap()
+        };
+        // Linear: lo + (i/(n−1))·(hi − lo); log: lo·(hi/lo)^(i/(n−1)).
+        assert_eq!(
+            range(r#"{"path":"estimator.cutoff_hz","min":100,"max":300,"count":3}"#),
+            [100.0, 200.0, 300.0]
+        );
+        let g = range(r#"{"path":"estimator.q","min":1,"max":100,"count":3,"scale":"log"}"#);
+        assert!(
+            (g[0] - 1.0).abs() < 1e-12
+                && (g[1] - 10.0).abs() < 1e-12
+                && (g[2] - 100.0).abs() < 1e-12,
+            "{g:?}"
+        );
+    }
+
+    #[test]
     fn log_range_is_geometric_and_sets_the_scene() {
         let s = SweepSpec {
             map: base(),
