@@ -121,7 +121,7 @@ struct Row {
 
 /// The velocity sign over samples [i0, i1] when the handle clearly moves
 /// one way throughout: the displacement over ±h samples stays beyond
-/// `min_move` at every sample (see [`rows_at`] for why that excludes a stop).
+/// `min_move` at every sample (see [`stop_test`] for why that excludes a stop).
 fn one_way(x: &[f64], i0: usize, i1: usize, h: usize, v_min_step: f64) -> Option<f64> {
     if i0 < h || i1 + h >= x.len() {
         return None;
@@ -132,22 +132,18 @@ fn one_way(x: &[f64], i0: usize, i1: usize, h: usize, v_min_step: f64) -> Option
         .then_some(s)
 }
 
-fn rows(trace: &Trace) -> (Vec<Row>, usize) {
-    rows_at(trace, &WINDOWS_S)
-}
-
 /// The sign test's half-span h (samples) and the displacement over ±h a
 /// sample must exceed. A window is kept when the handle cannot have stopped
 /// (and so stuck) inside it: if v(τ) = 0 somewhere in [t − hΔ, t + hΔ],
 /// then |v| ≤ a_max·2hΔ there and the displacement over that span is at
 /// most a_max·(2hΔ)²; a displacement beyond that plus three encoder steps
 /// rules a stop out. h: ±1 ms; a_max: 1.5× the largest second difference
-/// over ±h, an acceleration bound read from the data.
-fn stop_test(trace: &Trace) -> (usize, f64) {
+/// over ±h, an acceleration bound read from the data. `q`: the encoder
+/// step ([`Trace::quantization`]).
+fn stop_test(trace: &Trace, q: f64) -> (usize, f64) {
     let (x, dt) = (&trace.position, trace.dt);
     let n = x.len();
     let h = ((0.001 / dt).round() as usize).max(1);
-    let q = trace.quantization();
     let span = 2.0 * h as f64 * dt;
     let a_max = 1.5
         * (h..n.saturating_sub(h))
@@ -157,13 +153,15 @@ fn stop_test(trace: &Trace) -> (usize, f64) {
     (h, a_max * span * span + 3.0 * q.max(1e-9))
 }
 
-fn rows_at(trace: &Trace, windows_s: &[f64]) -> (Vec<Row>, usize) {
+/// Every window's equation (those where the handle moved one way) at the
+/// lengths `WINDOWS_S`, and how many windows were tried. `q`: the encoder step.
+fn rows(trace: &Trace, q: f64) -> (Vec<Row>, usize) {
     let (x, f, dt) = (&trace.position, &trace.force, trace.dt);
     let n = x.len();
-    let (h, v_min_step) = stop_test(trace);
+    let (h, v_min_step) = stop_test(trace, q);
     let mut out = Vec::new();
     let mut tried = 0;
-    for &len_s in windows_s {
+    for &len_s in &WINDOWS_S {
         let len = ((len_s / dt).round() as usize).max(MIN_WINDOW_SAMPLES);
         let big_t = len as f64 * dt;
         let hop = (len / 4).max(1);
@@ -264,7 +262,9 @@ pub fn identify(trace: &Trace, model: Model) -> Result<Identified, SpecError> {
         Model::MassDamperCoulomb => 3,
         Model::MassDamper => 2,
     };
-    let (all, tried) = rows(trace);
+    // One scan for the encoder step: the stop test and the result share it.
+    let quantization = trace.quantization();
+    let (all, tried) = rows(trace, quantization);
     let (plus, minus) = (
         all.iter().filter(|r| r.a[2] > 0.0).count(),
         all.iter().filter(|r| r.a[2] < 0.0).count(),
@@ -333,7 +333,7 @@ pub fn identify(trace: &Trace, model: Model) -> Result<Identified, SpecError> {
         mass: est(0),
         damping: est(1),
         coulomb: est(2),
-        quantization: trace.quantization(),
+        quantization,
         sample_hz: trace.sample_hz(),
         duration_s: n as f64 * trace.dt,
         windows_used: all.len(),
@@ -403,7 +403,7 @@ mod tests {
             force: vec![0.0; t.len()],
             t,
         };
-        let (h, bound) = stop_test(&tr);
+        let (h, bound) = stop_test(&tr, tr.quantization());
         assert_eq!(h, 2);
         assert!((bound - 1.8003e-5).abs() < 1e-12, "{bound}");
     }
@@ -541,7 +541,7 @@ mod tests {
         );
         // The standard error is the batch-means one, recomputed here from
         // the blocks' own fits: sd over the blocks / √(blocks).
-        let (all, _) = rows(&tr);
+        let (all, _) = rows(&tr, tr.quantization());
         let block_len = tr.position.len().div_ceil(BLOCKS);
         let masses: Vec<f64> = (0..BLOCKS)
             .filter_map(|b| {
