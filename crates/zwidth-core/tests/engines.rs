@@ -109,6 +109,39 @@ fn analytic_strict_passivity_is_colgate_for_fdm() {
 }
 
 #[test]
+fn strict_passivity_over_the_automatic_b_range_stops_where_colgate_does() {
+    // Colgate & Schenkel, FDM, no delay: K_max = 2(b − B)/T while B < b
+    // = 13.2 N·s/m, nothing beyond. With B every 5 N·s/m from 0 the map
+    // holds B = 0, 5, 10 (26 400, 16 400, 6 400 N/m) and stops at 15; each
+    // boundary point is a trial at K_max, which is strictly passive.
+    let acc: Accuracy = serde_json::from_str(r#"{"b_step":5}"#).unwrap();
+    let r = map(&MapSpec {
+        scene: linear("", r#"{"kind":"fdm"}"#),
+        method: Method::Analytic,
+        criterion: Criterion::StrictPassivity,
+        search: SearchKind::Bisect,
+        accuracy: acc,
+        b: None,
+        b_max: 40.0,
+        k_max: 1e7,
+    })
+    .unwrap();
+    let bs: Vec<f64> = r.boundary.iter().map(|p| p.b).collect();
+    assert_eq!(bs, [0.0, 5.0, 10.0]);
+    for p in &r.boundary {
+        let want = 2.0 * (13.2 - p.b) / 1e-3;
+        assert!((p.k_max - want).abs() < 1e-6 * want, "{p:?} vs {want}");
+    }
+    assert_eq!(r.points.len(), 3);
+    assert!(
+        r.points.iter().all(|p| p.passive == Some(true)),
+        "{:?}",
+        r.points
+    );
+    assert_eq!(r.b_width, 10.0);
+}
+
+#[test]
 fn frequency_engine_lands_on_the_analytic_impedance_boundary() {
     // For B = 0 the impedance-test boundary is K = 2b/T = 26 400 N/m (DESIGN.md);
     // for B = 20 the analytic formula gives the reference. The frequency

@@ -371,6 +371,46 @@ mod tests {
     }
 
     #[test]
+    fn strict_passivity_refines_the_binding_frequency_between_grid_points() {
+        // With a Butterworth filter the binding θ lies between the 8192-point
+        // grid's points. The reference: a brute-force minimum of
+        // (r − B·c)/a over 10⁵ θ in (0, π], then 10⁵ more within one coarse
+        // step of the best (θ resolution 6e-10 rad).
+        for (cutoff, b) in [(50.0, 0.0), (120.0, 3.0), (300.0, -2.0)] {
+            let j = format!(
+                r#"{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{{"kind":"butterworth","cutoff_hz":{cutoff},"order":2}}}}"#
+            );
+            let m =
+                LinearModel::new(&SceneSpec::from_json(&j).unwrap().validate().unwrap()).unwrap();
+            let f = |th: f64| {
+                let (a, c, r) = m.passivity_terms(th);
+                if a > 0.0 {
+                    (r - b * c) / a
+                } else {
+                    f64::INFINITY
+                }
+            };
+            let n = 100_000;
+            let pi = std::f64::consts::PI;
+            let coarse = (1..=n)
+                .map(|i| pi * i as f64 / n as f64)
+                .min_by(|x, y| f(*x).total_cmp(&f(*y)))
+                .unwrap();
+            let want = (0..=n)
+                .map(|i| {
+                    (coarse - pi / n as f64 + 2.0 * pi * i as f64 / (n as f64).powi(2)).min(pi)
+                })
+                .map(f)
+                .fold(f64::INFINITY, f64::min);
+            let (_, hi) = m.strict_passivity_range(b).unwrap();
+            assert!(
+                (hi / want - 1.0).abs() < 1e-10,
+                "cutoff {cutoff} B={b}: {hi} vs {want}"
+            );
+        }
+    }
+
+    #[test]
     fn fdm_strict_passivity_is_colgate() {
         // Colgate & Schenkel for FDM, no delay: passive iff b > KT/2 + |B|,
         // i.e. k_max = 2(b − |B|)/T.

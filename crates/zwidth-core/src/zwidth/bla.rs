@@ -295,6 +295,31 @@ mod tests {
     }
 
     #[test]
+    fn noise_se_from_the_period_spread_by_hand() {
+        // Eq. 3-42: three realizations of three periods each, periods at
+        // G_m + (−e, 0, e): each realization's sample variance over periods
+        // is (e² + 0 + e²)/(3 − 1) = e², so var(noise) of one line is
+        // Σ_m e² / (P·M²)·/|G|⁴ = 3e²/(3·9·|G|⁴) and se = e/(3|G|²).
+        let g = C::new(0.02, -0.05);
+        let e = 1e-4;
+        let mut s = BlaStats::new(1, 3);
+        for d in [-1e-3, 0.0, 1e-3] {
+            let gm = g + d;
+            s.push(&[vec![gm - e], vec![gm], vec![gm + e]]);
+        }
+        let v = s.verdict(0.05, 10);
+        let want = e / (3.0 * g.norm_sqr());
+        assert!(
+            (v.noise_se / want - 1.0).abs() < 1e-9,
+            "{} vs {want}",
+            v.noise_se
+        );
+        // The realizations' spread is unchanged by the periods: their means
+        // are G_m exactly.
+        assert!((v.margin_se / se_of(g, 1e-3) - 1.0).abs() < 1e-9, "{v:?}");
+    }
+
+    #[test]
     fn decides_only_beyond_the_t_quantiles() {
         // Passive needs Re Z/se > t_{1−a, 2}, a = 0.05/looks (looks = 10 − 3 + 1).
         let a = 0.05 / 8.0;

@@ -195,12 +195,12 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
             };
             last_y = y;
             if EARLY && stuck_for >= stuck_limit && touched && total > i + 1 {
-                let rest = (total - i - 1) as f64;
-                // Append `rest` samples of constant y to the measure window
-                // (Welford merge); samples before the window do not count.
+                // Append the remaining samples (at least one: `total > i + 1`)
+                // of constant y to the measure window (Welford merge);
+                // samples before the window do not count.
                 let start = measure_from.max(i + 1);
                 let counted = (total - start) as f64;
-                if counted > 0.0 && rest > 0.0 {
+                if counted > 0.0 {
                     let nb = counted;
                     let dlt = y - mean;
                     let nn = n + nb;
@@ -288,7 +288,10 @@ mod tests {
             (2e5, 15.0),
             (1e6, 100.0),
         ] {
-            let early = wall_hit(&sc, k, b, kn, &mut NoTrace);
+            let mut rows = Vec::new();
+            let early = wall_hit(&sc, k, b, kn, &mut rows);
+            // `samples` counts the steps simulated, one trace row each.
+            assert_eq!(rows.len(), early.samples, "K={k} B={b}");
             let full = run::<true, true, false>(&sc, k, b, kn, &mut NoTrace);
             assert_eq!(early.stable, full.stable, "K={k} B={b}");
             assert_eq!(early.diverged, full.diverged, "K={k} B={b}");
@@ -307,6 +310,34 @@ mod tests {
         }
         // The shortcut was taken (else this test checks nothing).
         assert!(shortened >= 2, "{shortened} trials ended early");
+    }
+
+    #[test]
+    fn a_heavy_undamped_handle_is_waited_for_until_it_touches() {
+        // No damping, no friction: free flight under the push is
+        // x(t) = x0 + F·t²/(2m) (exact under a zero-order hold), so the
+        // handle reaches the wall after √(2·d·m/F) = √(2·0.07·100/0.3572)
+        // = 6.26 s. Measurement starts `settle` after that contact, and the
+        // trial is contact + settle + measure samples long.
+        let spec = SceneSpec::from_json(
+            r#"{"device":{"mass":100,"damping":0,"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+        )
+        .unwrap();
+        let sc = spec.validate().unwrap();
+        let kn = HitKnobs {
+            settle_s: 0.5,
+            measure_s: 0.5,
+        };
+        let mut rows = Vec::new();
+        let o = wall_hit(&sc, 1000.0, 20.0, kn, &mut rows);
+        let h = &sc.spec.hit;
+        let t_c = (2.0 * h.home_distance * 100.0 / h.push_force).sqrt();
+        let contact = rows.iter().position(|r| r.y > 0.0).unwrap();
+        assert!(
+            (contact as f64 * 1e-3 - t_c).abs() <= 2e-3,
+            "contact at {contact} samples, {t_c} s by the formula"
+        );
+        assert_eq!(o.samples, contact + 500 + 500, "{o:?}");
     }
 
     #[test]

@@ -527,6 +527,31 @@ mod tests {
     use crate::zwidth::analytic::LinearModel;
     use crate::zwidth::scene::SceneSpec;
 
+    #[test]
+    fn tail_verdict_needs_re_z_three_standard_errors_above_zero() {
+        // Four periods; the tail is the last two. One line, Re Z in the
+        // tail 2 ± 0.001: mean 2, se = √((2·0.001²)/1/2) = 0.001, so
+        // 2 − 3·0.001 > 0 is passive. Re Z 10 ± 8: se = 8, 10 − 24 < 0
+        // is not (a spread like a growing oscillation's).
+        let hist = |a: f64, b: f64| {
+            vec![vec![C::new(-50.0, 0.0)]; 2]
+                .into_iter()
+                .chain([vec![C::new(a, 1.0)], vec![C::new(b, 3.0)]])
+                .collect::<Vec<_>>()
+        };
+        let (mean, passive) = tail_verdict(&hist(1.999, 2.001)).unwrap();
+        assert!((mean[0] - C::new(2.0, 2.0)).norm() < 1e-12, "{mean:?}");
+        assert!(passive);
+        let (mean, passive) = tail_verdict(&hist(2.0, 18.0)).unwrap();
+        assert!((mean[0].re - 10.0).abs() < 1e-12);
+        assert!(!passive);
+        // Exactly three standard errors: 3 ± 1 has se 1, 3 − 3·1 = 0 passes.
+        assert!(tail_verdict(&hist(2.0, 4.0)).unwrap().1);
+        // Fewer than two periods in the tail: no verdict.
+        assert!(tail_verdict(&hist(1.0, 1.0)[2..]).is_none());
+        assert!(tail_verdict(&[vec![C::new(1.0, 0.0)]]).is_none());
+    }
+
     const KNOBS: ProbeKnobs = ProbeKnobs {
         periods: 2,
         settle_tol: 1e-6,

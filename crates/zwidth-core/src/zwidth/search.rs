@@ -504,7 +504,10 @@ pub fn map_observed(
         .filter(|p| p.passive == Some(true))
         .filter_map(|p| p.fidelity)
         .reduce(f64::max);
-    ev.report(1.0);
+    // A cancelled map is not done: its progress stays where it stopped.
+    if !ev.observer.as_ref().is_some_and(|o| o.cancelled()) {
+        ev.report(1.0);
+    }
     let area = area(&boundary);
     let resolution = match (spec.search, ev.criterion, ev.method) {
         (_, Criterion::StrictPassivity, _) => {
@@ -766,6 +769,7 @@ fn grid(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::zwidth::scene::SceneSpec;
 
     fn bp(b: f64, k_max: f64) -> BoundaryPoint {
         BoundaryPoint::new(b, k_max)
@@ -822,6 +826,40 @@ mod tests {
         // steps, plus three; never more than the range.
         assert_eq!(planned_b(&[bp(0.0, 1000.0), bp(10.0, 10.0)], 68, 10.0), 5);
         assert_eq!(planned_b(&[bp(0.0, 1000.0), bp(10.0, 999.0)], 68, 10.0), 68);
+    }
+
+    #[test]
+    fn grid_progress_is_the_share_of_points_done() {
+        // A grid of 3 B × 10 K = 30 points reports every 16th point: once,
+        // at 16/30. Cancelled before it starts, every point ends at once
+        // (not rendered) and the map does not claim to be done.
+        let scene: SceneSpec = SceneSpec::from_json(
+            r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+        )
+        .unwrap();
+        let spec = MapSpec {
+            scene,
+            method: Method::Analytic,
+            criterion: Criterion::Impedance,
+            search: SearchKind::Grid,
+            accuracy: serde_json::from_str(r#"{"k_step":1000}"#).unwrap(),
+            b: Some(vec![0.0, 10.0, 20.0]),
+            b_max: 1000.0,
+            k_max: 10_000.0,
+        };
+        let o = std::sync::Arc::new(Observer::default());
+        o.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+        let r = map_observed(&spec, Some(o.clone()), 0).unwrap();
+        assert_eq!(r.points.len(), 30);
+        assert!(
+            (o.fraction() - 16.0 / 30.0).abs() < 1e-12,
+            "{}",
+            o.fraction()
+        );
+        // Not cancelled: done is done.
+        let o = std::sync::Arc::new(Observer::default());
+        map_observed(&spec, Some(o.clone()), 0).unwrap();
+        assert_eq!(o.fraction(), 1.0);
     }
 
     #[test]

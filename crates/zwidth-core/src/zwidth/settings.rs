@@ -289,4 +289,21 @@ mod tests {
             ("accuracy.realizations", true)
         );
     }
+
+    #[test]
+    fn a_trial_may_have_1e9_samples_and_not_more() {
+        // The documented limit, (settle_s + measure_s)·sample_hz ≤ 1e9: at
+        // the seed's 10 kHz, 99 998 + 2 s is exactly 1e9 samples.
+        let sc = SceneSpec::default().validate().unwrap();
+        assert_eq!(sc.spec.control.sample_hz, 1e4);
+        let settle = |s: f64| {
+            serde_json::from_value::<Accuracy>(serde_json::json!({"settle_s": s, "measure_s": 2.0}))
+                .unwrap()
+                .resolve(&sc)
+        };
+        assert_eq!(settle(99_998.0).unwrap().hit.settle_s, 99_998.0);
+        let e = settle(99_998.5).unwrap_err();
+        assert_eq!(e.field, "accuracy.settle_s");
+        assert!(e.to_string().contains("1e9 samples"), "{e}");
+    }
 }

@@ -80,7 +80,6 @@ pub fn run() -> Result<Vec<TradeoffRow>, SpecError> {
         }
         let (kr, br) = (results[0].2.k_width, results[0].2.b_width);
         let ref_interval = results[0].2.k_width_interval;
-        let rel = |x: f64, r: f64| if r > 0.0 { (x - r) / r } else { 0.0 };
         for (preset, wall_s, r) in results {
             rows.push(TradeoffRow {
                 scene: name.to_string(),
@@ -89,8 +88,8 @@ pub fn run() -> Result<Vec<TradeoffRow>, SpecError> {
                 trials: r.trials,
                 k_width: r.k_width,
                 b_width: r.b_width,
-                k_width_error: rel(r.k_width, kr),
-                b_width_error: rel(r.b_width, br),
+                k_width_error: relative_error(r.k_width, kr),
+                b_width_error: relative_error(r.b_width, br),
                 k_width_interval: r.k_width_interval,
                 overlaps_reference: r
                     .k_width_interval
@@ -100,6 +99,16 @@ pub fn run() -> Result<Vec<TradeoffRow>, SpecError> {
         }
     }
     Ok(rows)
+}
+
+/// (x − r)/r, or 0 against a reference of 0 (a scene that renders
+/// nothing at reference accuracy: no relative error, and never NaN).
+fn relative_error(x: f64, r: f64) -> f64 {
+    if r > 0.0 {
+        (x - r) / r
+    } else {
+        0.0
+    }
 }
 
 pub fn table(rows: &[TradeoffRow]) -> String {
@@ -147,4 +156,18 @@ pub fn interval_cell(k_width: f64, interval: Option<[f64; 2]>) -> String {
             50.0 * (hi - lo) / k_width.max(f64::MIN_POSITIVE)
         )
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relative_errors_against_the_reference() {
+        assert_eq!(relative_error(150.0, 100.0), 0.5);
+        assert_eq!(relative_error(80.0, 100.0), -0.2);
+        // A reference of 0: 0, not ±inf or NaN.
+        assert_eq!(relative_error(5.0, 0.0), 0.0);
+        assert_eq!(relative_error(0.0, 0.0), 0.0);
+    }
 }

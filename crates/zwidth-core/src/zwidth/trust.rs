@@ -91,12 +91,18 @@ pub fn run() -> Result<Vec<TrustRow>, SpecError> {
         s.probe.amplitude = amp;
         rows.push(one("amplitude_n", amp, s)?);
     }
+    mark_changes(&mut rows);
+    Ok(rows)
+}
+
+/// Each row's K-width change from the row before it, where that row varies
+/// the same thing and rendered something (none across kinds, none from 0).
+fn mark_changes(rows: &mut [TrustRow]) {
     for i in 1..rows.len() {
         if rows[i].vary == rows[i - 1].vary && rows[i - 1].k_width > 0.0 {
             rows[i].change_from_previous = Some(rows[i].k_width / rows[i - 1].k_width - 1.0);
         }
     }
-    Ok(rows)
 }
 
 pub fn table(rows: &[TrustRow]) -> String {
@@ -121,4 +127,44 @@ pub fn table(rows: &[TrustRow]) -> String {
         ));
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(vary: &'static str, k_width: f64) -> TrustRow {
+        TrustRow {
+            vary,
+            value: 0.0,
+            k_width,
+            k_width_interval: None,
+            change_from_previous: None,
+            spike: 0.0,
+            wall_s: 0.0,
+        }
+    }
+
+    #[test]
+    fn changes_are_from_the_previous_row_of_the_same_kind() {
+        // 100 → 150 is +50 %, 150 → 120 is −20 %; a new kind starts
+        // without a change, and nothing is relative to a K-width of 0.
+        let mut rows = vec![
+            row("seed", 100.0),
+            row("seed", 150.0),
+            row("seed", 120.0),
+            row("cutoff_hz", 0.0),
+            row("cutoff_hz", 50.0),
+            row("cutoff_hz", 75.0),
+        ];
+        mark_changes(&mut rows);
+        let got: Vec<Option<f64>> = rows.iter().map(|r| r.change_from_previous).collect();
+        let want = [None, Some(0.5), Some(-0.2), None, None, Some(0.5)];
+        for (g, w) in got.iter().zip(want) {
+            match (g, w) {
+                (Some(g), Some(w)) => assert!((g - w).abs() < 1e-12, "{got:?}"),
+                (g, w) => assert_eq!(*g, w, "{got:?}"),
+            }
+        }
+    }
 }
