@@ -490,16 +490,21 @@ mod tests {
         // Two process noises on the ideal sensor (built for a 1 nm step, so
         // r = d²/3 = 3.3e-19 m²): q = 2.5e4 (q·T⁵ = 2.5e-11 ≫ r: the gain
         // hardly depends on q) and q = 1e-3 (q·T⁵ = 1e-18, comparable with
-        // r: it does).
+        // r: it does). And the diagonal model (jerk noise q·T⁴ on the third
+        // state only) at q = 1e-6, where q·T⁴ = 1e-18 is comparable with r.
         use crate::estimators::{EstimatorSpec, Sampling, VelocityEstimator};
-        for q in [2.5e4, 1e-3] {
-            let sc = SceneSpec::from_json(&format!(r#"{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{{"kind":"kalman","q":{q}}}}}"#))
+        for (q, model) in [
+            (2.5e4, "white_jerk"),
+            (1e-3, "white_jerk"),
+            (1e-6, "diagonal"),
+        ] {
+            let est_json = format!(r#"{{"kind":"kalman","q":{q},"q_model":"{model}"}}"#);
+            let sc = SceneSpec::from_json(&format!(r#"{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{est_json}}}"#))
                 .unwrap()
                 .validate()
                 .unwrap();
             let m = LinearModel::new(&sc).unwrap();
-            let spec =
-                EstimatorSpec::from_json(&format!(r#"{{"kind":"kalman","q":{q}}}"#)).unwrap();
+            let spec = EstimatorSpec::from_json(&est_json).unwrap();
             let mut est = spec
                 .build(Sampling::new(1000.0, sc.sampling.quantization).unwrap())
                 .unwrap();
