@@ -132,6 +132,15 @@ impl Unstored {
     }
 }
 
+/// The first wait before retrying a store write.
+const FIRST_RETRY: Duration = Duration::from_millis(100);
+
+/// The wait after `wait`: doubled, at most 5 s (a full disk is retried
+/// every 5 s all night, not in a storm and not once an hour).
+fn backoff(wait: Duration) -> Duration {
+    (wait * 2).min(Duration::from_secs(5))
+}
+
 /// Run a store operation, retrying while its fault is transient (another
 /// writer holds the lock, the disk is full) with back-off (0.1 s to 5 s);
 /// meanwhile `held` (if any) shows why. A permanent fault, or shutdown,
@@ -147,7 +156,7 @@ where
     F: FnMut() -> Fut,
     Fut: std::future::Future<Output = Result<T, sqlx::Error>>,
 {
-    let mut wait = Duration::from_millis(100);
+    let mut wait = FIRST_RETRY;
     loop {
         match f().await {
             Ok(v) => {
@@ -170,7 +179,7 @@ where
                 }
                 tracing::warn!(error = %e, "{what} failed; retrying in {wait:?}");
                 tokio::time::sleep(wait).await;
-                wait = (wait * 2).min(Duration::from_secs(5));
+                wait = backoff(wait);
             }
         }
     }
@@ -277,13 +286,13 @@ async fn run_one(
     TRIALS_PER_SECOND.store(0, Ordering::Relaxed);
     // Every finished trial is stored before the end is recorded (the
     // experiment stays in `running` meanwhile, so its `held` reason shows).
-    let mut wait = Duration::from_millis(100);
+    let mut wait = FIRST_RETRY;
     let stored_all = loop {
         match unstored.flush(store, &id, &observer).await {
             Ok(()) => break true,
             Err(Fault::Busy | Fault::Full) if !*shutdown.borrow() => {
                 tokio::time::sleep(wait).await;
-                wait = (wait * 2).min(Duration::from_secs(5));
+                wait = backoff(wait);
             }
             Err(_) => break false,
         }
@@ -330,4 +339,21 @@ async fn run_one(
         .await;
     }
     forget();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn store_retries_back_off_from_a_tenth_of_a_second_to_five() {
+        // The schedule `retrying` documents: 0.1 s, doubling, capped at 5 s.
+        let mut w = FIRST_RETRY;
+        let mut seen = vec![w.as_millis()];
+        for _ in 0..8 {
+            w = backoff(w);
+            seen.push(w.as_millis());
+        }
+        assert_eq!(seen, [100, 200, 400, 800, 1600, 3200, 5000, 5000, 5000]);
+    }
 }

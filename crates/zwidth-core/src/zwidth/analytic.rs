@@ -122,9 +122,13 @@ fn state_space_tf(f: &[[f64; 3]; 3], g: [f64; 3], c: [f64; 3]) -> (Poly, Poly) {
     (num, den)
 }
 
+/// Iterations of the Riccati recursion before giving up on convergence.
+const RICCATI_CAP: usize = 2_000_000;
+
 /// Steady-state gain of the scaled triple-integrator Kalman filter (see
-/// `estimators::kalman`), by iterating the Riccati recursion to a fixed point.
-fn kalman_steady_gain(q: f64, model: QModel, t: f64, d: f64) -> [f64; 3] {
+/// `estimators::kalman`), by iterating the Riccati recursion to a fixed
+/// point; with the iterations it took (`RICCATI_CAP`: not converged).
+fn kalman_steady_gain(q: f64, model: QModel, t: f64, d: f64) -> ([f64; 3], usize) {
     let qs = match model {
         QModel::WhiteJerk => {
             let s5 = q * t.powi(5);
@@ -144,7 +148,7 @@ fn kalman_steady_gain(q: f64, model: QModel, t: f64, d: f64) -> [f64; 3] {
         [0.0, 0.0, 2.0 * d * d],
     ];
     let mut gain = [0.0; 3];
-    for it in 0..2_000_000 {
+    for it in 0..RICCATI_CAP {
         let mut pp = [[0.0; 3]; 3];
         for i in 0..3 {
             for j in 0..3 {
@@ -166,10 +170,10 @@ fn kalman_steady_gain(q: f64, model: QModel, t: f64, d: f64) -> [f64; 3] {
             .fold(0.0, f64::max);
         gain = new_gain;
         if it > 10 && change < 1e-13 {
-            break;
+            return (gain, it + 1);
         }
     }
-    gain
+    (gain, RICCATI_CAP)
 }
 
 impl LinearModel {
@@ -198,7 +202,7 @@ impl LinearModel {
                 (num, den)
             }
             EstimatorKind::Kalman { q, q_model } => {
-                let g = kalman_steady_gain(*q, *q_model, t, scene.sampling.quantization);
+                let (g, _) = kalman_steady_gain(*q, *q_model, t, scene.sampling.quantization);
                 let a = [[1.0, 1.0, 0.5], [0.0, 1.0, 1.0], [0.0, 0.0, 1.0]];
                 let mut f = [[0.0; 3]; 3];
                 for i in 0..3 {
@@ -505,6 +509,14 @@ mod tests {
                 .unwrap();
             let m = LinearModel::new(&sc).unwrap();
             let spec = EstimatorSpec::from_json(&est_json).unwrap();
+            // The fixed point was found by the convergence test, not the cap.
+            let qm = if model == "diagonal" {
+                QModel::Diagonal
+            } else {
+                QModel::WhiteJerk
+            };
+            let (_, iterations) = kalman_steady_gain(q, qm, 1e-3, sc.sampling.quantization);
+            assert!(iterations < RICCATI_CAP, "q = {q}: {iterations}");
             let mut est = spec
                 .build(Sampling::new(1000.0, sc.sampling.quantization).unwrap())
                 .unwrap();
