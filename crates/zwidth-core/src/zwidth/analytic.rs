@@ -415,6 +415,32 @@ mod tests {
     }
 
     #[test]
+    fn strict_passivity_can_need_a_least_stiffness() {
+        // A Kalman filter (q = 1e4) with one sample of delay and B = −4
+        // N·s/m: where Re{(1 − e^{−jθ})e^{−jθ}} < 0 the constraint
+        // K·a + B·c ≤ r bounds K from below. Checked against the constraint
+        // itself on 10⁵ θ: just inside [lo, hi] it holds at every θ, 1 %
+        // below lo it fails at some θ (found by the scan above, 2026-12-02:
+        // the only estimator/delay/B combinations with a lower bound).
+        let j = r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000,"delay_samples":1},"estimator":{"kind":"kalman","q":1e4}}"#;
+        let m = LinearModel::new(&SceneSpec::from_json(j).unwrap().validate().unwrap()).unwrap();
+        let b = -4.0;
+        let (lo, hi) = m.strict_passivity_range(b).unwrap();
+        assert!(lo > 2000.0 && hi > 1.5 * lo, "{lo} {hi}");
+        let holds = |k: f64| {
+            (1..=100_000).all(|i| {
+                let th = std::f64::consts::PI * i as f64 / 1e5;
+                let (a, c, r) = m.passivity_terms(th);
+                k * a + b * c <= r
+            })
+        };
+        assert!(holds(lo * 1.001) && holds(hi * 0.999));
+        assert!(!holds(lo * 0.99));
+        // Without the lower bound's θ (B = 0) nothing is required.
+        assert_eq!(m.strict_passivity_range(0.0).unwrap().0, 0.0);
+    }
+
+    #[test]
     fn fdm_strict_passivity_is_colgate() {
         // Colgate & Schenkel for FDM, no delay: passive iff b > KT/2 + |B|,
         // i.e. k_max = 2(b − |B|)/T.
