@@ -113,34 +113,6 @@ fn a_run_beyond_its_trial_limit_is_stopped_with_the_reason() {
 }
 
 #[test]
-fn a_bisection_is_estimated_by_its_own_loop_bounds() {
-    // One B column, k_max = 1024 k_step, k_rel_tol = 0.01 (search.rs):
-    // bracketing doubles from k_step: log2(1024) + 1 = 11 tries (at least
-    // the 11 of halving down ten times), plus one; the bisection halves a
-    // bracket of width ≤ hi/2 until ≤ 0.01·hi: ceil(log2(100)) + 1 = 8.
-    // Total 12 + 8 = 20. Robust: 8 rounds of 5 checks and 8 halvings more.
-    let spec_k = |search: &str, k_max: f64| -> ExperimentSpec {
-        serde_json::from_str(&format!(
-            r#"{{"kind":"map","scene":{SCENE},"search":"{search}","b":[0],"k_max":{k_max},
-                "accuracy":{{"preset":"draft","k_step":1000,"k_rel_tol":0.01}}}}"#
-        ))
-        .unwrap()
-    };
-    let spec = |search: &str| spec_k(search, 1_024_000.0);
-    assert_eq!(spec("bisect").validate().unwrap().trials, 20);
-    // k_max = 4096 k_step: 13 doublings (more than the 11 halvings), + 1, + 8.
-    assert_eq!(spec_k("bisect", 4_096_000.0).validate().unwrap().trials, 22);
-    assert_eq!(
-        spec("robust_bisect").validate().unwrap().trials,
-        20 + 8 * (5 + 8)
-    );
-    // A grid walks min(k_max / k_step, 60) stiffness values per column.
-    assert_eq!(spec("grid").validate().unwrap().trials, 60);
-    // A trace over a given list may walk every K step at every column.
-    assert_eq!(spec("trace").validate().unwrap().trials, 1024 + 2);
-}
-
-#[test]
 fn an_experiment_may_plan_max_trials_and_not_one_more() {
     let at = Cost {
         trials: MAX_TRIALS,

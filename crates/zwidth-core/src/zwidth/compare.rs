@@ -320,3 +320,20 @@ impl CompareResult {
         s
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn c_comes_from_the_wall_contact() {
+        // docs/zwidth.md records C = 1.098 m/s² for the 2018 device at
+        // 1 kHz, from the FDM + Butterworth hit at K = 7 441.2 N/m,
+        // B = 29.76 N·s/m (also pinned through the CLI in tests/cli.rs).
+        // The window starts at first contact: the free flight before it
+        // accelerates at only push/m = 0.3572/0.52 = 0.69 m/s².
+        let c = estimate_c(&seed_2018_scene()).unwrap();
+        assert!((c.estimate.lipschitz / 1.098 - 1.0).abs() < 0.005, "{c:?}");
+        assert_eq!((c.wall_k, c.wall_b), (C_WALL_K, C_WALL_B));
+    }
+}

@@ -223,4 +223,80 @@ mod tests {
         );
         assert_eq!(of_map(&spec(n + 1), &res, true).unwrap_err().field, "b");
     }
+
+    /// The 2018 device without friction and quantization, single rate, one
+    /// search over K (k_step 1000 N/m, k_rel_tol 0.01, draft).
+    fn linear(search: SearchKind, b: Option<Vec<f64>>, b_max: f64, k_max: f64) -> MapSpec {
+        MapSpec {
+            scene: crate::zwidth::scene::SceneSpec::from_json(
+                r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+            )
+            .unwrap(),
+            method: Method::Auto,
+            criterion: Criterion::Impedance,
+            search,
+            accuracy: serde_json::from_str(
+                r#"{"preset":"draft","k_step":1000,"k_rel_tol":0.01,"b_step":10}"#,
+            )
+            .unwrap(),
+            b,
+            b_max,
+            k_max,
+        }
+    }
+
+    fn trials(search: SearchKind, k_max: f64) -> u64 {
+        crate::zwidth::search::validate(&linear(search, Some(vec![0.0]), 1000.0, k_max))
+            .unwrap()
+            .trials
+    }
+
+    #[test]
+    fn a_bisection_is_estimated_by_its_own_loop_bounds() {
+        // One B column, k_max = 1024 k_step, k_rel_tol = 0.01 (search.rs):
+        // bracketing doubles from k_step: log2(1024) + 1 = 11 tries (at least
+        // the 11 of halving down ten times), plus one; the bisection halves a
+        // bracket of width ≤ hi/2 until ≤ 0.01·hi: ceil(log2(100)) + 1 = 8.
+        // Total 12 + 8 = 20. Robust: 8 rounds of 5 checks and 8 halvings more.
+        assert_eq!(trials(SearchKind::Bisect, 1_024_000.0), 20);
+        // k_max = 4096 k_step: 13 doublings (more than the 11 halvings), + 1, + 8.
+        assert_eq!(trials(SearchKind::Bisect, 4_096_000.0), 22);
+        assert_eq!(
+            trials(SearchKind::RobustBisect, 1_024_000.0),
+            20 + 8 * (5 + 8)
+        );
+        // A grid walks min(k_max / k_step, 60) stiffness values per column.
+        assert_eq!(trials(SearchKind::Grid, 1_024_000.0), 60);
+        // A trace over a given list may walk every K step at every column.
+        assert_eq!(trials(SearchKind::Trace, 1_024_000.0), 1024 + 2);
+    }
+
+    #[test]
+    fn the_automatic_b_range_is_counted_as_the_search_builds_it() {
+        // B = 0, 10, …, while B ≤ b_max: 11 columns to 100, 10 to 95.
+        let cols = |b_max: f64| {
+            crate::zwidth::search::validate(&linear(SearchKind::Bisect, None, b_max, 1e6))
+                .unwrap()
+                .b_columns
+        };
+        assert_eq!(cols(100.0), 11);
+        assert_eq!(cols(95.0), 10);
+        assert_eq!(cols(9.0), 1);
+    }
+
+    #[test]
+    fn only_searches_that_walk_k_are_limited_in_k_steps() {
+        // k_max / k_step = 10·MAX_K_STEPS: a bisection halves its way there
+        // (allowed), a grid or trace would walk every step (refused, naming
+        // the field).
+        let k_max = 10.0 * MAX_K_STEPS as f64 * 1000.0;
+        assert!(trials(SearchKind::Bisect, k_max) > 0);
+        for search in [SearchKind::Grid, SearchKind::Trace] {
+            let e =
+                crate::zwidth::search::validate(&linear(search, Some(vec![0.0]), 1000.0, k_max))
+                    .unwrap_err();
+            assert_eq!(e.field, "accuracy.k_step");
+            assert!(e.to_string().contains("stiffness steps"), "{e}");
+        }
+    }
 }

@@ -272,6 +272,37 @@ mod tests {
     }
 
     #[test]
+    fn the_wall_can_stand_anywhere() {
+        // The same soft wall (K = 1000 N/m, B = 20) at x = 0.05 m: the
+        // handle rests push/K past it, at 0.05 + 0.3572e-3 m.
+        let spec = SceneSpec::from_json(r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000},"wall":{"position":0.05}}"#).unwrap();
+        let sc = spec.validate().unwrap();
+        let o = wall_hit(&sc, 1000.0, 20.0, knobs(&sc), &mut NoTrace);
+        assert!(o.stable, "{o:?}");
+        assert!((o.mean_position - (0.05 + 0.3572e-3)).abs() < 1e-9, "{o:?}");
+    }
+
+    #[test]
+    fn a_push_that_only_matches_friction_never_moves_the_handle() {
+        // Push = Coulomb friction = 0.3572 N: no net drive, so the handle
+        // stays home and the trial is settle + measure long (no wait for a
+        // contact that cannot come).
+        let spec = SceneSpec::from_json(
+            r#"{"device":{"coulomb":0.3572,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+        )
+        .unwrap();
+        let sc = spec.validate().unwrap();
+        assert_eq!(sc.spec.hit.push_force, 0.3572);
+        let kn = HitKnobs {
+            settle_s: 0.5,
+            measure_s: 0.5,
+        };
+        let o = wall_hit(&sc, 1000.0, 20.0, kn, &mut NoTrace);
+        assert_eq!(o.samples, 1000, "{o:?}");
+        assert_eq!(o.mean_position, -sc.spec.hit.home_distance);
+    }
+
+    #[test]
     fn friction_hold_shortcut_gives_the_full_length_verdict() {
         // The seed device (Coulomb 0.19 N, 1 µm at 10 kHz, render 1 kHz):
         // where friction holds the handle, the trial ends early and counts
