@@ -110,6 +110,19 @@ mod tests {
     use super::*;
 
     #[test]
+    fn constants_have_no_roots() {
+        // A constant (zero included, with trailing zero coefficients) has
+        // no roots; the trimming stops at the constant term.
+        assert!(roots(&[3.0]).is_empty());
+        assert!(roots(&[0.0]).is_empty());
+        assert!(roots(&[2.0, 0.0, 0.0]).is_empty());
+        // 0 + z + 0·z²: the trailing zero is dropped, z = 0 is the root.
+        let r = roots(&[0.0, 1.0, 0.0]);
+        assert_eq!(r.len(), 1);
+        assert!(r[0].norm() < 1e-12, "{r:?}");
+    }
+
+    #[test]
     fn roots_of_known_polynomials() {
         // (z − 0.5)(z + 2)(z² + 1) = z⁴ + 1.5z³ + 0z² + 1.5z − 1 with roots 0.5, −2, ±j.
         let p = mul(&mul(&[-0.5, 1.0], &[2.0, 1.0]), &[1.0, 0.0, 1.0]);

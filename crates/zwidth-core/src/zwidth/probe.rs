@@ -307,7 +307,9 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
             );
         }
         stats.push(&g);
-        if stats.count() >= bla::MIN_REALIZATIONS || m + 1 == max_m {
+        // Look once there are enough realizations (with fewer in all, the
+        // verdict is taken after the loop).
+        if stats.count() >= bla::MIN_REALIZATIONS {
             let v = stats.verdict(alpha, max_m);
             let done = v.decided;
             verdict = Some(v);
