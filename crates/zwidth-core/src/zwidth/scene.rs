@@ -678,6 +678,18 @@ mod tests {
                 .unwrap_or_default(),
         };
         assert!(bad(r#"{"device":{"mass":0}}"#).contains("device.mass = 0"));
+        // At most 1e9 samples a trial: 999 + 1 s at 1 MHz is exactly that.
+        let fast = |settle: f64| {
+            format!(
+                r#"{{"loop":{{"sample_hz":1e6,"render_hz":1000}},"hit":{{"settle_s":{settle},"measure_s":1}}}}"#
+            )
+        };
+        assert_eq!(bad(&fast(999.0)), "");
+        let e = bad(&fast(999.5));
+        assert!(
+            e.contains("hit.measure_s = 1") && e.contains("1e9 samples"),
+            "{e}"
+        );
         assert!(bad(r#"{"device":{"damping":-1}}"#).contains("device.damping = -1"));
         assert!(bad(r#"{"loop":{"sample_hz":10000,"render_hz":3000}}"#)
             .contains("loop.render_hz = 3000"));

@@ -449,6 +449,37 @@ fn prepare(spec: &MapSpec) -> Result<(Evaluator, Cost), SpecError> {
     Ok((ev, cost))
 }
 
+/// Which trials the force limit clipped, and how many boundary points such
+/// a trial decided (a boundary point is set by the first failure above its
+/// `k_max`: limited by the actuator when that trial saturated). None when
+/// no trial saturated.
+fn saturation_note(points: &[Point], boundary: &[BoundaryPoint], limit: f64) -> Option<String> {
+    let saturated: Vec<&Point> = points
+        .iter()
+        .filter(|p| p.saturated == Some(true))
+        .collect();
+    if saturated.is_empty() {
+        return None;
+    }
+    let k_min = saturated.iter().map(|p| p.k).fold(f64::INFINITY, f64::min);
+    let on_boundary = boundary
+        .iter()
+        .filter(|bp| {
+            points
+                .iter()
+                .filter(|p| p.b == bp.b && p.k > bp.k_max && !p.ok())
+                .min_by(|a, b| a.k.total_cmp(&b.k))
+                .is_some_and(|p| p.saturated == Some(true))
+        })
+        .count();
+    Some(format!(
+        "the force limit ±{limit} N clipped the wall force in {} of {} trials (from K = {k_min:.4e} N/m); {on_boundary} of {} boundary points were decided by such a trial: there the actuator limits the width, not the estimator",
+        saturated.len(),
+        points.len(),
+        boundary.len()
+    ))
+}
+
 /// Run a map, reporting trials to and honouring cancellation from
 /// `observer`; `scope` names this map within its experiment.
 pub fn map_observed(
@@ -520,33 +551,12 @@ pub fn map_observed(
         ),
         _ => format!("K step {} N/m, B step {} N·s/m", res.k_step, res.b_step),
     };
-    let saturated: Vec<&Point> = points
-        .iter()
-        .filter(|p| p.saturated == Some(true))
-        .collect();
-    let saturation = (!saturated.is_empty()).then(|| {
-        let k_min = saturated.iter().map(|p| p.k).fold(f64::INFINITY, f64::min);
-        // A boundary point is set by the first failure above its k_max:
-        // limited by the actuator when that trial saturated.
-        let on_boundary = boundary
-            .iter()
-            .filter(|bp| {
-                points
-                    .iter()
-                    .filter(|p| p.b == bp.b && p.k > bp.k_max && !p.ok())
-                    .min_by(|a, b| a.k.total_cmp(&b.k))
-                    .is_some_and(|p| p.saturated == Some(true))
-            })
-            .count();
-        format!(
-            "the force limit ±{} N clipped the wall force in {} of {} trials (from K = {k_min:.4e} N/m); {on_boundary} of {} boundary points were decided by such a trial: there the actuator limits the width, not the estimator",
-            ev.scene.spec.device.force_limit.unwrap_or(f64::INFINITY),
-            saturated.len(),
-            points.len(),
-            boundary.len()
-        )
-    });
-    let saturated_trials = saturated.len();
+    let saturation = saturation_note(
+        &points,
+        &boundary,
+        ev.scene.spec.device.force_limit.unwrap_or(f64::INFINITY),
+    );
+    let saturated_trials = points.iter().filter(|p| p.saturated == Some(true)).count();
     Ok(MapResult {
         model: ev.model_description(),
         method: ev.method,
@@ -860,6 +870,37 @@ mod tests {
         let o = std::sync::Arc::new(Observer::default());
         map_observed(&spec, Some(o.clone()), 0).unwrap();
         assert_eq!(o.fraction(), 1.0);
+    }
+
+    #[test]
+    fn saturation_counts_boundary_points_decided_by_a_clipped_trial() {
+        // B = 0: K_max = 100, its first failure above is K = 200, clipped.
+        // B = 10: K_max = 100, its first failure above is K = 150, not
+        // clipped (a clipped one at 300 comes later). So 1 of 2 boundary
+        // points, 2 of 6 trials clipped, the first at K = 200.
+        let pt = |b: f64, k: f64, ok: bool, sat: bool| Point {
+            k,
+            b,
+            passive: Some(ok),
+            saturated: sat.then_some(true),
+            ..Point::default()
+        };
+        let points = [
+            pt(0.0, 50.0, true, false),
+            pt(0.0, 200.0, false, true),
+            pt(0.0, 400.0, false, false),
+            pt(10.0, 300.0, false, true),
+            pt(10.0, 150.0, false, false),
+            pt(10.0, 60.0, true, false),
+        ];
+        let boundary = [bp(0.0, 100.0), bp(10.0, 100.0)];
+        let note = saturation_note(&points, &boundary, 0.5).unwrap();
+        assert!(
+            note.starts_with("the force limit ±0.5 N clipped the wall force in 2 of 6 trials (from K = 2.0000e2 N/m); 1 of 2 boundary points"),
+            "{note}"
+        );
+        // Nothing clipped: no note.
+        assert_eq!(saturation_note(&points[4..], &boundary, 0.5), None);
     }
 
     #[test]
