@@ -836,6 +836,22 @@ mod tests {
         // steps, plus three; never more than the range.
         assert_eq!(planned_b(&[bp(0.0, 1000.0), bp(10.0, 10.0)], 68, 10.0), 5);
         assert_eq!(planned_b(&[bp(0.0, 1000.0), bp(10.0, 999.0)], 68, 10.0), 68);
+        // From the last two points, not from B = 0: 1000 at B = 10, 900 at
+        // 20 reach 0 at B = 20 + 900·10/100 = 110: 11 steps, plus three.
+        assert_eq!(
+            planned_b(&[bp(10.0, 1000.0), bp(20.0, 900.0)], 68, 10.0),
+            14
+        );
+    }
+
+    #[test]
+    fn area_is_the_trapezoid_sum_over_sorted_b() {
+        // (0, 1000), (10, 600), (20, 0) in any order: ½·10·(1000 + 600)
+        // + ½·10·(600 + 0) = 8 000 + 3 000 N/m·N·s/m.
+        let b = [bp(10.0, 600.0), bp(0.0, 1000.0), bp(20.0, 0.0)];
+        assert_eq!(area(&b), 11_000.0);
+        assert_eq!(area(&b[..1]), 0.0);
+        assert_eq!(area(&[]), 0.0);
     }
 
     #[test]
