@@ -886,6 +886,17 @@ mod tests {
         let o = std::sync::Arc::new(Observer::default());
         map_observed(&spec, Some(o.clone()), 0).unwrap();
         assert_eq!(o.fraction(), 1.0);
+        // A bisection over a list reports each finished column: one column,
+        // finished at once when cancelled, is 1 of 1.
+        let one = MapSpec {
+            search: SearchKind::Bisect,
+            b: Some(vec![0.0]),
+            ..spec
+        };
+        let o = std::sync::Arc::new(Observer::default());
+        o.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+        map_observed(&one, Some(o.clone()), 0).unwrap();
+        assert_eq!(o.fraction(), 1.0);
     }
 
     #[test]
