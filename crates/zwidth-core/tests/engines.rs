@@ -312,6 +312,8 @@ fn grid_and_trace_land_within_one_k_step_below_the_boundary() {
     for (search, bs) in [
         (SearchKind::Grid, vec![0.0, 20.0]), // the grid stops at 60 steps (90 000 N/m)
         (SearchKind::Trace, vec![0.0, 20.0, 40.0]),
+        // Falling boundary: the trace walks down from the last K_max.
+        (SearchKind::Trace, vec![40.0, 20.0, 0.0]),
     ] {
         let r = run_search(
             sc.clone(),
