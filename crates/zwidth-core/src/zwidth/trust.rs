@@ -7,7 +7,7 @@ use serde::Serialize;
 use std::time::Instant;
 
 use super::scene::SceneSpec;
-use super::search::map;
+use super::search::{map, BoundaryPoint};
 use super::settings::{Accuracy, Criterion, MapSpec, Method, Preset, SearchKind};
 use super::tradeoff::{interval_cell, EXAMPLES};
 use crate::error::SpecError;
@@ -47,18 +47,7 @@ fn one(vary: &'static str, value: f64, scene: SceneSpec) -> Result<TrustRow, Spe
     };
     let t = Instant::now();
     let r = map(&spec)?;
-    let spike = r
-        .boundary
-        .windows(3)
-        .filter_map(|w| {
-            let (a, p, c) = (&w[0], &w[1], &w[2]);
-            let line_lo = 0.5 * (a.k_lo? + c.k_lo?);
-            let line_hi = 0.5 * (a.k_hi? + c.k_hi?);
-            let gap = (p.k_lo? - line_hi).max(line_lo - p.k_hi?).max(0.0);
-            let base = p.k_max.min(0.5 * (a.k_max + c.k_max));
-            (base > 0.0).then(|| gap / base)
-        })
-        .fold(0.0, f64::max);
+    let spike = spike(&r.boundary);
     Ok(TrustRow {
         vary,
         value,
@@ -68,6 +57,22 @@ fn one(vary: &'static str, value: f64, scene: SceneSpec) -> Result<TrustRow, Spe
         spike,
         wall_s: t.elapsed().as_secs_f64(),
     })
+}
+
+/// The largest spike of a boundary its intervals do not allow (see
+/// [`TrustRow::spike`]); 0 where points have no intervals.
+fn spike(boundary: &[BoundaryPoint]) -> f64 {
+    boundary
+        .windows(3)
+        .filter_map(|w| {
+            let (a, p, c) = (&w[0], &w[1], &w[2]);
+            let line_lo = 0.5 * (a.k_lo? + c.k_lo?);
+            let line_hi = 0.5 * (a.k_hi? + c.k_hi?);
+            let gap = (p.k_lo? - line_hi).max(line_lo - p.k_hi?).max(0.0);
+            let base = p.k_max.min(0.5 * (a.k_max + c.k_max));
+            (base > 0.0).then(|| gap / base)
+        })
+        .fold(0.0, f64::max)
 }
 
 pub fn run() -> Result<Vec<TrustRow>, SpecError> {
@@ -143,6 +148,31 @@ mod tests {
             spike: 0.0,
             wall_s: 0.0,
         }
+    }
+
+    fn iv(k: f64, lo: f64, hi: f64) -> BoundaryPoint {
+        BoundaryPoint {
+            k_lo: Some(lo),
+            k_hi: Some(hi),
+            ..BoundaryPoint::new(0.0, k)
+        }
+    }
+
+    #[test]
+    fn spikes_are_gaps_the_intervals_do_not_allow() {
+        // A peak: 2000 [1900, 2100] between two 1000 [900, 1100]: the
+        // neighbours' line is [900, 1100], the gap 1900 − 1100 = 800 over
+        // the lower of 2000 and 1000: 0.8.
+        let (lo, hi) = (iv(1000.0, 900.0, 1100.0), iv(2000.0, 1900.0, 2100.0));
+        assert!((spike(&[lo, hi, lo]) - 0.8).abs() < 1e-12);
+        // A dip: 500 [450, 550] between them: gap 900 − 550 = 350 over 500.
+        assert!((spike(&[lo, iv(500.0, 450.0, 550.0), lo]) - 0.7).abs() < 1e-12);
+        // A steady slope is no spike: 1000, 2000, 3000 (±100).
+        assert_eq!(spike(&[lo, hi, iv(3000.0, 2900.0, 3100.0)]), 0.0);
+        // Without intervals, or fewer than three points: nothing to judge.
+        let bare = BoundaryPoint::new(0.0, 5000.0);
+        assert_eq!(spike(&[lo, bare, lo]), 0.0);
+        assert_eq!(spike(&[lo, hi]), 0.0);
     }
 
     #[test]
