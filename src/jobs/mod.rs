@@ -344,6 +344,86 @@ async fn run_one(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::atomic::AtomicUsize;
+
+    #[test]
+    fn a_cancel_reaches_the_running_simulation_at_once() {
+        let running: Running = Arc::default();
+        let o = Arc::new(Observer::default());
+        running.lock().unwrap().insert("a".into(), o.clone());
+        assert!(!cancel_running(&running, "b"), "not running here");
+        assert!(!o.cancelled());
+        assert!(cancel_running(&running, "a"));
+        assert!(
+            o.cancelled(),
+            "the simulation sees it without the runner's look"
+        );
+    }
+
+    /// A fresh store in a temporary directory, removed with the guard.
+    struct TempStore(std::path::PathBuf);
+    impl Drop for TempStore {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+    async fn temp_store(name: &str) -> (Store, TempStore) {
+        let dir = std::env::temp_dir().join(format!("zwidth-jobs-{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let store = Store::open(&dir.join("z.db")).await.unwrap();
+        (store, TempStore(dir))
+    }
+
+    #[tokio::test]
+    async fn retrying_waits_out_transient_faults_only() {
+        let (store, _guard) = temp_store("retry").await;
+        let (_tx, running) = tokio::sync::watch::channel(false);
+        // Busy twice (a pool timeout is `Busy`), then it works: retried
+        // after 0.1 and 0.2 s, with the reason shown meanwhile.
+        let calls = AtomicUsize::new(0);
+        let held = Observer::default();
+        let r = tokio::time::timeout(
+            Duration::from_secs(10),
+            retrying("x", &running, &store, Some(&held), || async {
+                match calls.fetch_add(1, Ordering::Relaxed) {
+                    0 | 1 => Err(sqlx::Error::PoolTimedOut),
+                    _ => Ok(5),
+                }
+            }),
+        )
+        .await
+        .expect("retries end");
+        assert_eq!(r.unwrap(), 5);
+        assert_eq!(calls.load(Ordering::Relaxed), 3);
+        assert_eq!(held.held(), None, "released once it worked");
+        // A permanent fault: one call, the error back.
+        let calls = AtomicUsize::new(0);
+        let r: Result<(), _> = tokio::time::timeout(
+            Duration::from_secs(10),
+            retrying("x", &running, &store, None, || async {
+                calls.fetch_add(1, Ordering::Relaxed);
+                Err(sqlx::Error::RowNotFound)
+            }),
+        )
+        .await
+        .expect("no retry");
+        assert!(matches!(r, Err(sqlx::Error::RowNotFound)));
+        assert_eq!(calls.load(Ordering::Relaxed), 1);
+        // Transient, but shutting down: no retry either.
+        let (_tx, stopping) = tokio::sync::watch::channel(true);
+        let calls = AtomicUsize::new(0);
+        let r: Result<(), _> = tokio::time::timeout(
+            Duration::from_secs(10),
+            retrying("x", &stopping, &store, None, || async {
+                calls.fetch_add(1, Ordering::Relaxed);
+                Err(sqlx::Error::PoolTimedOut)
+            }),
+        )
+        .await
+        .expect("no retry on shutdown");
+        assert!(r.is_err());
+        assert_eq!(calls.load(Ordering::Relaxed), 1);
+    }
 
     #[test]
     fn store_retries_back_off_from_a_tenth_of_a_second_to_five() {
