@@ -127,18 +127,16 @@ pub struct LevantGains {
 
 impl LevantSpec {
     pub fn label(&self) -> String {
+        // A spec not yet validated may lack a value: say so, never "NaN".
+        let show = |v: Option<f64>| v.map_or_else(|| "unset".to_string(), |x| x.to_string());
         let g = match (self.rule, self.mu1, self.alpha) {
-            (Some(r), _, _) => format!("{}, C={}", r.name(), self.lipschitz.unwrap_or(f64::NAN)),
+            (Some(r), _, _) => format!("{}, C={}", r.name(), show(self.lipschitz)),
             (_, Some(m1), _) => format!(
                 "mu1={m1}, mu2={}, C={}",
-                self.mu2.unwrap_or(f64::NAN),
-                self.lipschitz.unwrap_or(f64::NAN)
+                show(self.mu2),
+                show(self.lipschitz)
             ),
-            _ => format!(
-                "alpha={}, lambda={}",
-                self.alpha.unwrap_or(f64::NAN),
-                self.lambda.unwrap_or(f64::NAN)
-            ),
+            _ => format!("alpha={}, lambda={}", show(self.alpha), show(self.lambda)),
         };
         match self.discretization {
             Discretization::Explicit => g,
@@ -690,6 +688,17 @@ mod tests {
             ..Default::default()
         };
         assert!(spec.label().contains("hba, C=12"), "{}", spec.label());
+        // Without C (refused by validation, but labels are shown earlier).
+        let spec = LevantSpec {
+            rule: Some(GainRule::Hba),
+            ..Default::default()
+        };
+        assert_eq!(spec.label(), "hba, C=unset");
+        let spec = LevantSpec {
+            mu1: Some(1.5),
+            ..Default::default()
+        };
+        assert_eq!(spec.label(), "mu1=1.5, mu2=unset, C=unset");
     }
 
     #[test]
