@@ -154,13 +154,14 @@ impl Observer {
         self.scopes.store(n, std::sync::atomic::Ordering::Relaxed);
     }
 
-    /// Map `scope` is `fraction` (0 to 1) done.
+    /// Map `scope` is `fraction` (0 to 1) done. Progress never goes back:
+    /// parallel columns may report out of order, and a search that plans
+    /// more work than it first estimated stalls rather than rewinds.
     pub fn report(&self, scope: u32, fraction: f64) {
         if fraction.is_finite() {
-            self.progress
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .insert(scope, fraction.clamp(0.0, 1.0));
+            let mut p = self.progress.lock().unwrap_or_else(|e| e.into_inner());
+            let f = p.entry(scope).or_insert(0.0);
+            *f = f.max(fraction.clamp(0.0, 1.0));
         }
     }
 

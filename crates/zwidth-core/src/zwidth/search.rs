@@ -939,5 +939,10 @@ mod tests {
         assert!((o.fraction() - 0.375).abs() < 1e-12);
         o.report(2, f64::NAN); // ignored, never NaN out
         assert!((o.fraction() - 0.375).abs() < 1e-12);
+        // Out of order (parallel columns), or a plan that grew: no rewind.
+        o.report(1, 0.25);
+        assert!((o.fraction() - 0.375).abs() < 1e-12);
+        o.report(1, 0.75);
+        assert!((o.fraction() - 0.4375).abs() < 1e-12);
     }
 }
