@@ -304,6 +304,17 @@ impl LinearModel {
         (a, c, r)
     }
 
+    /// The largest K the constraint at θ allows with damping B (∞ where it
+    /// bounds K from below or not at all).
+    fn k_bound(&self, theta: f64, b: f64) -> f64 {
+        let (a, c, r) = self.passivity_terms(theta);
+        if a > 0.0 {
+            (r - b * c) / a
+        } else {
+            f64::INFINITY
+        }
+    }
+
     /// The stiffnesses K ≥ 0 that are strictly passive with damping B, as
     /// `(k_min, k_max)`, or none. For FDM and no delay: `b > KT/2 + |B|`.
     pub fn strict_passivity_range(&self, b: f64) -> Option<(f64, f64)> {
@@ -339,14 +350,7 @@ impl LinearModel {
                 (centre - step).max(std::f64::consts::PI * 1e-7),
                 (centre + step).min(std::f64::consts::PI),
             );
-            let f = |th: f64| {
-                let (a, c, r) = self.passivity_terms(th);
-                if a > 0.0 {
-                    (r - b * c) / a
-                } else {
-                    f64::INFINITY
-                }
-            };
+            let f = |th: f64| self.k_bound(th, b);
             let g = 0.5 * (5f64.sqrt() - 1.0);
             for _ in 0..60 {
                 let (m0, m1) = (x1 - g * (x1 - x0), x0 + g * (x1 - x0));
@@ -386,14 +390,7 @@ mod tests {
             );
             let m =
                 LinearModel::new(&SceneSpec::from_json(&j).unwrap().validate().unwrap()).unwrap();
-            let f = |th: f64| {
-                let (a, c, r) = m.passivity_terms(th);
-                if a > 0.0 {
-                    (r - b * c) / a
-                } else {
-                    f64::INFINITY
-                }
-            };
+            let f = |th: f64| m.k_bound(th, b);
             let n = 100_000;
             let pi = std::f64::consts::PI;
             let coarse = (1..=n)
