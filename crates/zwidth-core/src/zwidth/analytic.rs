@@ -60,7 +60,8 @@ pub struct ImpedanceCurve {
 impl ImpedanceCurve {
     /// Build from complex Z at the lines; shared with the frequency engine.
     pub fn from_z(omegas: &[f64], z: &[C], k: f64, b: f64) -> Self {
-        let ideal = |w: f64| C::new(b, -k / w).norm();
+        // |B + K/(jω)| = √(B² + (K/ω)²).
+        let ideal = |w: f64| b.hypot(k / w);
         let fidelity = (omegas
             .iter()
             .zip(z)
