@@ -38,11 +38,17 @@ pub struct CEstimate {
     pub estimate: LipschitzEstimate,
 }
 
+/// The 2018 paper's Butterworth cutoff, 499 Hz (its 1 kHz loop), or just
+/// below Nyquist (0.499·f_s) on a slower loop.
+pub fn paper_cutoff_hz(sample_hz: f64) -> f64 {
+    499.0f64.min(0.499 * sample_hz)
+}
+
 /// C as the papers measured it: a wall hit with FDM + Butterworth (499 Hz, or
 /// just below Nyquist), the encoder positions from first contact for 1 s, and
 /// the largest |ẍ| of a smooth fit (see `lipschitz`).
 pub fn estimate_c(scene: &SceneSpec) -> Result<CEstimate, SpecError> {
-    let fc = 499.0f64.min(0.499 * scene.control.sample_hz);
+    let fc = paper_cutoff_hz(scene.control.sample_hz);
     let estimator: EstimatorSpec = EstimatorKind::Butterworth {
         cutoff_hz: fc,
         order: 2,
@@ -113,7 +119,7 @@ pub struct CompareResult {
 
 /// The paper's four estimators with its tuned parameters.
 pub fn paper_estimators(scene: &SceneSpec, c: f64) -> Vec<(String, String, EstimatorSpec)> {
-    let fc = 499.0f64.min(0.499 * scene.control.sample_hz);
+    let fc = paper_cutoff_hz(scene.control.sample_hz);
     vec![
         (
             "FDM+filter".into(),
@@ -324,6 +330,13 @@ impl CompareResult {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_paper_cutoff_stays_below_nyquist() {
+        assert_eq!(paper_cutoff_hz(1000.0), 499.0);
+        assert_eq!(paper_cutoff_hz(10_000.0), 499.0);
+        assert_eq!(paper_cutoff_hz(500.0), 249.5);
+    }
 
     #[test]
     fn c_comes_from_the_wall_contact() {

@@ -267,6 +267,8 @@ mod tests {
         assert!(o.stable, "{o:?}");
         assert!((o.mean_position - 0.3572 / 1000.0).abs() < 1e-9, "{o:?}");
         assert_eq!(trace.len(), o.samples);
+        // One row per sample, at t = i·T.
+        assert_eq!(trace[250].t, 250.0 * sc.dt);
         // Free flight before contact: m ẍ + b ẋ = push; the handle reaches the wall.
         assert!(trace.iter().any(|r| r.y > 0.0));
     }
@@ -347,11 +349,11 @@ mod tests {
     fn a_heavy_undamped_handle_is_waited_for_until_it_touches() {
         // No damping, no friction: free flight under the push is
         // x(t) = x0 + F·t²/(2m) (exact under a zero-order hold), so the
-        // handle reaches the wall after √(2·d·m/F) = √(2·0.07·100/0.3572)
-        // = 6.26 s. Measurement starts `settle` after that contact, and the
+        // handle reaches the wall after √(2·d·m/F) = √(2·0.07·100/0.01)
+        // = 37.4 s. Measurement starts `settle` after that contact, and the
         // trial is contact + settle + measure samples long.
         let spec = SceneSpec::from_json(
-            r#"{"device":{"mass":100,"damping":0,"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+            r#"{"device":{"mass":100,"damping":0,"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000},"hit":{"push_force":0.01}}"#,
         )
         .unwrap();
         let sc = spec.validate().unwrap();
