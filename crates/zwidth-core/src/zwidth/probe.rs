@@ -93,8 +93,7 @@ pub struct VerdictConfidence {
 
 /// Substeps of the excitation grid per encoder sample.
 pub fn substeps(scene: &Scene) -> usize {
-    let want = 40.0 * scene.spec.probe.f_max_hz;
-    (want / scene.spec.control.sample_hz).ceil().max(1.0) as usize
+    super::scene::probe_substeps(scene.spec.probe.f_max_hz, scene.spec.control.sample_hz)
 }
 
 /// Everything about the excitation that does not depend on (K, B): built
@@ -528,6 +527,27 @@ mod tests {
     use super::*;
     use crate::zwidth::analytic::LinearModel;
     use crate::zwidth::scene::SceneSpec;
+
+    #[test]
+    fn remaining_transient_by_aitken() {
+        let c = |re: f64| C::new(re, 0.0);
+        // Decaying by r = 0.5 per period with d = 1: what remains is
+        // d·r/(r − 1) = −1, so 1 N·s/m.
+        assert!((remaining_transient(&[c(10.0)], &[c(1.0)], &[c(2.0)]) - 1.0).abs() < 1e-12);
+        // Growing (r = 2) or not a number: never settled.
+        assert_eq!(
+            remaining_transient(&[c(10.0)], &[c(2.0)], &[c(1.0)]),
+            f64::INFINITY
+        );
+        assert_eq!(
+            remaining_transient(&[c(10.0)], &[c(f64::NAN)], &[c(1.0)]),
+            f64::INFINITY
+        );
+        // No change at all: nothing remains; the worst line counts.
+        assert_eq!(remaining_transient(&[c(10.0)], &[c(0.0)], &[c(1.0)]), 0.0);
+        let two = remaining_transient(&[c(10.0), c(10.0)], &[c(0.0), c(1.0)], &[c(1.0), c(2.0)]);
+        assert!((two - 1.0).abs() < 1e-12);
+    }
 
     #[test]
     fn tail_verdict_needs_re_z_three_standard_errors_above_zero() {

@@ -411,8 +411,7 @@ impl SceneSpec {
                 format!("at most {MAX_PROBE_LINES} lines (f_max_hz / f_min_hz)"),
             ));
         }
-        let nsub = (40.0 * p.f_max_hz / l.sample_hz).ceil().max(1.0);
-        let per_period = l.sample_hz / p.f_min_hz * nsub;
+        let per_period = l.sample_hz / p.f_min_hz * probe_substeps(p.f_max_hz, l.sample_hz) as f64;
         if per_period > MAX_PROBE_PERIOD_STEPS as f64 {
             return Err(SpecError::new(
                 "probe.f_min_hz",
@@ -601,6 +600,12 @@ impl Scene {
 }
 
 /// Check a wall's stiffness K (N/m) and damping B (N·s/m).
+/// Substeps of the probe's excitation grid per encoder sample: at least 40
+/// per period of the highest line.
+pub fn probe_substeps(f_max_hz: f64, sample_hz: f64) -> usize {
+    (40.0 * f_max_hz / sample_hz).ceil().max(1.0) as usize
+}
+
 pub fn validate_wall(k: f64, b: f64) -> Result<(), SpecError> {
     if !(k.is_finite() && (0.0..=1e9).contains(&k)) {
         return Err(SpecError::new(
