@@ -931,6 +931,34 @@ mod tests {
     }
 
     #[test]
+    fn verdicts_are_noisy_with_friction_or_quantization_in_the_frequency_engine() {
+        let spec = |device: &str, method: Method| MapSpec {
+            criterion: if method == Method::Time {
+                Criterion::Stability
+            } else {
+                Criterion::Impedance
+            },
+            scene: SceneSpec::from_json(&format!(
+                r#"{{"device":{device},"loop":{{"sample_hz":1000,"render_hz":1000}}}}"#
+            ))
+            .unwrap(),
+            method,
+            search: SearchKind::Bisect,
+            accuracy: Default::default(),
+            b: Some(vec![0.0]),
+            b_max: 1000.0,
+            k_max: 1e7,
+        };
+        let f = Method::Frequency;
+        assert!(noisy(&spec(r#"{"coulomb":0,"quantization":1e-6}"#, f)).unwrap());
+        assert!(noisy(&spec(r#"{"coulomb":0.19,"quantization":0}"#, f)).unwrap());
+        assert!(!noisy(&spec(r#"{"coulomb":0,"quantization":0}"#, f)).unwrap());
+        // The time engine's verdict is a threshold on one run: no intervals.
+        let t = Method::Time;
+        assert!(!noisy(&spec(r#"{"coulomb":0.19,"quantization":1e-6}"#, t)).unwrap());
+    }
+
+    #[test]
     fn observer_fraction_averages_the_maps() {
         let o = Observer::default();
         o.set_scopes(4);
