@@ -335,6 +335,26 @@ fn grid_and_trace_land_within_one_k_step_below_the_boundary() {
 }
 
 #[test]
+fn a_trace_stops_at_k_max() {
+    // At B = 40 the exact boundary is 99 034 N/m (Jury); capped at
+    // k_max = 30 000 the trace walks the 1 500 N/m lattice up to 30 000
+    // and no further.
+    let r = map(&MapSpec {
+        scene: linear("", r#"{"kind":"fdm"}"#),
+        method: Method::Analytic,
+        criterion: Criterion::Stability,
+        search: SearchKind::Trace,
+        accuracy: serde_json::from_str(r#"{"k_step":1500}"#).unwrap(),
+        b: Some(vec![40.0]),
+        b_max: 1000.0,
+        k_max: 30_000.0,
+    })
+    .unwrap();
+    assert_eq!(r.k_width, 30_000.0);
+    assert!(r.points.iter().all(|p| p.k <= 30_000.0), "{:?}", r.points);
+}
+
+#[test]
 fn analytic_and_frequency_agree_with_butterworth() {
     let est = r#"{"kind":"butterworth","cutoff_hz":150,"order":2}"#;
     let acc = Accuracy::Preset(Preset::Standard);
