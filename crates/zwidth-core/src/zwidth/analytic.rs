@@ -123,6 +123,10 @@ fn state_space_tf(f: &[[f64; 3]; 3], g: [f64; 3], c: [f64; 3]) -> (Poly, Poly) {
     (num, den)
 }
 
+/// The smallest θ (rad/sample) the strict-passivity scan looks at: θ = 0
+/// itself is 0/0 in every term.
+const THETA_MIN: f64 = std::f64::consts::PI * 1e-7;
+
 /// Iterations of the Riccati recursion before giving up on convergence.
 const RICCATI_CAP: usize = 2_000_000;
 
@@ -322,7 +326,7 @@ impl LinearModel {
         const N: usize = 8192;
         let (mut lo, mut hi) = (0.0f64, f64::INFINITY);
         let mut arg_hi = None;
-        let thetas = std::iter::once(std::f64::consts::PI * 1e-7)
+        let thetas = std::iter::once(THETA_MIN)
             .chain((1..=N).map(|i| std::f64::consts::PI * i as f64 / N as f64));
         for (i, th) in thetas.enumerate() {
             let (a, c, r) = self.passivity_terms(th);
@@ -342,13 +346,9 @@ impl LinearModel {
         // Refine the binding θ between its grid neighbours (golden section).
         if let Some(i) = arg_hi {
             let step = std::f64::consts::PI / N as f64;
-            let centre = if i == 0 {
-                std::f64::consts::PI * 1e-7
-            } else {
-                step * i as f64
-            };
+            let centre = if i == 0 { THETA_MIN } else { step * i as f64 };
             let (mut x0, mut x1) = (
-                (centre - step).max(std::f64::consts::PI * 1e-7),
+                (centre - step).max(THETA_MIN),
                 (centre + step).min(std::f64::consts::PI),
             );
             let f = |th: f64| self.k_bound(th, b);
