@@ -166,17 +166,16 @@ impl Space {
             let explicit = values.contains_key("alpha") || values.contains_key("lambda");
             let normalized = values.contains_key("mu1") || values.contains_key("mu2");
             if explicit || normalized {
+                // The rule and the other form's gains go; an untuned gain
+                // of the tuned form keeps the base's value (a base without
+                // it is refused by the scene's validation, naming it).
                 remove.push("estimator.rule");
-                for n in ["alpha", "lambda", "mu1", "mu2"] {
-                    if !values.contains_key(n) {
-                        remove.push(match n {
-                            "alpha" => "estimator.alpha",
-                            "lambda" => "estimator.lambda",
-                            "mu1" => "estimator.mu1",
-                            _ => "estimator.mu2",
-                        });
-                    }
-                }
+                let other: [&str; 2] = if explicit {
+                    ["estimator.mu1", "estimator.mu2"]
+                } else {
+                    ["estimator.alpha", "estimator.lambda"]
+                };
+                remove.extend(other);
             }
         }
         let set: Vec<(String, f64)> = values
@@ -264,6 +263,29 @@ mod tests {
             !t.contains("alpha") && !t.contains("lambda") && t.contains(r#""mu2":8"#),
             "{t}"
         );
+    }
+
+    #[test]
+    fn one_explicit_gain_is_tuned_against_the_base_other() {
+        // Tuning α alone on a base with α = 20, λ = 5 keeps λ = 5 (it was
+        // dropped, and every scene refused, until 2026-12-02).
+        let s = space(
+            r#"{"kind":"levant","alpha":20,"lambda":5,"lipschitz":2}"#,
+            r#"{"alpha":{"min":10,"max":30}}"#,
+        )
+        .unwrap();
+        let t = serde_json::to_string(&s.scene(&[0.5]).unwrap().estimator).unwrap();
+        assert!(
+            t.contains(r#""alpha":20"#) && t.contains(r#""lambda":5"#),
+            "{t}"
+        );
+        // A rule base has no λ to keep: refused, naming it.
+        let e = space(
+            r#"{"kind":"levant","rule":"hba_sc","lipschitz":2}"#,
+            r#"{"alpha":{"min":10,"max":30}}"#,
+        )
+        .unwrap_err();
+        assert_eq!(e.field, "scene.estimator.lambda", "{e}");
     }
 
     #[test]
