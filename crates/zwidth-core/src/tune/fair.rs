@@ -264,3 +264,18 @@ pub fn compare_tuned(
     result.elapsed_s = start.elapsed().as_secs_f64();
     Ok(result)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_objective_is_named_as_the_user_wrote_it() {
+        // `tuned_for` and the table say what was asked for: the metric's
+        // JSON name, without quotes.
+        let o: Objective = serde_json::from_str(r#""k_width""#).unwrap();
+        assert_eq!(objective_name(&o), "k_width");
+        let w: Objective = serde_json::from_str(r#"{"weighted":{"k_width":1}}"#).unwrap();
+        assert_eq!(objective_name(&w), r#"{"weighted":{"k_width":1.0}}"#);
+    }
+}
