@@ -39,6 +39,13 @@ struct Run<'a> {
     failure: Mutex<Option<SpecError>>,
 }
 
+/// The score of gains that violate the constraint by `violation` (> 0):
+/// below every feasible score (K-widths are at most 1e12 N/m), and lower
+/// the farther off they are, so the solver is led back towards feasibility.
+fn infeasible_score(violation: f64) -> f64 {
+    -1e15 - violation
+}
+
 impl<'a> Run<'a> {
     /// A run of `tune` with nothing evaluated yet.
     fn new(tune: &'a Tune, observer: Option<Arc<Observer>>) -> Self {
@@ -87,8 +94,7 @@ impl<'a> Run<'a> {
 
     fn score(&self, m: &Metrics, feasible_violation: f64) -> f64 {
         if feasible_violation > 0.0 {
-            // Below every feasible score, ordered by how far off it is.
-            return -1e15 - feasible_violation;
+            return infeasible_score(feasible_violation);
         }
         match &self.tune.spec.objective {
             Objective::Single(x) => m.signed(*x),
@@ -746,6 +752,14 @@ fn ranking_held(search: &[f64], finals: &[f64]) -> bool {
 #[cfg(test)]
 mod replicate_tests {
     use super::*;
+
+    #[test]
+    fn infeasible_gains_score_below_any_width_and_worse_the_farther_off() {
+        let (near, far) = (infeasible_score(0.1), infeasible_score(2.0));
+        assert!(near > far, "{near} {far}");
+        assert!(near < -1e12, "below every K-width (≤ 1e12 N/m)");
+        assert_eq!(near, -1e15 - 0.1);
+    }
 
     fn pooled(score: f64, interval: [f64; 2], replicates: usize) -> Pooled {
         Pooled {
