@@ -257,6 +257,37 @@ mod tests {
         assert!(*c.0.borrow() > 3);
     }
 
+    /// Records every point it is asked about (a constant cost).
+    struct Seen(RefCell<Vec<Vec<f64>>>);
+    impl Cost for Seen {
+        fn cost(&self, u: &[f64]) -> Result<f64, Error> {
+            self.0.borrow_mut().push(u.to_vec());
+            Ok(0.0)
+        }
+    }
+
+    #[test]
+    fn the_first_simplex_steps_inwards_near_the_upper_bound() {
+        // Start (0.95, 0.2), step 0.15: 0.95 + 0.15 > 1, so that vertex is
+        // 0.95 − 0.15 = 0.8; the other steps up to 0.35.
+        let c = Seen(RefCell::new(Vec::new()));
+        nelder_mead(&c, &[0.95, 0.2], 0.15, 1).unwrap();
+        let seen = c.0.borrow();
+        let close =
+            |u: &[f64], w: [f64; 2]| (u[0] - w[0]).abs() < 1e-12 && (u[1] - w[1]).abs() < 1e-12;
+        for w in [[0.95, 0.2], [0.8, 0.2], [0.95, 0.35]] {
+            assert!(seen.iter().any(|u| close(u, w)), "{w:?} not in {seen:?}");
+        }
+    }
+
+    #[test]
+    fn grids_are_evenly_spaced_with_both_ends() {
+        assert_eq!(grid(0), Vec::<f64>::new());
+        assert_eq!(grid(1), vec![0.5]);
+        assert_eq!(grid(3), vec![0.0, 0.5, 1.0]);
+        assert_eq!(grid(5), vec![0.0, 0.25, 0.5, 0.75, 1.0]);
+    }
+
     #[test]
     fn particle_swarm_is_reproducible_with_a_seed() {
         let run = |seed| {
