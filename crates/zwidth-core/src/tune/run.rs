@@ -754,6 +754,30 @@ mod replicate_tests {
     use super::*;
 
     #[test]
+    fn the_pareto_front_keeps_ties_and_drops_the_dominated() {
+        // (K-width, B-width): (100, 10) twice, (50, 20), (40, 5). The two
+        // equal points do not dominate each other (domination needs one
+        // strictly better metric), so (100, 10) is on the front, once;
+        // (40, 5) is dominated by it.
+        let e = |index: usize, k: f64, b: f64| {
+            let mut p = pooled(k, [k, k], 1).eval;
+            p.index = index;
+            p.phase = "search".into();
+            p.metrics.b_width = b;
+            p
+        };
+        let h = [
+            e(0, 100.0, 10.0),
+            e(1, 100.0, 10.0),
+            e(2, 50.0, 20.0),
+            e(3, 40.0, 5.0),
+        ];
+        let mut f = pareto_front(&h, &[Metric::KWidth, Metric::BWidth]);
+        f.sort();
+        assert_eq!(f, [0, 2]);
+    }
+
+    #[test]
     fn infeasible_gains_score_below_any_width_and_worse_the_farther_off() {
         let (near, far) = (infeasible_score(0.1), infeasible_score(2.0));
         assert!(near > far, "{near} {far}");
