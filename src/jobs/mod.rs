@@ -396,33 +396,32 @@ mod tests {
         assert_eq!(r.unwrap(), 5);
         assert_eq!(calls.load(Ordering::Relaxed), 3);
         assert_eq!(held.held(), None, "released once it worked");
+        // A fault that always comes back: the calls `retrying` makes.
+        let calls_with = |shutdown: bool, fault: fn() -> sqlx::Error| {
+            let store = store.clone();
+            async move {
+                let (_tx, rx) = tokio::sync::watch::channel(shutdown);
+                let calls = AtomicUsize::new(0);
+                let r: Result<(), _> = tokio::time::timeout(
+                    Duration::from_secs(10),
+                    retrying("x", &rx, &store, None, || async {
+                        calls.fetch_add(1, Ordering::Relaxed);
+                        Err(fault())
+                    }),
+                )
+                .await
+                .expect("no retry");
+                (r, calls.load(Ordering::Relaxed))
+            }
+        };
         // A permanent fault: one call, the error back.
-        let calls = AtomicUsize::new(0);
-        let r: Result<(), _> = tokio::time::timeout(
-            Duration::from_secs(10),
-            retrying("x", &running, &store, None, || async {
-                calls.fetch_add(1, Ordering::Relaxed);
-                Err(sqlx::Error::RowNotFound)
-            }),
-        )
-        .await
-        .expect("no retry");
+        let (r, n) = calls_with(false, || sqlx::Error::RowNotFound).await;
         assert!(matches!(r, Err(sqlx::Error::RowNotFound)));
-        assert_eq!(calls.load(Ordering::Relaxed), 1);
+        assert_eq!(n, 1);
         // Transient, but shutting down: no retry either.
-        let (_tx, stopping) = tokio::sync::watch::channel(true);
-        let calls = AtomicUsize::new(0);
-        let r: Result<(), _> = tokio::time::timeout(
-            Duration::from_secs(10),
-            retrying("x", &stopping, &store, None, || async {
-                calls.fetch_add(1, Ordering::Relaxed);
-                Err(sqlx::Error::PoolTimedOut)
-            }),
-        )
-        .await
-        .expect("no retry on shutdown");
+        let (r, n) = calls_with(true, || sqlx::Error::PoolTimedOut).await;
         assert!(r.is_err());
-        assert_eq!(calls.load(Ordering::Relaxed), 1);
+        assert_eq!(n, 1);
     }
 
     #[test]
