@@ -385,6 +385,18 @@ mod tests {
         );
     }
 
+    /// A trace of `n` samples every `dt` s, (force, position) from t.
+    fn sampled(dt: f64, n: usize, f: impl Fn(f64) -> (f64, f64)) -> Trace {
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let (force, position) = t.iter().map(|&t| f(t)).unzip();
+        Trace {
+            dt,
+            t,
+            force,
+            position,
+        }
+    }
+
     #[test]
     fn stop_test_bound_by_hand() {
         // x = ½·a·t² + v0·t + x0 at 2 kHz, a = 3 m/s², ideal sensor (v0, x0
@@ -392,17 +404,12 @@ mod tests {
         // 2 samples; the second difference over ±h is exactly a·(hΔ)², so
         // a_max = 1.5·3 = 4.5 m/s², and the bound is a_max·(2hΔ)² + 3 nm
         // = 4.5·(2e-3)² + 3e-9 = 1.8003e-5 m.
-        let dt = 5e-4;
-        let t: Vec<f64> = (0..2000).map(|k| k as f64 * dt).collect();
-        let tr = Trace {
-            dt,
-            position: t
-                .iter()
-                .map(|t| 1.5 * t * t + 2f64.sqrt() * 1e-3 * t + std::f64::consts::PI * 1e-4)
-                .collect(),
-            force: vec![0.0; t.len()],
-            t,
-        };
+        let tr = sampled(5e-4, 2000, |t| {
+            (
+                0.0,
+                1.5 * t * t + 2f64.sqrt() * 1e-3 * t + std::f64::consts::PI * 1e-4,
+            )
+        });
         let (h, bound) = stop_test(&tr, tr.quantization());
         assert_eq!(h, 2);
         assert!((bound - 1.8003e-5).abs() < 1e-12, "{bound}");
@@ -414,20 +421,12 @@ mod tests {
         // F = m·a + b·v ± f_c: every window moves the same way, so f_c cannot
         // be told from a force offset.
         for dir in [1.0, -1.0] {
-            let dt = 1e-3;
-            let t: Vec<f64> = (0..20_000).map(|k| k as f64 * dt).collect();
-            let tr = Trace {
-                dt,
-                position: t
-                    .iter()
-                    .map(|t| dir * (0.1 * t + 0.05 * (1.0 - t.cos())))
-                    .collect(),
-                force: t
-                    .iter()
-                    .map(|t| dir * (0.52 * 0.05 * t.cos() + 13.2 * (0.1 + 0.05 * t.sin()) + 0.19))
-                    .collect(),
-                t,
-            };
+            let tr = sampled(1e-3, 20_000, |t| {
+                (
+                    dir * (0.52 * 0.05 * t.cos() + 13.2 * (0.1 + 0.05 * t.sin()) + 0.19),
+                    dir * (0.1 * t + 0.05 * (1.0 - t.cos())),
+                )
+            });
             let e = identify(&tr, Model::MassDamperCoulomb).unwrap_err();
             assert!(e.allowed.contains("at least 30 windows each way"), "{e}");
             let (fwd, back) = if dir > 0.0 {
