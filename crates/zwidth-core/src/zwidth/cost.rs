@@ -167,7 +167,7 @@ pub fn of_map(spec: &MapSpec, res: &Resolved, exact: bool) -> Result<Cost, SpecE
             res.k_step,
             format!(
                 "k_max / accuracy.k_step = {k_steps:.3e} stiffness steps; a {} walks at most {MAX_K_STEPS}: raise accuracy.k_step or lower k_max",
-                if spec.search == SearchKind::Trace { "trace" } else { "grid" }
+                spec.search.name()
             ),
         ));
     }

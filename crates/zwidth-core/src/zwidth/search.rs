@@ -426,7 +426,7 @@ fn prepare(spec: &MapSpec) -> Result<(Evaluator, Cost), SpecError> {
             spec.k_max,
             format!(
                 "must be at least the K step of the {} search, {} N/m at this accuracy (or search by bisection)",
-                if spec.search == SearchKind::Trace { "trace" } else { "grid" },
+                spec.search.name(),
                 res.k_step
             ),
         ));

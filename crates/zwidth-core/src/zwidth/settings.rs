@@ -51,6 +51,18 @@ pub enum SearchKind {
     Grid,
 }
 
+impl SearchKind {
+    /// The name a spec gives it.
+    pub fn name(self) -> &'static str {
+        match self {
+            SearchKind::Trace => "trace",
+            SearchKind::Bisect => "bisect",
+            SearchKind::RobustBisect => "robust_bisect",
+            SearchKind::Grid => "grid",
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Preset {
@@ -288,6 +300,14 @@ mod tests {
             (e.field.as_str(), e.to_string().contains("1 to 1000")),
             ("accuracy.realizations", true)
         );
+    }
+
+    #[test]
+    fn search_names_are_the_spec_names() {
+        use SearchKind::*;
+        for k in [Trace, Bisect, RobustBisect, Grid] {
+            assert_eq!(serde_json::to_value(k).unwrap(), k.name());
+        }
     }
 
     #[test]
