@@ -108,6 +108,11 @@ fn tune_spec(
 /// The Butterworth study at `acc` (`scan_points` = 490 for 1 Hz steps).
 pub fn cutoff(acc: Preset, scan_points: usize) -> Result<CutoffStudy, SpecError> {
     let scene = seed_with(r#"{"kind":"butterworth","cutoff_hz":100,"order":2}"#)?;
+    cutoff_on(scene, acc, scan_points)
+}
+
+/// The Butterworth study on `scene` (its estimator a Butterworth filter).
+fn cutoff_on(scene: SceneSpec, acc: Preset, scan_points: usize) -> Result<CutoffStudy, SpecError> {
     // Whole hertz for both: the scan's resolution.
     let p = [("cutoff_hz", 10.0, 499.0, Scale::Linear, Some(1.0))];
     let t = Instant::now();
@@ -200,5 +205,33 @@ impl Study {
             l.tuned_params.iter().map(|(n, x)| format!("{n} = {x:.3}")).collect::<Vec<_>>().join(", "),
             l.tuned_k_width, l.tuned_gains, l.tune_evaluations, l.tune_s,
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cutoff_study_reports_its_gap_and_ratio_from_its_own_maps() {
+        // A linear scene (analytic engine: cheap, deterministic). Scan of 5
+        // points (10, 132.25, …, 499 Hz); the tuner gets 5/5 = 1 map, the
+        // first of its coarse grid (u = 0: 10 Hz). Gap and ratio by their
+        // definitions, (tune − scan)/scan in % and 1/5.
+        let scene: SceneSpec = serde_json::from_value(serde_json::json!({
+            "device": {"coulomb": 0, "quantization": 0},
+            "loop": {"sample_hz": 1000, "render_hz": 1000},
+            "estimator": {"kind": "butterworth", "cutoff_hz": 100, "order": 2}
+        }))
+        .unwrap();
+        let c = cutoff_on(scene, Preset::Draft, 5).unwrap();
+        assert_eq!((c.scan_evaluations, c.tune_evaluations), (5, 1));
+        assert_eq!(c.tune_cutoff_hz, 10.0);
+        assert!(c.scan_best_k_width > c.tune_k_width);
+        let gap = 100.0 * (c.tune_k_width - c.scan_best_k_width) / c.scan_best_k_width;
+        assert_eq!(c.k_width_gap_pct, gap);
+        assert!(gap < 0.0);
+        assert_eq!(c.evaluation_ratio, 0.2);
+        assert_eq!(c.accuracy, "draft");
     }
 }

@@ -1,0 +1,141 @@
+//! The path the `auto` solvers take through the parameter space, the budget
+//! they spend, and a resumed tune replaying its stored evaluations: pinned
+//! evaluation by evaluation on a linear scene (analytic engine, so every
+//! map is deterministic and cheap).
+
+use super::*;
+use crate::zwidth::observer::StoredEvaluation;
+
+/// A K-width tune of the linear 1 kHz scene's Butterworth filter over
+/// `params`, `budget` search evaluations, `solver`.
+fn linear_tune(params: serde_json::Value, budget: usize, solver: &str) -> Tune {
+    let spec: TuneSpec = serde_json::from_value(serde_json::json!({
+        "scene": {"device": {"coulomb": 0, "quantization": 0},
+                  "loop": {"sample_hz": 1000, "render_hz": 1000},
+                  "estimator": {"kind": "butterworth", "cutoff_hz": 200, "order": 2}},
+        "params": params,
+        "objective": "k_width",
+        "accuracy": "draft",
+        "final_accuracy": "draft",
+        "finalists": 1,
+        "solver": solver,
+        "max_evaluations": budget,
+        "b": [0, 20]
+    }))
+    .unwrap();
+    spec.validate().unwrap()
+}
+
+fn search(r: &TuneResult) -> Vec<&Evaluation> {
+    r.history.iter().filter(|e| e.phase == "search").collect()
+}
+
+/// The first evaluation with the highest score (the solvers keep the first
+/// of equals: `c < best.0` on the cost −score).
+fn first_best<'a>(evals: &[&'a Evaluation]) -> &'a Evaluation {
+    evals
+        .iter()
+        .fold(None::<&Evaluation>, |b, e| match b {
+            Some(b) if b.score >= e.score => Some(b),
+            _ => Some(e),
+        })
+        .unwrap()
+}
+
+#[test]
+fn one_parameter_auto_grids_a_quarter_of_the_budget_then_runs_brent_in_the_best_cell() {
+    // Budget 12: a grid of 12/4 = 3 points (u = 0, ½, 1: 50, 250, 450 Hz);
+    // then Brent (1973, ch. 5) on the best point's cell [u* − ½, u* + ½] ∩
+    // [0, 1], whose first point is the golden-section point
+    // a + (3 − √5)/2 · (b − a); every later point lies in the cell. Points
+    // round to the 10 Hz lattice (min + round((v − min)/step)·step), so
+    // some repeat: those are free cache hits, and the computed ones are
+    // exactly the budget.
+    let tune = linear_tune(
+        serde_json::json!({"cutoff_hz": {"min": 50, "max": 450, "step": 10}}),
+        12,
+        "auto",
+    );
+    let r = tune.run(None).unwrap();
+    let s = search(&r);
+    let hz = |e: &&Evaluation| e.params["cutoff_hz"];
+    assert_eq!(
+        s[..3].iter().map(hz).collect::<Vec<_>>(),
+        [50.0, 250.0, 450.0]
+    );
+    assert!(s[..3].iter().all(|e| !e.cached));
+    let best = (hz(&first_best(&s[..3])) - 50.0) / 400.0;
+    let (lo, hi) = ((best - 0.5).max(0.0), (best + 0.5).min(1.0));
+    let golden = lo + (3.0 - 5f64.sqrt()) / 2.0 * (hi - lo);
+    let on_lattice = |u: f64| 50.0 + ((u * 400.0) / 10.0).round() * 10.0;
+    assert_eq!(hz(&s[3]), on_lattice(golden), "Brent's first point");
+    assert!(!s[3].cached);
+    for e in &s[3..] {
+        let u = (hz(e) - 50.0) / 400.0;
+        assert!(
+            (lo - 1e-12..=hi + 1e-12).contains(&u),
+            "{} Hz outside the cell [{lo}, {hi}]",
+            hz(e)
+        );
+    }
+    let computed = s.iter().filter(|e| !e.cached).count();
+    let hits = s.len() - computed;
+    assert_eq!(computed, 12, "the budget counts computed evaluations only");
+    assert!(hits > 0, "the lattice makes some points repeat");
+    // The finalist is mapped at the search's accuracy: a cache hit too.
+    assert_eq!(r.evaluations, 12);
+}
+
+#[test]
+fn auto_on_two_parameters_starts_nelder_mead_at_the_best_of_its_halton_design() {
+    // n = 2: a Halton design of 2n + 1 = 5 points, then Nelder–Mead (1965)
+    // from the best of them, whose first vertex is that point itself (a
+    // cache hit, same parameters).
+    let tune = linear_tune(
+        serde_json::json!({"cutoff_hz": {"min": 50, "max": 450},
+                           "order": {"min": 1, "max": 4}}),
+        9,
+        "auto",
+    );
+    let r = tune.run(None).unwrap();
+    let s = search(&r);
+    assert!(s.len() > 5, "{} search evaluations", s.len());
+    let best = first_best(&s[..5]);
+    assert!(
+        s[..5].iter().any(|e| e.score < best.score),
+        "the design's points differ in score, so the start matters"
+    );
+    assert_eq!(s[5].params, best.params, "Nelder–Mead's first vertex");
+    assert!(s[5].cached);
+}
+
+#[test]
+fn a_resumed_tune_replays_its_stored_evaluations_and_takes_the_same_path() {
+    // An interrupted run stored its first 7 evaluations; the resumed run
+    // must replay them (not recompute: only the rest is stored anew),
+    // count them toward the budget, count their trials, and end where the
+    // uninterrupted run ended.
+    let tune = linear_tune(
+        serde_json::json!({"cutoff_hz": {"min": 50, "max": 450, "step": 10}}),
+        12,
+        "auto",
+    );
+    let whole = Arc::new(Observer::default());
+    let full = tune.run(Some(whole.clone())).unwrap();
+    let stored = whole.take_new_evaluations();
+    assert_eq!(stored.len(), full.evaluations, "every computed map stored");
+    let again = Arc::new(Observer::default().with_evaluations(stored[..7].to_vec()));
+    let resumed = tune.run(Some(again.clone())).unwrap();
+    let path = |r: &TuneResult| {
+        r.history
+            .iter()
+            .map(|e| (e.phase.clone(), e.params.clone(), e.score, e.cached))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(path(&resumed), path(&full));
+    assert_eq!(resumed.best.params, full.best.params);
+    let keys = |v: &[StoredEvaluation]| v.iter().map(|e| e.key.clone()).collect::<Vec<_>>();
+    assert_eq!(keys(&again.take_new_evaluations()), keys(&stored[7..]));
+    let trials = |o: &Observer| o.trials.load(std::sync::atomic::Ordering::Relaxed);
+    assert_eq!(trials(&again), trials(&whole));
+}
