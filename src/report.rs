@@ -279,9 +279,9 @@ fn boundaries_svg<'a>(
     maps: impl Iterator<Item = &'a MapSummary>,
 ) -> Result<String, String> {
     let series: Vec<Series> = maps
-        .map(|m| Series {
-            name: format!("{} {}", &m.run[..m.run.len().min(8)], m.label),
-            points: m.boundary.iter().map(|p| (p.b, p.k_max)).collect(),
+        .map(|m| {
+            let name = format!("{} {}", &m.run[..m.run.len().min(8)], m.label);
+            Series::boundary(name, &m.boundary)
         })
         .collect();
     lines_svg(title, "B (N·s/m)", "K (N/m)", &series)
@@ -347,14 +347,23 @@ pub fn svg(spec: &ExperimentSpec, maps: &[MapSummary], result: &Value) -> Result
                 .iter()
                 .filter_map(|r| Some((r["value"].as_f64()?, r["k_width"].as_f64()?)))
                 .collect();
+            // Noisy scenes: each row's map carries the K-width's interval.
+            let bars = rows(result)
+                .iter()
+                .filter_map(|r| {
+                    let i = r["map"]["k_width_interval"].as_array()?;
+                    Some((
+                        r["value"].as_f64()?,
+                        i.first()?.as_f64()?,
+                        i.get(1)?.as_f64()?,
+                    ))
+                })
+                .collect();
             lines_svg(
                 &format!("K-width against {path}"),
                 path,
                 "K-width (N/m)",
-                &[Series {
-                    name: "K-width".into(),
-                    points: pts,
-                }],
+                &[Series::new("K-width", pts).with_intervals(bars)],
             )
         }
         _ => boundaries_svg("Z-width boundaries", maps.iter()),

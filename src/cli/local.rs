@@ -398,14 +398,16 @@ pub(super) fn run(
                 let series: Vec<Series> = report
                     .rows
                     .iter()
-                    .map(|r| Series {
-                        name: r.name.clone(),
-                        points: report
-                            .rates
-                            .iter()
-                            .copied()
-                            .zip(r.rms_error.iter().copied())
-                            .collect(),
+                    .map(|r| {
+                        Series::new(
+                            r.name.clone(),
+                            report
+                                .rates
+                                .iter()
+                                .copied()
+                                .zip(r.rms_error.iter().copied())
+                                .collect(),
+                        )
                     })
                     .collect();
                 let text = loglog_svg(

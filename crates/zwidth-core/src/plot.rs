@@ -4,10 +4,40 @@ use plotters::prelude::*;
 
 use crate::zwidth::search::BoundaryPoint;
 
-/// One named line.
+/// One named line, and optionally a confidence interval at some of its x
+/// (drawn as vertical bars in the line's colour).
 pub struct Series {
     pub name: String,
     pub points: Vec<(f64, f64)>,
+    /// (x, lo, hi): the interval of the quantity at x.
+    pub intervals: Vec<(f64, f64, f64)>,
+}
+
+impl Series {
+    pub fn new(name: impl Into<String>, points: Vec<(f64, f64)>) -> Self {
+        Self {
+            name: name.into(),
+            points,
+            intervals: Vec::new(),
+        }
+    }
+
+    /// With the intervals of a map's boundary (`k_lo` to `k_hi` at each B
+    /// that has both).
+    pub fn with_intervals(mut self, intervals: Vec<(f64, f64, f64)>) -> Self {
+        self.intervals = intervals;
+        self
+    }
+
+    /// A boundary K(B), its points' intervals included.
+    pub fn boundary(name: impl Into<String>, boundary: &[BoundaryPoint]) -> Self {
+        Self::new(name, boundary.iter().map(|p| (p.b, p.k_max)).collect()).with_intervals(
+            boundary
+                .iter()
+                .filter_map(|p| Some((p.b, p.k_lo?, p.k_hi?)))
+                .collect(),
+        )
+    }
 }
 
 /// A log–log line chart, one coloured line with markers per series and a
@@ -101,6 +131,15 @@ fn draw_lines<
         chart
             .draw_series(data.into_iter().map(|p| Circle::new(p, 3, colour.filled())))
             .map_err(|e| e.to_string())?;
+        let bars = s
+            .intervals
+            .iter()
+            .filter(|&&(x, lo, hi)| keep(x, lo) && keep(x, hi));
+        chart
+            .draw_series(bars.map(|&(x, lo, hi)| {
+                PathElement::new(vec![(x, lo), (x, hi)], colour.mix(0.6).stroke_width(2))
+            }))
+            .map_err(|e| e.to_string())?;
     }
     chart
         .configure_series_labels()
@@ -131,7 +170,15 @@ pub fn lines_svg(
     }
     let x1 = finite().map(|p| p.0).fold(f64::MIN, f64::max).max(1e-12) * 1.05;
     let x0 = finite().map(|p| p.0).fold(0.0, f64::min);
-    let y1 = finite().map(|p| p.1).fold(f64::MIN, f64::max).max(1e-12)
+    let highs = series
+        .iter()
+        .flat_map(|s| s.intervals.iter().map(|i| i.2))
+        .filter(|h| h.is_finite());
+    let y1 = finite()
+        .map(|p| p.1)
+        .chain(highs)
+        .fold(f64::MIN, f64::max)
+        .max(1e-12)
         * (1.1 + 0.08 * series.len() as f64);
     let y0 = finite().map(|p| p.1).fold(0.0, f64::min);
     let mut svg = String::new();
@@ -390,14 +437,8 @@ mod tests {
     #[test]
     fn writes_an_svg_with_legend_and_labels() {
         let s = vec![
-            Series {
-                name: "fdm".into(),
-                points: vec![(1e3, 1e-3), (1e4, 1e-2)],
-            },
-            Series {
-                name: "levant".into(),
-                points: vec![(1e3, 2e-3), (1e4, 5e-4)],
-            },
+            Series::new("fdm", vec![(1e3, 1e-3), (1e4, 1e-2)]),
+            Series::new("levant", vec![(1e3, 2e-3), (1e4, 5e-4)]),
         ];
         let svg = loglog_svg("t", "sample rate (Hz)", "RMS error (m/s)", &s).unwrap();
         assert!(svg.starts_with("<svg"));
@@ -405,5 +446,29 @@ mod tests {
             assert!(svg.contains(text), "missing {text}");
         }
         assert!(loglog_svg("t", "x", "y", &[]).is_err());
+    }
+
+    #[test]
+    fn a_boundary_draws_one_bar_per_interval_and_the_axis_reaches_its_top() {
+        // Three boundary points, two with an interval: two bars (the
+        // series' colour at 0.6 opacity; the boundary without intervals has
+        // none), and the y axis (ticks labelled `{:.2e}`) reaches the 9e4
+        // top of the highest interval.
+        let mut b: Vec<BoundaryPoint> = [(0.0, 3e4), (10.0, 5e4), (20.0, 4e4)]
+            .iter()
+            .map(|&(b, k)| BoundaryPoint::new(b, k))
+            .collect();
+        let bare = lines_svg("t", "B", "K", &[Series::boundary("m", &b)]).unwrap();
+        (b[1].k_lo, b[1].k_hi) = (Some(4e4), Some(9e4));
+        (b[2].k_lo, b[2].k_hi) = (Some(3.5e4), Some(4.5e4));
+        b[0].k_lo = Some(2e4); // no k_hi: no bar
+        let with = lines_svg("t", "B", "K", &[Series::boundary("m", &b)]).unwrap();
+        let bars = |s: &str| s.matches("<polyline fill=\"none\" opacity=\"0.6\"").count();
+        assert_eq!((bars(&bare), bars(&with)), (0, 2));
+        assert!(
+            with.contains("9.00e4"),
+            "the axis reaches the interval's top"
+        );
+        assert!(!bare.contains("9.00e4"));
     }
 }

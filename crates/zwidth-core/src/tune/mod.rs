@@ -505,10 +505,7 @@ impl TuneResult {
                 "Pareto front (search evaluations)",
                 metric_name(mx),
                 metric_name(my),
-                &[Series {
-                    name: "non-dominated".into(),
-                    points: pts,
-                }],
+                &[Series::new("non-dominated", pts)],
             );
         }
         let search: Vec<&Evaluation> = self
@@ -529,14 +526,11 @@ impl TuneResult {
             "evaluation",
             "score (higher is better)",
             &[
-                Series {
-                    name: "each evaluation".into(),
-                    points: search.iter().map(|e| (e.index as f64, e.score)).collect(),
-                },
-                Series {
-                    name: "best so far".into(),
-                    points: running,
-                },
+                Series::new(
+                    "each evaluation",
+                    search.iter().map(|e| (e.index as f64, e.score)).collect(),
+                ),
+                Series::new("best so far", running),
             ],
         )
     }
