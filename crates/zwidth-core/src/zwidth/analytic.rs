@@ -384,10 +384,18 @@ mod tests {
         // With a Butterworth filter the binding θ lies between the 8192-point
         // grid's points. The reference: a brute-force minimum of
         // (r − B·c)/a over 10⁵ θ in (0, π], then 10⁵ more within one coarse
-        // step of the best (θ resolution 6e-10 rad).
-        for (cutoff, b) in [(50.0, 0.0), (120.0, 3.0), (300.0, -2.0)] {
+        // step of the best (θ resolution 6e-10 rad). A delay of d samples
+        // multiplies H by e^{−jdθ}, so the bound oscillates in θ with many
+        // local minima: the refinement must stay next to the binding one.
+        for (cutoff, b, delay) in [
+            (50.0, 0.0, 0),
+            (120.0, 3.0, 0),
+            (300.0, -2.0, 0),
+            (120.0, 3.0, 3),
+            (300.0, 0.0, 7),
+        ] {
             let j = format!(
-                r#"{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{{"kind":"butterworth","cutoff_hz":{cutoff},"order":2}}}}"#
+                r#"{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000,"delay_samples":{delay}}},"estimator":{{"kind":"butterworth","cutoff_hz":{cutoff},"order":2}}}}"#
             );
             let m =
                 LinearModel::new(&SceneSpec::from_json(&j).unwrap().validate().unwrap()).unwrap();
@@ -407,7 +415,7 @@ mod tests {
             let (_, hi) = m.strict_passivity_range(b).unwrap();
             assert!(
                 (hi / want - 1.0).abs() < 1e-10,
-                "cutoff {cutoff} B={b}: {hi} vs {want}"
+                "cutoff {cutoff} B={b} delay {delay}: {hi} vs {want}"
             );
         }
     }

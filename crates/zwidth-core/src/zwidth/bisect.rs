@@ -483,3 +483,33 @@ mod tests {
         assert_eq!(pts.len() - 8, 1 + 3, "{:?}", &pts[8..]);
     }
 }
+
+#[cfg(test)]
+mod resolution_tests {
+    use super::*;
+
+    #[test]
+    fn a_zero_tolerance_ends_at_neighbouring_floats() {
+        // rel_tol = 0 (the service refuses anything below 1e-6, cost.rs; the
+        // function must still end): the bisection runs until no f64 lies
+        // between lo and hi, then stops with lo rendering and hi not, as
+        // next-door floats. A run that classified more than 2 000 times
+        // would be looping (the 1..2 bracket halves in ≤ 53 steps).
+        for t in [1.1, 1.3, 1.37, 1.5 + 1e-9, 1.77, 1.999] {
+            let mut calls = 0;
+            let mut classify = |k: f64| {
+                calls += 1;
+                assert!(calls < 2_000, "threshold {t}: still bisecting");
+                Point {
+                    k,
+                    stable: Some(k < t),
+                    ..Point::default()
+                }
+            };
+            let mut points = Vec::new();
+            let (lo, hi) = bisect_edge(&mut classify, 1.0, 2.0, 0.0, &mut points, Point::ok);
+            assert!(lo < t && hi >= t, "threshold {t}: [{lo}, {hi}]");
+            assert_eq!(hi, f64::from_bits(lo.to_bits() + 1), "threshold {t}");
+        }
+    }
+}

@@ -343,8 +343,14 @@ mod tests {
 
     #[test]
     fn a_noiseless_scene_is_decided_by_its_sign() {
-        let v = one_line(C::new(0.2, 0.1), &[0.0; 3]).verdict(0.05, 10);
-        assert!(v.decided && v.passive && v.margin_se < 1e-12, "{v:?}");
+        // Admittances that are sums of powers of two: the mean of three
+        // equal realizations is exact, so the spread is exactly 0 and the
+        // sign of Re Z = Re(1/G) alone decides (+3.2 and −3.2 N·s/m).
+        let v = one_line(C::new(0.25, 0.125), &[0.0; 3]).verdict(0.05, 10);
+        assert!(v.decided && v.passive && v.margin_se == 0.0, "{v:?}");
+        assert!((v.margin - 3.2).abs() < 1e-12, "{v:?}");
+        let v = one_line(C::new(-0.25, 0.125), &[0.0; 3]).verdict(0.05, 10);
+        assert!(v.decided && !v.passive && v.margin_se == 0.0, "{v:?}");
         let v = one_line(C::new(-0.2, 0.1), &[0.0; 3]).verdict(0.05, 10);
         assert!(v.decided && !v.passive, "{v:?}");
         // Two realizations are never enough.

@@ -191,6 +191,29 @@ pub struct ProbeSpec {
     /// difference between them is their parameters', not the noise's.
     #[serde(default = "d_seed")]
     pub seed: u64,
+    /// Noisy scenes: how a point is judged. `bla` (default): the best
+    /// linear approximation from random-phase realizations, with a stated
+    /// confidence (docs/zwidth.md). `tfestimate`: the 2018 paper's own
+    /// method, the baseline: one Schroeder multisine record, a Welch
+    /// estimate of the admittance, passive iff Re Z ≥ 0 on every line; no
+    /// confidence and no intervals. Linear scenes use neither (exact).
+    #[serde(default, skip_serializing_if = "ProbeMethod::is_bla")]
+    pub method: ProbeMethod,
+}
+
+/// How a noisy scene's point is judged (`ProbeSpec::method`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum ProbeMethod {
+    #[default]
+    Bla,
+    Tfestimate,
+}
+
+impl ProbeMethod {
+    fn is_bla(&self) -> bool {
+        *self == Self::Bla
+    }
 }
 
 fn d_confidence() -> f64 {
@@ -222,6 +245,7 @@ impl Default for ProbeSpec {
             periods: d_periods(),
             confidence: d_confidence(),
             seed: d_seed(),
+            method: ProbeMethod::Bla,
         }
     }
 }

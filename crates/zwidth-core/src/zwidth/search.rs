@@ -21,7 +21,7 @@ use super::cost::Cost;
 use super::hit::{wall_hit, NoTrace};
 pub use super::observer::{Observer, StoredEvaluation, StoredTrial};
 use super::probe::{probe_with, ProbeSetup};
-use super::scene::{validate_wall, Scene};
+use super::scene::{validate_wall, ProbeMethod, Scene};
 use super::settings::{Criterion, MapSpec, Method, Resolved, SearchKind};
 use crate::error::SpecError;
 
@@ -250,6 +250,11 @@ impl Evaluator {
                         s.probe.seed,
                         100.0 * s.probe.confidence
                     )
+                } else if self.nonlinear_probe() {
+                    format!(
+                        "frequency-domain multisine simulation (bilateral wall; the 2018 paper's tfestimate verdict: one Schroeder multisine, {} periods Welch-averaged, taken as certain: no confidence, no intervals)",
+                        super::probe::tfestimate_periods(self.res.probe.periods)
+                    )
                 } else {
                     "frequency-domain multisine simulation (bilateral wall)".to_string()
                 };
@@ -339,8 +344,14 @@ impl Evaluator {
     }
 
     /// Whether verdicts carry uncertainty: a simulation with friction or
-    /// quantization, judged by the BLA verdict (`bla.rs`).
+    /// quantization, judged by the BLA verdict (`bla.rs`). The
+    /// `tfestimate` baseline takes its verdicts as certain.
     pub fn noisy(&self) -> bool {
+        self.nonlinear_probe() && self.scene.spec.probe.method == ProbeMethod::Bla
+    }
+
+    /// A frequency-domain probe of a scene with friction or quantization.
+    fn nonlinear_probe(&self) -> bool {
         let d = &self.scene.spec.device;
         self.method == Method::Frequency && (d.coulomb > 0.0 || d.quantization > 0.0)
     }

@@ -1,12 +1,14 @@
 //! `zwidth bench trust`: how far the seed device's figures can be trusted
 //! (issue 11's targets, measured): the K-width and its interval for a few
 //! probe seeds, against the Butterworth cutoff 480–499 Hz, and against the
-//! probe amplitude. All at standard accuracy on `examples/seed_2018.json`.
+//! probe amplitude. All at standard accuracy on `examples/seed_2018.json`,
+//! judged by the BLA verdict; the cutoff rows again with the 2018 paper's
+//! `tfestimate` verdict, the baseline the BLA is measured against.
 
 use serde::Serialize;
 use std::time::Instant;
 
-use super::scene::SceneSpec;
+use super::scene::{ProbeMethod, SceneSpec};
 use super::search::{map, BoundaryPoint};
 use super::settings::{Accuracy, Criterion, MapSpec, Method, Preset, SearchKind};
 use super::tradeoff::{interval_cell, EXAMPLES};
@@ -16,6 +18,8 @@ use crate::error::SpecError;
 pub struct TrustRow {
     /// What varies: "seed", "cutoff_hz" or "amplitude_n".
     pub vary: &'static str,
+    /// How points were judged: "bla" or "tfestimate" (`probe.method`).
+    pub verdict: &'static str,
     pub value: f64,
     /// N/m, and its interval (N/m).
     pub k_width: f64,
@@ -50,6 +54,10 @@ fn one(vary: &'static str, value: f64, scene: SceneSpec) -> Result<TrustRow, Spe
     let spike = spike(&r.boundary);
     Ok(TrustRow {
         vary,
+        verdict: match spec.scene.probe.method {
+            ProbeMethod::Bla => "bla",
+            ProbeMethod::Tfestimate => "tfestimate",
+        },
         value,
         k_width: r.k_width,
         k_width_interval: r.k_width_interval,
@@ -60,15 +68,18 @@ fn one(vary: &'static str, value: f64, scene: SceneSpec) -> Result<TrustRow, Spe
 }
 
 /// The largest spike of a boundary its intervals do not allow (see
-/// [`TrustRow::spike`]); 0 where points have no intervals.
+/// [`TrustRow::spike`]). A point without an interval (a verdict taken as
+/// certain: the `tfestimate` baseline) is its own zero-width interval.
 fn spike(boundary: &[BoundaryPoint]) -> f64 {
+    let lo = |p: &BoundaryPoint| p.k_lo.unwrap_or(p.k_max);
+    let hi = |p: &BoundaryPoint| p.k_hi.unwrap_or(p.k_max);
     boundary
         .windows(3)
         .filter_map(|w| {
             let (a, p, c) = (&w[0], &w[1], &w[2]);
-            let line_lo = 0.5 * (a.k_lo? + c.k_lo?);
-            let line_hi = 0.5 * (a.k_hi? + c.k_hi?);
-            let gap = (p.k_lo? - line_hi).max(line_lo - p.k_hi?).max(0.0);
+            let line_lo = 0.5 * (lo(a) + lo(c));
+            let line_hi = 0.5 * (hi(a) + hi(c));
+            let gap = (lo(p) - line_hi).max(line_lo - hi(p)).max(0.0);
             let base = p.k_max.min(0.5 * (a.k_max + c.k_max));
             (base > 0.0).then(|| gap / base)
         })
@@ -83,13 +94,16 @@ pub fn run() -> Result<Vec<TrustRow>, SpecError> {
         s.probe.seed = seed;
         rows.push(one("seed", seed as f64, s)?);
     }
-    for hz in 480..=499 {
-        let mut s = base.clone();
-        s.estimator = serde_json::from_value(serde_json::json!({
-            "kind": "butterworth", "cutoff_hz": hz, "order": 2
-        }))
-        .map_err(|e| SpecError::new("estimator", hz, e.to_string()))?;
-        rows.push(one("cutoff_hz", f64::from(hz), s)?);
+    for method in [ProbeMethod::Bla, ProbeMethod::Tfestimate] {
+        for hz in 480..=499 {
+            let mut s = base.clone();
+            s.estimator = serde_json::from_value(serde_json::json!({
+                "kind": "butterworth", "cutoff_hz": hz, "order": 2
+            }))
+            .map_err(|e| SpecError::new("estimator", hz, e.to_string()))?;
+            s.probe.method = method;
+            rows.push(one("cutoff_hz", f64::from(hz), s)?);
+        }
     }
     for amp in [0.25, 0.5, 1.0, 2.0] {
         let mut s = base.clone();
@@ -104,7 +118,8 @@ pub fn run() -> Result<Vec<TrustRow>, SpecError> {
 /// the same thing and rendered something (none across kinds, none from 0).
 fn mark_changes(rows: &mut [TrustRow]) {
     for i in 1..rows.len() {
-        if rows[i].vary == rows[i - 1].vary && rows[i - 1].k_width > 0.0 {
+        let same = rows[i].vary == rows[i - 1].vary && rows[i].verdict == rows[i - 1].verdict;
+        if same && rows[i - 1].k_width > 0.0 {
             rows[i].change_from_previous = Some(rows[i].k_width / rows[i - 1].k_width - 1.0);
         }
     }
@@ -112,8 +127,8 @@ fn mark_changes(rows: &mut [TrustRow]) {
 
 pub fn table(rows: &[TrustRow]) -> String {
     let mut s = format!(
-        "{:<12} {:>8} {:>12} {:>28} {:>9} {:>10} {:>8}\n",
-        "vary", "value", "K-width", "interval (±%)", "change", "spike", "wall (s)"
+        "{:<12} {:<10} {:>8} {:>12} {:>28} {:>9} {:>10} {:>8}\n",
+        "vary", "verdict", "value", "K-width", "interval (±%)", "change", "spike", "wall (s)"
     );
     for r in rows {
         let interval = interval_cell(r.k_width, r.k_width_interval);
@@ -121,8 +136,9 @@ pub fn table(rows: &[TrustRow]) -> String {
             .change_from_previous
             .map_or("-".to_string(), |c| format!("{:+.1}%", 100.0 * c));
         s.push_str(&format!(
-            "{:<12} {:>8} {:>12.0} {:>28} {:>9} {:>9.1}% {:>8.2}\n",
+            "{:<12} {:<10} {:>8} {:>12.0} {:>28} {:>9} {:>9.1}% {:>8.2}\n",
             r.vary,
+            r.verdict,
             r.value,
             r.k_width,
             interval,
@@ -141,6 +157,7 @@ mod tests {
     fn row(vary: &'static str, k_width: f64) -> TrustRow {
         TrustRow {
             vary,
+            verdict: "bla",
             value: 0.0,
             k_width,
             k_width_interval: None,
@@ -169,9 +186,13 @@ mod tests {
         assert!((spike(&[lo, iv(500.0, 450.0, 550.0), lo]) - 0.7).abs() < 1e-12);
         // A steady slope is no spike: 1000, 2000, 3000 (±100).
         assert_eq!(spike(&[lo, hi, iv(3000.0, 2900.0, 3100.0)]), 0.0);
-        // Without intervals, or fewer than three points: nothing to judge.
+        // A point without an interval is its own: 5000 between two
+        // [900, 1100] misses their line by 3900, over the lower 1000: 3.9.
         let bare = BoundaryPoint::new(0.0, 5000.0);
-        assert_eq!(spike(&[lo, bare, lo]), 0.0);
+        assert!((spike(&[lo, bare, lo]) - 3.9).abs() < 1e-12);
+        // Three bare points on a line: none; fewer than three: nothing to judge.
+        let flat = BoundaryPoint::new(0.0, 1000.0);
+        assert_eq!(spike(&[flat, flat, flat]), 0.0);
         assert_eq!(spike(&[lo, hi]), 0.0);
     }
 
@@ -196,5 +217,13 @@ mod tests {
                 (g, w) => assert_eq!(*g, w, "{got:?}"),
             }
         }
+    }
+
+    #[test]
+    fn a_change_is_never_across_verdicts() {
+        let mut rows = vec![row("cutoff_hz", 100.0), row("cutoff_hz", 200.0)];
+        rows[1].verdict = "tfestimate";
+        mark_changes(&mut rows);
+        assert_eq!(rows[1].change_from_previous, None);
     }
 }

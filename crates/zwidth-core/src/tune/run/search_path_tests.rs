@@ -133,6 +133,13 @@ fn a_resumed_tune_replays_its_stored_evaluations_and_takes_the_same_path() {
             .collect::<Vec<_>>()
     };
     assert_eq!(path(&resumed), path(&full));
+    // What a running tune shows as its best: at the end, the finalist.
+    let shown = whole.best().expect("a best is shown");
+    assert_eq!(
+        shown["params"],
+        serde_json::to_value(&full.best.params).unwrap()
+    );
+    assert_eq!(shown["phase"], "final");
     assert_eq!(resumed.best.params, full.best.params);
     let keys = |v: &[StoredEvaluation]| v.iter().map(|e| e.key.clone()).collect::<Vec<_>>();
     assert_eq!(keys(&again.take_new_evaluations()), keys(&stored[7..]));
