@@ -270,6 +270,13 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_tuned_compare_defaults_to_24_maps_and_seed_0() {
+        // The documented defaults (this struct's docs, the OpenAPI schema).
+        let t: TunedCompare = serde_json::from_str(r#"{"objective":"k_width"}"#).unwrap();
+        assert_eq!((t.max_evaluations, t.seed), (24, 0));
+    }
+
+    #[test]
     fn the_objective_is_named_as_the_user_wrote_it() {
         // `tuned_for` and the table say what was asked for: the metric's
         // JSON name, without quotes.

@@ -286,6 +286,21 @@ mod tests {
         )
         .unwrap_err();
         assert_eq!(e.field, "scene.estimator.lambda", "{e}");
+        // The same for the normalized form: μ1 alone on a μ1/μ2 base keeps
+        // μ2; on a rule base there is no μ2 to keep.
+        let s = space(
+            r#"{"kind":"levant","mu1":2,"mu2":3,"lipschitz":2}"#,
+            r#"{"mu1":{"min":1,"max":10}}"#,
+        )
+        .unwrap();
+        let t = serde_json::to_string(&s.scene(&[0.0]).unwrap().estimator).unwrap();
+        assert!(t.contains(r#""mu1":1"#) && t.contains(r#""mu2":3"#), "{t}");
+        let e = space(
+            r#"{"kind":"levant","rule":"hba_sc","lipschitz":2}"#,
+            r#"{"mu1":{"min":1,"max":10}}"#,
+        )
+        .unwrap_err();
+        assert_eq!(e.field, "scene.estimator.mu2", "{e}");
     }
 
     #[test]
