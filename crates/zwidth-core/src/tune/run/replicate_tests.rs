@@ -206,3 +206,26 @@ fn replicates_go_to_the_finalists_whose_interval_overlaps_the_best() {
     assert_eq!(more_replicates(&p, 3), vec![0, 1]);
     assert!(more_replicates(&[], 3).is_empty());
 }
+
+#[test]
+fn a_weighted_score_is_the_signed_weighted_sum() {
+    // Σ wᵢ·sᵢ·mᵢ (the objective's docs): 1e-5·4e5 + 1e-2·300 − 0.5·12
+    // (the fidelity error counts against) = 4 + 3 − 6 = 1.
+    let spec: TuneSpec = serde_json::from_value(serde_json::json!({
+        "scene": {"device": {"coulomb": 0, "quantization": 0},
+                  "estimator": {"kind": "butterworth", "cutoff_hz": 100}},
+        "params": {"cutoff_hz": {"min": 50, "max": 400}},
+        "objective": {"weighted": {"k_width": 1e-5, "b_width": 1e-2, "max_fidelity_error": 0.5}}
+    }))
+    .unwrap();
+    let tune = spec.validate().unwrap();
+    let run = Run::new(&tune, None);
+    let mut m = pooled(4e5, [4e5, 4e5], 1).eval.metrics;
+    m.b_width = 300.0;
+    m.max_fidelity_error = Some(12.0);
+    assert!(
+        (run.score(&m, 0.0) - 1.0).abs() < 1e-12,
+        "{}",
+        run.score(&m, 0.0)
+    );
+}
