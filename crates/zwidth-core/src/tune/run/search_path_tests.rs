@@ -146,3 +146,27 @@ fn a_resumed_tune_replays_its_stored_evaluations_and_takes_the_same_path() {
     let trials = |o: &Observer| o.trials.load(std::sync::atomic::Ordering::Relaxed);
     assert_eq!(trials(&again), trials(&whole));
 }
+
+#[test]
+fn cache_hits_do_not_end_a_search_before_its_grid_is_walked() {
+    // Budget 60 over a 20 Hz lattice (21 values): the coarse grid takes 15
+    // (60/4), Brent a few in the best cell (±1/14: 3 lattice values), and
+    // the rest of the budget is an even grid of 4·left + 1 points over the
+    // cell, all of them cache hits by then. The runaway guard counts calls
+    // (20 per evaluation of budget, + 100): it must let that grid finish,
+    // ending on the cell's top.
+    let tune = linear_tune(
+        serde_json::json!({"cutoff_hz": {"min": 50, "max": 450, "step": 20}}),
+        60,
+        "auto",
+    );
+    let r = tune.run(None).unwrap();
+    let s = search(&r);
+    let hz = |e: &Evaluation| e.params["cutoff_hz"];
+    let grid: Vec<f64> = s[..15].iter().map(|e| hz(e)).collect();
+    let best = (hz(first_best(&s[..15])) - 50.0) / 400.0;
+    let hi = (best + 1.0 / 14.0).min(1.0);
+    let on_lattice = |u: f64| 50.0 + ((u * 400.0) / 20.0).round() * 20.0;
+    assert_eq!(hz(s.last().unwrap()), on_lattice(hi), "grid {grid:?}");
+    assert!(s.len() > 60 + 120, "{} calls: more than 20 + 60 + 100", s.len());
+}
