@@ -205,6 +205,16 @@ fn describe(e: &EstimatorSpec, c: f64) -> String {
     }
 }
 
+/// Progress scopes of a tuned comparison of `list`: one per map, and one
+/// per tune (the estimators with something to tune).
+fn scopes(list: &[(String, String, EstimatorSpec)], sample_hz: f64) -> usize {
+    let tunes = list
+        .iter()
+        .filter(|(_, _, e)| tunable(e, sample_hz).is_some())
+        .count();
+    list.len() + tunes
+}
+
 /// The paper's estimators on `scene`, each tuned for `tuned.objective`
 /// first, then mapped at `accuracy` side by side. Progress: one scope per
 /// tune, then one per map.
@@ -219,11 +229,7 @@ pub fn compare_tuned(
     let c = compare::estimate_c(scene)?;
     let list = compare::paper_estimators(scene, c.estimate.lipschitz);
     if let Some(o) = &observer {
-        let tunes = list
-            .iter()
-            .filter(|(_, _, e)| tunable(e, scene.control.sample_hz).is_some())
-            .count();
-        o.set_scopes(list.len() + tunes);
+        o.set_scopes(scopes(&list, scene.control.sample_hz));
     }
     let mut rows = Vec::with_capacity(list.len());
     let mut tunings = Vec::with_capacity(list.len());
@@ -268,6 +274,33 @@ pub fn compare_tuned(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_paper_estimators_make_four_maps_and_three_tunes() {
+        // FDM + Butterworth, AKF, FOAW, Levant (2018 paper §IV): FOAW has
+        // nothing to tune, so 4 maps + 3 tunes = 7 progress scopes.
+        let scene = compare::seed_2018_scene();
+        let list = compare::paper_estimators(&scene, 1.1);
+        assert_eq!(list.len(), 4);
+        assert_eq!(scopes(&list, scene.control.sample_hz), 7);
+    }
+
+    #[test]
+    fn tuned_parameters_are_described_in_si_units() {
+        let e = |j: &str| EstimatorSpec::from_json(j).unwrap();
+        let bw = e(r#"{"kind":"butterworth","cutoff_hz":123.456}"#);
+        assert_eq!(describe(&bw, 1.0), "ωc = 123.5 Hz");
+        let k = e(r#"{"kind":"kalman","q":12345}"#);
+        assert_eq!(describe(&k, 1.0), "q = 1.234e4");
+        // α = μ1·C, λ = μ2·√C (the normalized gains, `LevantSpec::gains`), C = 4 m/s².
+        let l = e(r#"{"kind":"levant","mu1":2,"mu2":3,"lipschitz":4}"#);
+        assert_eq!(
+            describe(&l, 4.0),
+            "α = 8.00 m/s², λ = 6.000 m^½/s (μ1 = 2.000, μ2 = 3.000, C = 4.000)"
+        );
+        let fdm = e(r#"{"kind":"fdm"}"#);
+        assert_eq!(describe(&fdm, 1.0), fdm.label());
+    }
 
     #[test]
     fn a_tuned_compare_defaults_to_24_maps_and_seed_0() {

@@ -163,10 +163,16 @@ fn cache_hits_do_not_end_a_search_before_its_grid_is_walked() {
     let r = tune.run(None).unwrap();
     let s = search(&r);
     let hz = |e: &Evaluation| e.params["cutoff_hz"];
+    let on_lattice = |u: f64| 50.0 + ((u * 400.0) / 20.0).round() * 20.0;
     let grid: Vec<f64> = s[..15].iter().map(|e| hz(e)).collect();
+    let want: Vec<f64> = (0..15).map(|i| on_lattice(i as f64 / 14.0)).collect();
+    assert_eq!(grid, want, "a grid of 60/4 = 15 points");
     let best = (hz(first_best(&s[..15])) - 50.0) / 400.0;
     let hi = (best + 1.0 / 14.0).min(1.0);
-    let on_lattice = |u: f64| 50.0 + ((u * 400.0) / 20.0).round() * 20.0;
     assert_eq!(hz(s.last().unwrap()), on_lattice(hi), "grid {grid:?}");
-    assert!(s.len() > 60 + 120, "{} calls: more than 20 + 60 + 100", s.len());
+    assert!(
+        s.len() > 60 + 120,
+        "{} calls: more than 20 + 60 + 100",
+        s.len()
+    );
 }
