@@ -245,6 +245,31 @@ impl<const FRICTION: bool, const QUANT: bool> Loop<FRICTION, QUANT> {
     }
 }
 
+/// The outcome of a loop that diverged after `periods_run` periods: not
+/// passive (Re Z = −1 on every line stands for "no steady state").
+fn diverged(
+    setup: &ProbeSetup,
+    k: f64,
+    b: f64,
+    periods_run: u32,
+    confidence: Option<VerdictConfidence>,
+    saturated_renders: u64,
+) -> ProbeOutcome {
+    let z = vec![C::new(-1.0, 0.0); setup.omegas.len()];
+    let mut imp = ImpedanceCurve::from_z(&setup.omegas, &z, k, b);
+    imp.passive = false;
+    ProbeOutcome {
+        passive: false,
+        settled: false,
+        diverged: true,
+        periods_run,
+        last_change: f64::MAX,
+        impedance: imp,
+        confidence,
+        saturated_renders,
+    }
+}
+
 /// A noisy scene: random-phase realizations until the BLA verdict is
 /// decided or `knobs.realizations` have run (`bla.rs`). Each realization
 /// continues from the state the last one left, discards
@@ -275,26 +300,15 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
             periods_run += 1;
             if !lp.period(&force, &mut vbuf) {
                 // Diverged: not passive, and no doubt about it.
-                let z = vec![C::new(-1.0, 0.0); setup.omegas.len()];
-                let mut imp = ImpedanceCurve::from_z(&setup.omegas, &z, k, b);
-                imp.passive = false;
-                return ProbeOutcome {
-                    passive: false,
-                    settled: false,
-                    diverged: true,
-                    periods_run,
-                    last_change: f64::MAX,
-                    impedance: imp,
-                    confidence: Some(VerdictConfidence {
-                        decided: true,
-                        margin: -1.0,
-                        margin_se: 0.0,
-                        noise_se: 0.0,
-                        realizations: m + 1,
-                        bands: 0,
-                    }),
-                    saturated_renders: lp.ctl.saturated,
+                let sure = VerdictConfidence {
+                    decided: true,
+                    margin: -1.0,
+                    margin_se: 0.0,
+                    noise_se: 0.0,
+                    realizations: m + 1,
+                    bands: 0,
                 };
+                return diverged(setup, k, b, periods_run, Some(sure), lp.ctl.saturated);
             }
             if i < bla::TRANSIENT_PERIODS {
                 continue;
@@ -373,19 +387,7 @@ fn run_tfestimate<const FRICTION: bool, const QUANT: bool>(
     for chunk in v.chunks_mut(n) {
         periods_run += 1;
         if !lp.period(&setup.force, chunk) {
-            let z = vec![C::new(-1.0, 0.0); setup.omegas.len()];
-            let mut imp = ImpedanceCurve::from_z(&setup.omegas, &z, k, b);
-            imp.passive = false;
-            return ProbeOutcome {
-                passive: false,
-                settled: false,
-                diverged: true,
-                periods_run,
-                last_change: f64::MAX,
-                impedance: imp,
-                confidence: None,
-                saturated_renders: lp.ctl.saturated,
-            };
+            return diverged(setup, k, b, periods_run, None, lp.ctl.saturated);
         }
     }
     let v = &v[n..]; // the transient period discarded
