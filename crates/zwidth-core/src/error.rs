@@ -33,6 +33,32 @@ impl SpecError {
     }
 }
 
+/// Parse JSON `text` as a `noun` ("scene", "estimator spec"), naming the
+/// field a parse error is in below `what` (`scene.probe.method`), or `what`
+/// itself when it is the whole document.
+pub fn parse_json<T: serde::de::DeserializeOwned>(
+    text: &str,
+    what: &str,
+    noun: &str,
+) -> Result<T, SpecError> {
+    let mut de = serde_json::Deserializer::from_str(text);
+    let parsed: T = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+        let path = e.path().to_string();
+        let field = match path.as_str() {
+            "" | "." | "?" => what.to_string(),
+            p => format!("{what}.{p}"),
+        };
+        SpecError::new(
+            field,
+            "(as written)",
+            format!("is not a valid {noun}: {}", e.inner()),
+        )
+    })?;
+    de.end()
+        .map_err(|e| SpecError::new(what, "(document)", format!("is not a valid {noun}: {e}")))?;
+    Ok(parsed)
+}
+
 impl fmt::Display for SpecError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(

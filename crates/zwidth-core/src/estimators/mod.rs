@@ -163,13 +163,7 @@ impl Sampling {
 impl EstimatorSpec {
     /// Parse the JSON form; the error text is serde's, which names the field.
     pub fn from_json(text: &str) -> Result<Self, SpecError> {
-        serde_json::from_str(text).map_err(|e| {
-            SpecError::new(
-                "estimator",
-                text.trim(),
-                format!("is not a valid estimator spec: {e}"),
-            )
-        })
+        crate::error::parse_json(text, "estimator", "estimator spec")
     }
 
     /// A short human label, e.g. `butterworth(100 Hz, order 2)`.

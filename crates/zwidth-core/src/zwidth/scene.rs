@@ -305,9 +305,7 @@ fn is_whole(x: f64) -> bool {
 
 impl SceneSpec {
     pub fn from_json(text: &str) -> Result<Self, SpecError> {
-        serde_json::from_str(text).map_err(|e| {
-            SpecError::new("scene", "(document)", format!("is not a valid scene: {e}"))
-        })
+        crate::error::parse_json(text, "scene", "scene")
     }
 
     pub fn validate(&self) -> Result<Scene, SpecError> {
@@ -707,6 +705,15 @@ mod tests {
                 .unwrap_or_default(),
         };
         assert!(bad(r#"{"device":{"mass":0}}"#).contains("device.mass = 0"));
+        // Parse errors name the field too (serde's path).
+        let e = bad(r#"{"probe":{"method":"welch"}}"#);
+        assert!(e.starts_with("scene.probe.method = "), "{e}");
+        assert!(
+            e.contains("unknown variant `welch`, expected `bla` or `tfestimate`"),
+            "{e}"
+        );
+        assert!(bad(r#"{"device":{"mass":"heavy"}}"#).starts_with("scene.device.mass = "));
+        assert!(bad(r#"{"device":{"mass":1}} x"#).starts_with("scene = (document)"));
         // At most 1e9 samples a trial: 999 + 1 s at 1 MHz is exactly that.
         let fast = |settle: f64| {
             format!(
