@@ -247,6 +247,10 @@ fn fidelity_is_the_rms_distance_to_the_ideal_wall() {
         let c = m.impedance(k, b);
         assert!(c.passive, "K={k} B={b}");
         assert_eq!(c.freq_hz.len(), 100);
+        // The lines: every hertz from 1 to 100.
+        for (i, f) in c.freq_hz.iter().enumerate() {
+            assert!((f - (i + 1) as f64).abs() < 1e-9, "line {i}: {f} Hz");
+        }
         assert!(
             (c.fidelity / want - 1.0).abs() < 1e-9,
             "K={k} B={b}: {} vs {want}",

@@ -393,6 +393,10 @@ mod tests {
             (300.0, -2.0, 0),
             (120.0, 3.0, 3),
             (300.0, 0.0, 7),
+            // Three local minima per period, the binding one inside.
+            (60.0, 10.0, 6),
+            (80.0, 10.0, 6),
+            (200.0, 10.0, 6),
         ] {
             let j = format!(
                 r#"{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000,"delay_samples":{delay}}},"estimator":{{"kind":"butterworth","cutoff_hz":{cutoff},"order":2}}}}"#
