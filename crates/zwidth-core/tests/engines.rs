@@ -339,6 +339,64 @@ fn grid_and_trace_land_within_one_k_step_below_the_boundary() {
 }
 
 #[test]
+fn a_falling_trace_keeps_a_boundary_of_one_step() {
+    // K step 20 000 N/m. At B = 40 the trace climbs to 80 000 (Jury:
+    // 99 034); at B = 0 (Jury ≈ 2.4e4) it walks down from 80 000 and ends
+    // on the one lattice K below the boundary, 20 000 = one step: a
+    // boundary, not "nothing renders".
+    let step = 20_000.0;
+    let acc = Accuracy::Knobs(AccuracyKnobs {
+        preset: Preset::Standard,
+        k_step: Some(step),
+        ..Default::default()
+    });
+    let r = run_search(
+        linear("", r#"{"kind":"fdm"}"#),
+        Method::Analytic,
+        Criterion::Stability,
+        SearchKind::Trace,
+        &[40.0, 0.0],
+        acc,
+    );
+    assert_eq!(k_at(&r, 40.0), 80_000.0);
+    assert!(jury(0, 0.0) > step && jury(0, 0.0) < 2.0 * step);
+    assert_eq!(k_at(&r, 0.0), step);
+}
+
+#[test]
+fn an_automatic_b_range_stops_after_two_empty_columns() {
+    // Linear FDM scene with 3 samples of delay, analytic impedance map
+    // over the automatic B range (up to b_max = 1000 N·s/m): the delay
+    // leaves a B-width of a few tens of N·s/m (two draft columns render),
+    // so the map must stop there (two empty columns in a row), not search
+    // every B up to b_max. Columns run in batches of the thread count, so
+    // at most one batch past the kept boundary (plus its two empty
+    // columns) is searched.
+    let r = map(&MapSpec {
+        scene: linear(r#","delay_samples":3"#, r#"{"kind":"fdm"}"#),
+        method: Method::Analytic,
+        criterion: Criterion::Impedance,
+        search: SearchKind::Bisect,
+        accuracy: Accuracy::Preset(Preset::Draft),
+        b: None,
+        b_max: 1000.0,
+        k_max: 1e7,
+    })
+    .unwrap();
+    let mut columns: Vec<f64> = r.points.iter().map(|p| p.b).collect();
+    columns.sort_by(f64::total_cmp);
+    columns.dedup();
+    let batch = rayon::current_num_threads().max(2);
+    assert!(
+        columns.len() <= r.boundary.len() + batch + 1,
+        "{} columns searched for a boundary of {}",
+        columns.len(),
+        r.boundary.len()
+    );
+    assert!(*columns.last().unwrap() < 1000.0);
+}
+
+#[test]
 fn a_trace_stops_at_k_max() {
     // At B = 40 the exact boundary is 99 034 N/m (Jury); capped at
     // k_max = 30 000 the trace walks the 1 500 N/m lattice up to 30 000
