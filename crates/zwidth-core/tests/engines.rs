@@ -397,6 +397,29 @@ fn an_automatic_b_range_stops_after_two_empty_columns() {
 }
 
 #[test]
+fn a_map_states_its_resolution_and_search() {
+    let at = |search: SearchKind| {
+        map(&MapSpec {
+            scene: linear("", r#"{"kind":"fdm"}"#),
+            method: Method::Analytic,
+            criterion: Criterion::Stability,
+            search,
+            accuracy: Accuracy::Preset(Preset::Draft),
+            b: Some(vec![0.0]),
+            b_max: 1000.0,
+            k_max: 1e7,
+        })
+        .unwrap()
+        .resolution
+    };
+    let plain = at(SearchKind::Bisect);
+    assert!(plain.ends_with("(bisection)"), "{plain}");
+    let robust = at(SearchKind::RobustBisect);
+    assert!(robust.contains("the first failure from below"), "{robust}");
+    assert!(at(SearchKind::Grid).starts_with("K step "));
+}
+
+#[test]
 fn a_trace_stops_at_k_max() {
     // At B = 40 the exact boundary is 99 034 N/m (Jury); capped at
     // k_max = 30 000 the trace walks the 1 500 N/m lattice up to 30 000

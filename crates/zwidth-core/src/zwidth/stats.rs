@@ -194,6 +194,9 @@ mod tests {
         }
         // Γ(½) = √π.
         assert!((ln_gamma(0.5) - 0.5 * std::f64::consts::PI.ln()).abs() < 1e-13);
+        // Below ½ by the reflection formula: Γ(¼) = 3.625 609 908 221 908
+        // (OEIS A068466).
+        assert!((ln_gamma(0.25) - 3.625_609_908_221_908f64.ln()).abs() < 1e-12);
     }
 
     #[test]
