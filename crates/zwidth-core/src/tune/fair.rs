@@ -303,6 +303,34 @@ mod tests {
     }
 
     #[test]
+    fn a_tuned_compare_refuses_a_pareto_objective_and_budgets_outside_1_to_200() {
+        let field = |j: &str| {
+            serde_json::from_str::<TunedCompare>(j)
+                .unwrap()
+                .validate()
+                .unwrap_err()
+                .field
+        };
+        assert_eq!(
+            field(r#"{"objective":{"pareto":["k_width","b_width"]}}"#),
+            "tuned.objective"
+        );
+        assert_eq!(
+            field(r#"{"objective":"k_width","max_evaluations":0}"#),
+            "tuned.max_evaluations"
+        );
+        assert_eq!(
+            field(r#"{"objective":"k_width","max_evaluations":201}"#),
+            "tuned.max_evaluations"
+        );
+        let ok = r#"{"objective":"k_width","max_evaluations":200}"#;
+        assert!(serde_json::from_str::<TunedCompare>(ok)
+            .unwrap()
+            .validate()
+            .is_ok());
+    }
+
+    #[test]
     fn a_tuned_compare_defaults_to_24_maps_and_seed_0() {
         // The documented defaults (this struct's docs, the OpenAPI schema).
         let t: TunedCompare = serde_json::from_str(r#"{"objective":"k_width"}"#).unwrap();

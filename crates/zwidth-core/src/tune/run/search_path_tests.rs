@@ -84,6 +84,10 @@ fn one_parameter_auto_grids_a_quarter_of_the_budget_then_runs_brent_in_the_best_
     assert!(hits > 0, "the lattice makes some points repeat");
     // The finalist is mapped at the search's accuracy: a cache hit too.
     assert_eq!(r.evaluations, 12);
+    // Its plot: every search evaluation and the best so far.
+    let svg = r.svg().unwrap();
+    assert!(svg.starts_with("<svg") && svg.contains("Objective over evaluations"));
+    assert!(svg.contains("each evaluation") && svg.contains("best so far"));
 }
 
 #[test]
