@@ -101,6 +101,20 @@ fn finals_are_mapped_at_the_final_accuracy_and_the_search_at_its_own() {
     assert_eq!(fin.metrics.k_width, k_at(fin, "standard"));
     assert_ne!(fin.metrics.k_width, k_at(fin, "draft"));
     assert_eq!(search.metrics.k_width, k_at(search, "draft"));
+    // saved_s: the computed search maps at the final accuracy's mean cost,
+    // minus what the search and the finals did cost (its documented formula).
+    let c = r.coarse_to_fine.as_ref().unwrap();
+    let n = r
+        .history
+        .iter()
+        .filter(|e| e.phase == "search" && !e.cached)
+        .count() as f64;
+    let want = n * c.mean_final_evaluation_s - (c.search_s + c.final_s);
+    assert!(
+        (c.saved_s.unwrap() - want).abs() < 1e-9,
+        "{:?} vs {want}",
+        c.saved_s
+    );
 }
 
 #[test]
