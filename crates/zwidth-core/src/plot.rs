@@ -22,8 +22,7 @@ impl Series {
         }
     }
 
-    /// With the intervals of a map's boundary (`k_lo` to `k_hi` at each B
-    /// that has both).
+    /// With these intervals, (x, lo, hi) each.
     pub fn with_intervals(mut self, intervals: Vec<(f64, f64, f64)>) -> Self {
         self.intervals = intervals;
         self

@@ -151,12 +151,18 @@ impl ProbeSetup {
         let mut fa = LineAnalyzer::new(per_period);
         let mut f_lines = vec![C::new(0.0, 0.0); ms.lines.len()];
         fa.lines(&force, &ms.lines, &mut f_lines);
-        // The staircase's true coefficient: × (1 − e^{−jωh})/(jωh).
-        let (j, h) = (C::new(0.0, 1.0), self.h);
+        // The staircase's true coefficient.
         for (f, &w) in f_lines.iter_mut().zip(&self.omegas) {
-            *f *= (C::new(1.0, 0.0) - C::from_polar(1.0, -w * h)) / (j * w * h);
+            *f *= self.hold(w);
         }
         (force, f_lines)
+    }
+
+    /// A force held over each step of h: its true Fourier coefficient at ω
+    /// is the samples' × (1 − e^{−jωh})/(jωh).
+    fn hold(&self, w: f64) -> C {
+        let h = self.h;
+        (C::new(1.0, 0.0) - C::from_polar(1.0, -w * h)) / (C::new(0.0, 1.0) * w * h)
     }
 }
 
@@ -397,18 +403,33 @@ fn run_tfestimate<const FRICTION: bool, const QUANT: bool>(
         .collect();
     let mut fa = LineAnalyzer::new(n);
     let lines = setup.lines.len();
-    let (mut vs, mut fs) = (vec![C::new(0.0, 0.0); lines], vec![C::new(0.0, 0.0); lines]);
+    let mut vs = vec![C::new(0.0, 0.0); lines];
     let (mut cross, mut power) = (vec![C::new(0.0, 0.0); lines], vec![0.0; lines]);
-    let (mut seg_v, mut seg_f) = (vec![0.0; n], vec![0.0; n]);
+    let mut seg = vec![0.0; n];
+    // The force is periodic, so a segment's windowed force depends only on
+    // where in the period it starts (two places for an even period): each
+    // is transformed once.
+    let mut force_at: Vec<(usize, Vec<C>)> = Vec::new();
     let mut start = 0;
     while start + n <= v.len() {
-        for i in 0..n {
-            seg_v[i] = v[start + i] * w[i];
-            // The force is periodic: segment sample i is period sample (start + i) mod n.
-            seg_f[i] = setup.force[(start + i) % n] * w[i];
+        let offset = start % n;
+        if !force_at.iter().any(|(o, _)| *o == offset) {
+            for (i, x) in seg.iter_mut().enumerate() {
+                *x = setup.force[(offset + i) % n] * w[i];
+            }
+            let mut fs = vec![C::new(0.0, 0.0); lines];
+            fa.lines(&seg, &setup.lines, &mut fs);
+            force_at.push((offset, fs));
         }
-        fa.lines(&seg_v, &setup.lines, &mut vs);
-        fa.lines(&seg_f, &setup.lines, &mut fs);
+        let fs = &force_at
+            .iter()
+            .find(|(o, _)| *o == offset)
+            .expect("just added")
+            .1;
+        for (i, x) in seg.iter_mut().enumerate() {
+            *x = v[start + i] * w[i];
+        }
+        fa.lines(&seg, &setup.lines, &mut vs);
         for l in 0..lines {
             cross[l] += vs[l] * fs[l].conj();
             power[l] += fs[l].norm_sqr();
@@ -417,11 +438,9 @@ fn run_tfestimate<const FRICTION: bool, const QUANT: bool>(
     }
     // Undo the step-averaging of the velocity and the staircase's hold, as
     // the BLA does (`ProbeSetup::v_correction`, `excitation`).
-    let (j, h) = (C::new(0.0, 1.0), setup.h);
     let z: Vec<C> = (0..lines)
         .map(|l| {
-            let w = setup.omegas[l];
-            let hold = (C::new(1.0, 0.0) - C::from_polar(1.0, -w * h)) / (j * w * h);
+            let hold = setup.hold(setup.omegas[l]);
             let g = cross[l] / power[l].max(1e-300) * setup.v_correction[l] / hold;
             C::new(1.0, 0.0) / g
         })
