@@ -299,4 +299,98 @@ mod tests {
             assert!(e.to_string().contains("stiffness steps"), "{e}");
         }
     }
+
+    #[test]
+    fn a_trace_over_the_automatic_b_range_walks_k_once_down_and_once_up() {
+        // search.rs's trace: one fall from k_max and one rise, each at most
+        // k_max / k_step steps, plus three trials a column: 2·1024 + 3·10.
+        let c =
+            crate::zwidth::search::validate(&linear(SearchKind::Trace, None, 95.0, 1_024_000.0))
+                .unwrap();
+        assert_eq!((c.b_columns, c.trials), (10, 2 * 1024 + 3 * 10));
+        assert_eq!(c.stored_bytes, c.trials * BYTES_PER_TRIAL);
+    }
+
+    #[test]
+    fn the_map_limits_hold_at_their_documented_values() {
+        let sc = crate::zwidth::scene::SceneSpec::default()
+            .validate()
+            .unwrap();
+        let res = Accuracy::default().resolve(&sc).unwrap();
+        let map = |b_step: f64, b_max: f64, k_step: f64, k_max: f64, search: SearchKind| {
+            let spec = MapSpec {
+                search,
+                b: None,
+                b_max,
+                k_max,
+                ..linear(search, None, b_max, k_max)
+            };
+            let r = Resolved {
+                b_step,
+                k_step,
+                ..res
+            };
+            of_map(&spec, &r, false)
+        };
+        let bis = SearchKind::Bisect;
+        // b_max / b_step < MAX_B_COLUMNS = 2000 steps (cost.rs), plus B = 0.
+        assert_eq!(map(10.0, 19_990.0, 1.0, 1e6, bis).unwrap().b_columns, 2000);
+        // 2000 columns from B = 0.5 steps to 1000: the step is at fault …
+        assert_eq!(
+            map(0.5, 1000.0, 1.0, 1e6, bis).unwrap_err().field,
+            "accuracy.b_step"
+        );
+        // … from 10 steps to 30 000, b_max is.
+        assert_eq!(
+            map(10.0, 30_000.0, 1.0, 1e6, bis).unwrap_err().field,
+            "b_max"
+        );
+        // k_max / k_step at most MAX_K_RATIO = 1e12.
+        assert!(map(10.0, 100.0, 1.0, 1e12, bis).is_ok());
+        assert_eq!(
+            map(10.0, 100.0, 1.0, 2e12, bis).unwrap_err().field,
+            "accuracy.k_step"
+        );
+        assert_eq!(
+            map(10.0, 100.0, 0.0, 1e6, bis).unwrap_err().field,
+            "accuracy.k_step"
+        );
+        // A grid walks at most MAX_K_STEPS = 100 000 stiffness steps.
+        let grid = SearchKind::Grid;
+        assert!(map(10.0, 100.0, 1000.0, 1e8, grid).is_ok());
+        assert_eq!(
+            map(10.0, 100.0, 1000.0, 100_001_000.0, grid)
+                .unwrap_err()
+                .field,
+            "accuracy.k_step"
+        );
+    }
+
+    #[test]
+    fn at_most_max_trials_and_a_runaway_stop_at_four_times_the_plan() {
+        let c = |trials: u64| Cost {
+            trials,
+            ..Cost::default()
+        };
+        assert_eq!(c(MAX_TRIALS).check("f").unwrap(), c(2_000_000));
+        let e = c(MAX_TRIALS + 1).check("f").unwrap_err();
+        assert_eq!(e.field, "f");
+        assert!(e.to_string().contains("2000001 trials planned"), "{e}");
+        // The observer stops a run past 4 × its plan + 1000 (module docs).
+        assert_eq!(c(10).trial_limit(), 1040);
+        assert_eq!(c(0).trial_limit(), 1000);
+        assert_eq!(c(u64::MAX).trial_limit(), u64::MAX);
+        // Sums and multiples add field by field.
+        let one = Cost::of_trials(3, 7);
+        assert_eq!(
+            one.times(2).plus(one),
+            Cost {
+                maps: 3,
+                b_columns: 9,
+                trials: 21,
+                stored_rows: 21,
+                stored_bytes: 21 * BYTES_PER_TRIAL
+            }
+        );
+    }
 }

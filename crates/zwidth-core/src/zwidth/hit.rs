@@ -438,4 +438,80 @@ mod tests {
         assert!(!o.stable, "{o:?}");
         assert!(o.rms.unwrap() > 1e-5, "{o:?}");
     }
+
+    /// A scene at 1 kHz from its device and hit JSON.
+    fn scene_1khz(device: &str, hit: &str) -> Scene {
+        SceneSpec::from_json(&format!(
+            r#"{{"device":{device},"loop":{{"sample_hz":1000,"render_hz":1000}},"hit":{hit}}}"#
+        ))
+        .unwrap()
+        .validate()
+        .unwrap()
+    }
+
+    #[test]
+    fn the_wait_for_contact_is_capped_at_ten_approach_times_plus_a_second() {
+        let half = HitKnobs {
+            settle_s: 0.5,
+            measure_s: 0.5,
+        };
+        // Damped: the estimate is d·b/F + m/b (terminal velocity plus its
+        // time constant) = 1e-6·100/0.03 + 0.52/100 = 8.5333 ms, so the cap
+        // is ⌊(10·8.5333 ms + 1 s)/1 ms⌋ = 1085 samples. The 2 mm encoder
+        // first reads past the wall at x ≥ 1 mm, ~3.3 s at F/b = 0.3 mm/s:
+        // the cap binds, and the window that follows reads 0 throughout.
+        let sc = scene_1khz(
+            r#"{"mass":0.52,"damping":100,"coulomb":0,"quantization":0.002}"#,
+            r#"{"push_force":0.03,"home_distance":1e-6}"#,
+        );
+        let o = wall_hit(&sc, 1000.0, 20.0, half, &mut NoTrace);
+        assert_eq!(o.samples, 1085 + 500, "{o:?}");
+        assert_eq!((o.mean_position, o.rms, o.stable), (0.0, Some(0.0), true));
+        // Undamped: √(2·d·m/F) = √(2·1e-6·100/0.01) = 0.14142 s: cap
+        // ⌊(1.4142 + 1)/1 ms⌋ = 2414 (contact only at √(2·1 mm/1e-4) ≈ 4.5 s).
+        let sc = scene_1khz(
+            r#"{"mass":100,"damping":0,"coulomb":0,"quantization":0.002}"#,
+            r#"{"push_force":0.01,"home_distance":1e-6}"#,
+        );
+        let o = wall_hit(&sc, 1000.0, 20.0, half, &mut NoTrace);
+        assert_eq!(o.samples, 2414 + 500, "{o:?}");
+    }
+
+    #[test]
+    fn the_window_is_settle_after_contact_and_its_rms_is_about_its_mean() {
+        // 2011 paper §2.4: RMS of the measured position about its mean over
+        // the window. Recomputed here in two passes from the trace.
+        let sc = scene_1khz(r#"{"coulomb":0,"quantization":0}"#, "{}");
+        let kn = HitKnobs {
+            settle_s: 0.02,
+            measure_s: 0.2,
+        };
+        let mut trace = Vec::new();
+        let o = wall_hit(&sc, 1000.0, 20.0, kn, &mut trace);
+        let c = trace.iter().position(|r| r.y > 0.0).unwrap();
+        assert_eq!(o.samples, c + 20 + 200);
+        let w: Vec<f64> = trace[c + 20..c + 220].iter().map(|r| r.y).collect();
+        let mean = w.iter().sum::<f64>() / 200.0;
+        let rms = (w.iter().map(|y| (y - mean).powi(2)).sum::<f64>() / 200.0).sqrt();
+        assert!(
+            (o.mean_position - mean).abs() <= 1e-12 * mean.abs(),
+            "{o:?} vs {mean}"
+        );
+        let got = o.rms.unwrap();
+        assert!(
+            rms > 1e-6 && (got - rms).abs() <= 1e-9 * rms,
+            "{got} vs {rms}"
+        );
+    }
+
+    #[test]
+    fn a_trial_diverges_on_position_alone() {
+        // No damping, no wall (K = B = 0): free flight at F/m from 7 cm
+        // before the wall; x = 10 m at t = √(2·10.07·0.52/0.3572) = 5.4148 s,
+        // where v = 3.7 m/s is far below the velocity bound.
+        let sc = scene_1khz(r#"{"damping":0,"coulomb":0,"quantization":0}"#, "{}");
+        let o = wall_hit(&sc, 0.0, 0.0, knobs(&sc), &mut NoTrace);
+        assert!(o.diverged && !o.stable && o.rms.is_none(), "{o:?}");
+        assert!((5414..=5416).contains(&o.samples), "{o:?}");
+    }
 }

@@ -216,4 +216,74 @@ mod tests {
         }
         assert!(!free.cancelled());
     }
+
+    #[test]
+    fn stored_trials_are_replayed_by_their_exact_scope_k_and_b() {
+        let p = Point {
+            k: 1500.0,
+            b: 20.0,
+            passive: Some(true),
+            ..Point::default()
+        };
+        let o = Observer::default();
+        o.record(3, &p);
+        let new = o.take_new();
+        assert_eq!(
+            new,
+            [StoredTrial {
+                scope: 3,
+                point: p.clone()
+            }]
+        );
+        assert!(o.take_new().is_empty(), "taken once");
+        let r = Observer::resuming(new);
+        assert_eq!(r.replay(3, 1500.0, 20.0), Some(p));
+        // The key is the exact bits of K and B, and the map's scope.
+        assert_eq!(r.replay(2, 1500.0, 20.0), None);
+        assert_eq!(r.replay(3, 1500.0, 20.000_001), None);
+        assert_eq!(r.replay(3, 1500.000_001, 20.0), None);
+        // Evaluations the same way, by key.
+        let e = Observer::default().with_evaluations(vec![StoredEvaluation {
+            key: "a".into(),
+            record: serde_json::json!(1),
+        }]);
+        assert_eq!(e.stored_evaluation("a"), Some(serde_json::json!(1)));
+        assert_eq!(e.stored_evaluation("b"), None);
+    }
+
+    #[test]
+    fn a_held_run_waits_until_released_or_cancelled() {
+        use std::sync::Arc;
+        let o = Arc::new(Observer::default());
+        o.hold(Some("disk full".into()));
+        assert_eq!(o.held().as_deref(), Some("disk full"));
+        let waiter = {
+            let o = o.clone();
+            std::thread::spawn(move || o.wait_while_held())
+        };
+        // Still waiting after a while (it would return at once if it did not
+        // wait), then released.
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        assert!(!waiter.is_finished());
+        o.hold(None);
+        waiter.join().unwrap();
+        assert_eq!(o.held(), None);
+        // A cancel ends the wait too.
+        o.hold(Some("disk full".into()));
+        o.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+        o.wait_while_held();
+        assert!(o.held().is_some());
+    }
+
+    #[test]
+    fn progress_is_the_mean_of_the_maps_fractions_and_never_goes_back() {
+        let o = Observer::default();
+        o.set_scopes(4);
+        o.report(0, 0.5);
+        o.report(1, 1.0);
+        o.report(0, 0.25); // out of order: kept at 0.5
+        o.report(2, f64::NAN); // ignored
+        o.report(3, 7.0); // clamped to 1
+        assert_eq!(o.fraction(), (0.5 + 1.0 + 1.0) / 4.0);
+    }
 }

@@ -621,13 +621,13 @@ impl Scene {
     }
 }
 
-/// Check a wall's stiffness K (N/m) and damping B (N·s/m).
 /// Substeps of the probe's excitation grid per encoder sample: at least 40
 /// per period of the highest line.
 pub fn probe_substeps(f_max_hz: f64, sample_hz: f64) -> usize {
     (40.0 * f_max_hz / sample_hz).ceil().max(1.0) as usize
 }
 
+/// Check a wall's stiffness K (N/m) and damping B (N·s/m).
 pub fn validate_wall(k: f64, b: f64) -> Result<(), SpecError> {
     if !(k.is_finite() && (0.0..=1e9).contains(&k)) {
         return Err(SpecError::new(
@@ -751,5 +751,140 @@ mod tests {
         assert!(bad(r#"{"devise":{}}"#).contains("devise"));
         assert!(bad(r#"{"hit":{"threshold":0}}"#).contains("hit.threshold = 0"));
         assert!(validate_wall(-1.0, 0.0).is_err() && validate_wall(1.0, f64::NAN).is_err());
+    }
+
+    /// The scene's field that fails, or "" when it is valid.
+    fn failing(json: &str) -> String {
+        match SceneSpec::from_json(json).unwrap().validate() {
+            Ok(_) => String::new(),
+            Err(e) => e.field,
+        }
+    }
+
+    #[test]
+    fn each_documented_limit_is_inclusive() {
+        // Each limit's own value is allowed, the next value out is not (the
+        // bounds the messages state).
+        let one_khz = r#""loop":{"sample_hz":1000,"render_hz":1000"#;
+        for (ok, bad, field) in [
+            (r#"{"device":{"mass":1e4}}"#.to_string(), r#"{"device":{"mass":1.0001e4}}"#.to_string(), "device.mass"),
+            (
+                r#"{"device":{"force_limit":1,"force_resolution":1},"probe":{"amplitude":1}}"#.into(),
+                r#"{"device":{"force_limit":1,"force_resolution":1.01},"probe":{"amplitude":1}}"#.into(),
+                "device.force_resolution",
+            ),
+            (r#"{"loop":{"delay_samples":100}}"#.into(), r#"{"loop":{"delay_samples":101}}"#.into(), "loop.delay_samples"),
+            (
+                r#"{"device":{"force_limit":0.5},"probe":{"amplitude":0.5}}"#.into(),
+                r#"{"device":{"force_limit":0.5},"probe":{"amplitude":0.51}}"#.into(),
+                "probe.amplitude",
+            ),
+            (
+                r#"{"hit":{"settle_s":3000,"measure_s":600}}"#.into(),
+                r#"{"hit":{"settle_s":3000,"measure_s":601}}"#.into(),
+                "hit.settle_s",
+            ),
+            // The probe's highest line below the render Nyquist (500 Hz here).
+            (
+                format!(r#"{{{one_khz}}},"probe":{{"f_max_hz":499}}}}"#),
+                format!(r#"{{{one_khz}}},"probe":{{"f_max_hz":500}}}}"#),
+                "probe.f_max_hz",
+            ),
+            // At most MAX_PROBE_LINES = 1000 lines, f_max / f_min.
+            (
+                r#"{"loop":{"sample_hz":10000,"render_hz":10000},"probe":{"f_min_hz":2,"f_max_hz":2000}}"#.into(),
+                r#"{"loop":{"sample_hz":10000,"render_hz":10000},"probe":{"f_min_hz":2,"f_max_hz":2002}}"#.into(),
+                "probe.f_max_hz",
+            ),
+            // One probe period at most MAX_PROBE_PERIOD_STEPS = 4e6 steps:
+            // 2 MHz / 0.5 Hz with one substep (40·100/2e6 < 1) is exactly 4e6.
+            (
+                r#"{"loop":{"sample_hz":2e6,"render_hz":1000},"probe":{"f_min_hz":0.5,"f_max_hz":100}}"#.into(),
+                r#"{"loop":{"sample_hz":2e6,"render_hz":1000},"probe":{"f_min_hz":0.25,"f_max_hz":100}}"#.into(),
+                "probe.f_min_hz",
+            ),
+        ] {
+            assert_eq!(failing(&ok), "", "{ok}");
+            assert_eq!(failing(&bad), field, "{bad}");
+        }
+        // f_max must lie above f_min.
+        assert_eq!(
+            failing(r#"{"probe":{"f_min_hz":1,"f_max_hz":1}}"#),
+            "probe.f_max_hz"
+        );
+        assert_eq!(failing(r#"{"probe":{"f_max_hz":1e308}}"#), "probe.f_max_hz");
+        // The wall: K in [0, 1e9] N/m, |B| ≤ 1e7 N·s/m.
+        assert!(validate_wall(0.0, 1e7).is_ok() && validate_wall(1e9, -1e7).is_ok());
+        assert_eq!(validate_wall(0.0, 2e7).unwrap_err().field, "b");
+        assert_eq!(validate_wall(0.0, -2e7).unwrap_err().field, "b");
+        assert_eq!(validate_wall(2e9, 0.0).unwrap_err().field, "k");
+    }
+
+    #[test]
+    fn the_first_nonlinearity_is_named_and_the_grid_follows_the_loop() {
+        let reason = |j: &str| {
+            SceneSpec::from_json(j)
+                .unwrap()
+                .validate()
+                .unwrap()
+                .linear_reason()
+        };
+        let lin =
+            r#""device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}"#;
+        assert_eq!(reason(&format!("{{{lin}}}")), None);
+        let one = |device: &str, estimator: &str| {
+            reason(&format!(
+                r#"{{"device":{device},"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{estimator}}}"#
+            ))
+        };
+        assert_eq!(
+            one(r#"{"coulomb":0}"#, r#"{"kind":"fdm"}"#).as_deref(),
+            Some("quantization")
+        );
+        assert_eq!(
+            one(r#"{"quantization":0}"#, r#"{"kind":"fdm"}"#).as_deref(),
+            Some("Coulomb friction")
+        );
+        let flat = r#"{"coulomb":0,"quantization":0}"#;
+        assert_eq!(
+            one(flat, r#"{"kind":"fdm","median_velocity":3}"#).as_deref(),
+            Some("median smoothing")
+        );
+        assert_eq!(
+            one(flat, r#"{"kind":"fdm","median_position":3}"#).as_deref(),
+            Some("median smoothing")
+        );
+        assert_eq!(
+            one(
+                r#"{"coulomb":0,"quantization":0,"force_resolution":0.01}"#,
+                r#"{"kind":"fdm"}"#
+            )
+            .as_deref(),
+            Some("force command resolution")
+        );
+        assert_eq!(one(flat, r#"{"kind":"kalman","q":1e3}"#), None);
+        // The default (seed) scene: 10 kHz sampling, 1 kHz rendering.
+        let sc = SceneSpec::default().validate().unwrap();
+        assert_eq!((sc.dt, sc.render_dt, sc.ratio), (1e-4, 1e-3, 10));
+        assert_eq!(sc.sampling.quantization, 1e-6);
+        let ideal = SceneSpec::from_json(&format!("{{{lin}}}"))
+            .unwrap()
+            .validate()
+            .unwrap();
+        assert_eq!(ideal.sampling.quantization, IDEAL_SENSOR_ESTIMATOR_STEP);
+        // At least 40 probe substeps per period of the highest line.
+        assert_eq!(probe_substeps(100.0, 1000.0), 4);
+        assert_eq!(probe_substeps(30.0, 1000.0), 2);
+        assert_eq!(probe_substeps(100.0, 1e4), 1);
+        // The probe method: BLA unless named, and kept by a parameter edit.
+        assert!(ProbeMethod::default().is_bla() && !ProbeMethod::Tfestimate.is_bla());
+        let tf = SceneSpec::from_json(r#"{"probe":{"method":"tfestimate"}}"#)
+            .unwrap()
+            .with_number("device.damping", 5.0, "p")
+            .unwrap();
+        assert_eq!(tf.probe.method, ProbeMethod::Tfestimate);
+        assert!(serde_json::to_value(SceneSpec::default()).unwrap()["probe"]
+            .get("method")
+            .is_none());
     }
 }

@@ -984,4 +984,273 @@ mod tests {
         o.report(1, 0.75);
         assert!((o.fraction() - 0.4375).abs() < 1e-12);
     }
+
+    /// A single-rate 1 kHz scene with the given device, FDM, on the
+    /// analytic engine.
+    fn analytic(device: &str, criterion: Criterion, search: SearchKind, accuracy: &str) -> MapSpec {
+        MapSpec {
+            scene: SceneSpec::from_json(&format!(
+                r#"{{"device":{device},"loop":{{"sample_hz":1000,"render_hz":1000}}}}"#
+            ))
+            .unwrap(),
+            method: Method::Analytic,
+            criterion,
+            search,
+            accuracy: serde_json::from_str(accuracy).unwrap(),
+            b: None,
+            b_max: 1000.0,
+            k_max: 1e7,
+        }
+    }
+
+    const UNDAMPED: &str = r#"{"damping":0,"coulomb":0,"quantization":0}"#;
+
+    /// Jury's criterion for an undamped mass under FDM at T = 1 ms (no
+    /// delay): z³ + (x + y − 2)z² + (1 + x)z − y with x = KT²/2m, y = BT/2m
+    /// is stable iff 0 < K < (4m/T²)·y(1 − y)/(1 + y), 0 < B < 2m/T.
+    fn jury_undamped(b: f64) -> f64 {
+        let (m, t) = (0.52, 1e-3);
+        let y = b * t / (2.0 * m);
+        (4.0 * m / (t * t) * y * (1.0 - y) / (1.0 + y)).max(0.0)
+    }
+
+    #[test]
+    fn an_automatic_b_range_starts_empty_and_ends_at_two_empty_columns() {
+        // Undamped: B = 0 renders nothing, 100 … 1000 do (up to 2m/T =
+        // 1040), 1100 and beyond nothing. In batches of two columns the
+        // search stops after the batch (1200, 1300), both empty, and keeps
+        // one empty column past the last that renders.
+        let mut spec = analytic(
+            UNDAMPED,
+            Criterion::Stability,
+            SearchKind::Bisect,
+            r#"{"preset":"draft","b_step":100}"#,
+        );
+        spec.b_max = 2000.0;
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        let r = pool.install(|| map(&spec)).unwrap();
+        let bs: Vec<f64> = r.boundary.iter().map(|p| p.b).collect();
+        assert_eq!(
+            bs,
+            (0..=11).map(|i| f64::from(i) * 100.0).collect::<Vec<_>>()
+        );
+        for p in &r.boundary {
+            let want = jury_undamped(p.b);
+            assert!(
+                p.k_max <= want && p.k_max >= 0.95 * want,
+                "B = {}: {} vs Jury {want}",
+                p.b,
+                p.k_max
+            );
+        }
+        assert_eq!((r.boundary[0].k_max, r.boundary[11].k_max), (0.0, 0.0));
+        assert_eq!(r.b_width, 1000.0);
+        assert_eq!(r.points.iter().map(|p| p.b).fold(0.0, f64::max), 1300.0);
+        // Two columns, the first empty: both kept.
+        spec.b_max = 100.0;
+        let r = map(&spec).unwrap();
+        let got: Vec<(f64, bool)> = r.boundary.iter().map(|p| (p.b, p.k_max > 0.0)).collect();
+        assert_eq!(got, [(0.0, false), (100.0, true)]);
+    }
+
+    #[test]
+    fn a_trace_climbs_then_falls_one_k_step_at_a_time() {
+        // 2011 paper §2.4 on the undamped device, steps of 20 000 N/m:
+        // B = 100 climbs 20k … 160k (Jury: 164 912) and fails at 180k (9
+        // trials); B = 0 renders nothing: 180k, then 160k … 20k, all fail
+        // (9 more), and the boundary there is 0.
+        let mut spec = analytic(
+            UNDAMPED,
+            Criterion::Stability,
+            SearchKind::Trace,
+            r#"{"preset":"draft","k_step":20000}"#,
+        );
+        spec.b = Some(vec![100.0, 0.0]);
+        let r = map(&spec).unwrap();
+        let bd: Vec<(f64, f64)> = r.boundary.iter().map(|p| (p.b, p.k_max)).collect();
+        assert_eq!(bd, [(100.0, 160_000.0), (0.0, 0.0)]);
+        assert_eq!(r.trials, 18);
+        assert!(r.points.iter().all(|p| p.k >= 20_000.0));
+    }
+
+    #[test]
+    fn strict_passivity_is_exact_per_b_and_stops_where_nothing_is_passive() {
+        // Colgate & Schenkel for FDM: K < 2(b − |B|)/T with b = 13.2 N·s/m,
+        // T = 1 ms: 26 400, 16 400, 6 400 at B = 0, 5, 10; none from 13.2.
+        let lin = r#"{"coulomb":0,"quantization":0}"#;
+        let mut spec = analytic(
+            lin,
+            Criterion::StrictPassivity,
+            SearchKind::Bisect,
+            r#""draft""#,
+        );
+        spec.b = Some(vec![0.0, 5.0, 10.0, 15.0, 20.0]);
+        let r = map(&spec).unwrap();
+        let want = [26_400.0, 16_400.0, 6_400.0, 0.0, 0.0];
+        assert_eq!(r.boundary.len(), 5);
+        for (p, w) in r.boundary.iter().zip(want) {
+            assert!(
+                (p.k_max - w).abs() <= 1e-3 * w,
+                "B = {}: {} vs {w}",
+                p.b,
+                p.k_max
+            );
+        }
+        assert_eq!((r.b_width, r.trials), (10.0, 3));
+        assert!(r.resolution.starts_with("exact per B"), "{}", r.resolution);
+        // Trapezoids: ½·5·(26 400 + 16 400) + ½·5·(16 400 + 6 400) + ½·5·6 400.
+        assert!((r.area - 180_000.0).abs() < 1e-3 * 180_000.0, "{}", r.area);
+        // The automatic range: B = 0, 5, 10 to b_max = 10 inclusive …
+        spec.b = None;
+        spec.accuracy = serde_json::from_str(r#"{"b_step":5}"#).unwrap();
+        spec.b_max = 10.0;
+        let bs: Vec<f64> = map(&spec).unwrap().boundary.iter().map(|p| p.b).collect();
+        assert_eq!(bs, [0.0, 5.0, 10.0]);
+        // … and to b_max = 100 it ends at the first B with nothing passive.
+        spec.b_max = 100.0;
+        let bs: Vec<f64> = map(&spec).unwrap().boundary.iter().map(|p| p.b).collect();
+        assert_eq!(bs, [0.0, 5.0, 10.0]);
+        // The evaluator's verdict on either side of 26 400 at B = 0.
+        let sc = spec.scene.validate().unwrap();
+        let res = spec.accuracy.resolve(&sc).unwrap();
+        let ev = Evaluator::new(
+            sc.clone(),
+            Method::Analytic,
+            Criterion::StrictPassivity,
+            res,
+        )
+        .unwrap();
+        assert_eq!(ev.classify(30_000.0, 0.0).passive, Some(false));
+        assert_eq!(ev.classify(20_000.0, 0.0).passive, Some(true));
+        // A linear scene on `auto` is answered by the analytic engine.
+        let ev = Evaluator::new(sc, Method::Auto, Criterion::Stability, res).unwrap();
+        assert_eq!(ev.method, Method::Analytic);
+    }
+
+    #[test]
+    fn a_bisection_states_its_tolerance_and_robust_checks_below_the_result() {
+        // FDM, B = 0, k_max 20 000 (below Jury's 26 512 for b = 13.2): a
+        // bisection doubles 2976.48, 5952.96, 11 905.92 and then tries the
+        // cap, 20 000 (4 trials); the robust one then checks 0.3 … 0.9 of
+        // 20 000 (5 more), all stable.
+        let lin = r#"{"coulomb":0,"quantization":0}"#;
+        let mut spec = analytic(lin, Criterion::Stability, SearchKind::Bisect, r#""draft""#);
+        spec.b = Some(vec![0.0]);
+        spec.k_max = 20_000.0;
+        let r = map(&spec).unwrap();
+        assert_eq!((r.trials, r.k_width), (4, 20_000.0));
+        assert_eq!(r.resolution, "K to 5.00 % (bisection)");
+        spec.search = SearchKind::RobustBisect;
+        let r = map(&spec).unwrap();
+        assert_eq!((r.trials, r.k_width), (9, 20_000.0));
+        assert!(
+            r.resolution.starts_with("K to 5.00 % (bisection, checked"),
+            "{}",
+            r.resolution
+        );
+    }
+
+    #[test]
+    fn maps_refuse_ranges_outside_the_documented_limits() {
+        let lin = r#"{"coulomb":0,"quantization":0}"#;
+        let field = |spec: &MapSpec| validate(spec).unwrap_err().field;
+        let mut spec = analytic(
+            lin,
+            Criterion::Stability,
+            SearchKind::Bisect,
+            r#"{"k_step":1000}"#,
+        );
+        spec.b = Some(vec![0.0]);
+        spec.b_max = 0.0;
+        assert_eq!(field(&spec), "b_max");
+        spec.b_max = 1e6;
+        assert!(validate(&spec).is_ok());
+        spec.b_max = f64::INFINITY;
+        assert_eq!(field(&spec), "b_max");
+        spec.b_max = 1000.0;
+        spec.k_max = 0.0;
+        assert_eq!(field(&spec), "k_max");
+        spec.k_max = 1e9;
+        assert!(validate(&spec).is_ok());
+        spec.k_max = f64::INFINITY;
+        assert_eq!(field(&spec), "k_max");
+        // A trace needs k_max of at least one K step (here 1000 N/m).
+        spec.search = SearchKind::Trace;
+        spec.k_max = 1000.0;
+        assert!(validate(&spec).is_ok());
+        spec.k_max = 999.0;
+        assert_eq!(field(&spec), "k_max");
+        spec.k_max = 1e4;
+        spec.b = Some(vec![]);
+        assert_eq!(field(&spec), "b");
+    }
+
+    #[test]
+    fn planned_b_ignores_empty_columns_and_never_plans_fewer_than_done() {
+        // The extrapolation (B where the last two rendering columns' line
+        // reaches K = 0, in steps, plus three) kept within [done + 1,
+        // max(n_auto, done + 1)].
+        let b = [bp(0.0, 1000.0), bp(10.0, 900.0), bp(20.0, 0.0)];
+        assert_eq!(planned_b(&b, 68, 10.0), 13);
+        // Flat, or two points at one B: no slope, the whole range.
+        assert_eq!(planned_b(&[bp(0.0, 900.0), bp(10.0, 900.0)], 68, 10.0), 68);
+        assert_eq!(
+            planned_b(&[bp(10.0, 1000.0), bp(10.0, 900.0)], 68, 10.0),
+            68
+        );
+        // 1000 → 10 from B = 0 to 10 ends at B = 10.1: 2 steps + 3 = 5, but
+        // six columns are done already: 7.
+        let done = [
+            bp(0.0, 1000.0),
+            bp(10.0, 10.0),
+            bp(20.0, 0.0),
+            bp(30.0, 0.0),
+            bp(40.0, 0.0),
+            bp(50.0, 0.0),
+        ];
+        assert_eq!(planned_b(&done, 68, 10.0), 7);
+        assert_eq!(planned_b(&done, 3, 10.0), 7);
+        assert_eq!(planned_b(&[bp(0.0, 900.0), bp(10.0, 1000.0)], 1, 10.0), 3);
+    }
+
+    #[test]
+    fn widths_have_intervals_only_when_every_point_has_both_ends() {
+        let half = BoundaryPoint {
+            k_lo: Some(50.0),
+            ..bp(0.0, 100.0)
+        };
+        assert_eq!(widths_interval(&[half], 10.0), (None, None));
+        let other = BoundaryPoint {
+            k_hi: Some(150.0),
+            ..bp(0.0, 100.0)
+        };
+        assert_eq!(widths_interval(&[other], 10.0), (None, None));
+        assert_eq!(widths_interval(&[], 10.0), (None, None));
+    }
+
+    #[test]
+    fn saturation_is_judged_at_the_boundary_point_s_own_b_above_its_k() {
+        // B = 0, K_max = 100: the first failure above 100 at B = 0 is the
+        // clipped 200 (not the unclipped 100 itself, nor 150 at B = 10).
+        let pt = |b: f64, k: f64, sat: bool| Point {
+            k,
+            b,
+            passive: Some(false),
+            saturated: sat.then_some(true),
+            ..Point::default()
+        };
+        let points = [
+            pt(0.0, 200.0, true),
+            pt(0.0, 100.0, false),
+            pt(10.0, 150.0, false),
+        ];
+        let note = saturation_note(&points, &[bp(0.0, 100.0)], 0.5).unwrap();
+        assert!(
+            note.contains("in 1 of 3 trials (from K = 2.0000e2 N/m); 1 of 1 boundary points"),
+            "{note}"
+        );
+    }
 }

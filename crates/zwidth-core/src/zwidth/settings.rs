@@ -326,4 +326,55 @@ mod tests {
         assert_eq!(e.field, "accuracy.settle_s");
         assert!(e.to_string().contains("1e9 samples"), "{e}");
     }
+
+    #[test]
+    fn the_presets_resolve_to_the_documented_table() {
+        // docs/zwidth.md's preset table on the seed scene (hit settle 4 s,
+        // measure 2 s, 4 probe periods): draft ×¼ time, ½ periods, twice the
+        // 2011 paper's steps (1488.24 N/m, 14.88 N·s/m); reference ×2, ×2, half.
+        let sc = SceneSpec::default().validate().unwrap();
+        let row = |p: Preset| {
+            let r = Accuracy::Preset(p).resolve(&sc).unwrap();
+            (
+                r.hit.settle_s,
+                r.hit.measure_s,
+                r.probe.periods,
+                r.k_step,
+                r.b_step,
+            )
+        };
+        assert_eq!(row(Preset::Draft), (1.0, 0.5, 2, 2976.48, 29.76));
+        assert_eq!(
+            row(Preset::Standard),
+            (4.0, 2.0, 4, PAPER_K_STEP, PAPER_B_STEP)
+        );
+        assert_eq!(row(Preset::Reference), (8.0, 4.0, 8, 744.12, 7.44));
+        // A map without b_max or k_max: 1000 N·s/m and 1e7 N/m (the docs).
+        let m: MapSpec = serde_json::from_str(r#"{"scene":{}}"#).unwrap();
+        assert_eq!((m.b_max, m.k_max), (1000.0, 1e7));
+    }
+
+    #[test]
+    fn every_knob_is_checked_at_its_documented_limit() {
+        let sc = SceneSpec::default().validate().unwrap();
+        let resolve =
+            |j: serde_json::Value| serde_json::from_value::<Accuracy>(j).unwrap().resolve(&sc);
+        let field = |j: serde_json::Value| resolve(j).unwrap_err().field;
+        use serde_json::json;
+        assert_eq!(field(json!({"k_step": 0})), "accuracy.k_step");
+        assert_eq!(field(json!({"b_step": -1})), "accuracy.b_step");
+        assert_eq!(field(json!({"settle_tol": 0})), "accuracy.settle_tol");
+        assert_eq!(field(json!({"measure_s": 0})), "accuracy.measure_s");
+        assert_eq!(field(json!({"k_rel_tol": 0.5})), "accuracy.k_rel_tol");
+        assert!(resolve(json!({"k_rel_tol": 0.49})).is_ok());
+        // realizations × (1 + periods) ≤ 100 000: 1000 × 100 is the limit.
+        assert!(resolve(json!({"realizations": 1000, "periods": 99})).is_ok());
+        assert_eq!(
+            field(json!({"realizations": 1000, "periods": 100})),
+            "accuracy.realizations"
+        );
+        assert_eq!(field(json!({"periods": 1001})), "accuracy.periods");
+        assert_eq!(field(json!({"max_periods": 1})), "accuracy.max_periods");
+        assert!(resolve(json!({"max_periods": 2})).is_ok());
+    }
 }

@@ -359,6 +359,77 @@ mod tests {
     }
 
     #[test]
+    fn range_limits_are_the_documented_ones() {
+        // The documented limits: min < max, both finite; 2..=200 points; a
+        // log scale needs min > 0; an explicit list holds 1 to 200 values.
+        let range = |values: Option<Vec<f64>>, min: f64, max: f64, scale: Scale| ParameterRange {
+            path: "estimator.cutoff_hz".into(),
+            min: values.is_none().then_some(min),
+            max: values.is_none().then_some(max),
+            count: values.is_none().then_some(3),
+            values,
+            scale,
+        };
+        let field = |r: ParameterRange| r.values().unwrap_err().field;
+        assert_eq!(
+            field(range(None, 30.0, 30.0, Scale::Linear)),
+            "parameter.max"
+        );
+        assert_eq!(
+            field(range(None, 30.0, f64::INFINITY, Scale::Linear)),
+            "parameter.max"
+        );
+        assert_eq!(
+            field(range(None, f64::NEG_INFINITY, 30.0, Scale::Linear)),
+            "parameter.max"
+        );
+        assert_eq!(field(range(None, 0.0, 30.0, Scale::Log)), "parameter.min");
+        assert_eq!(field(range(None, -1.0, 30.0, Scale::Log)), "parameter.min");
+        // A linear range may start below zero: lo + i/(n−1)·(hi − lo).
+        assert_eq!(
+            range(None, -1.0, 1.0, Scale::Linear).values().unwrap(),
+            [-1.0, 0.0, 1.0]
+        );
+        assert_eq!(
+            field(range(Some(vec![]), 0.0, 0.0, Scale::Linear)),
+            "parameter.values"
+        );
+        let n = |k: usize| (1..=k).map(|i| i as f64).collect::<Vec<_>>();
+        assert_eq!(
+            range(Some(n(MAX_VARIANTS)), 0.0, 0.0, Scale::Linear)
+                .values()
+                .unwrap()
+                .len(),
+            200
+        );
+        assert_eq!(
+            field(range(Some(n(MAX_VARIANTS + 1)), 0.0, 0.0, Scale::Linear)),
+            "parameter.values"
+        );
+    }
+
+    #[test]
+    fn a_scene_list_sweep_labels_each_scene_and_names_the_bad_one() {
+        let scenes = |list: &str| -> SweepSpec {
+            serde_json::from_str(&format!(
+                r#"{{"map":{{"scene":{{}},"b":[0]}},"scenes":[{list}]}}"#
+            ))
+            .unwrap()
+        };
+        let ok = r#"{"loop":{"sample_hz":1000,"render_hz":1000}}"#;
+        let v = scenes(&[ok, ok].join(",")).variants().unwrap();
+        let labels: Vec<_> = v.iter().map(|(l, x, _)| (l.as_str(), *x)).collect();
+        assert_eq!(labels, [("scene 0: fdm", None), ("scene 1: fdm", None)]);
+        assert_eq!(v[1].2.b, Some(vec![0.0]), "the map's settings kept");
+        let bad = scenes(&format!(r#"{ok},{{"device":{{"mass":0}}}}"#));
+        assert_eq!(bad.variants().unwrap_err().field, "scenes[1].device.mass");
+        assert_eq!(scenes("").variant_specs().unwrap_err().field, "scenes");
+        let many = |k: usize| scenes(&vec!["{}"; k].join(",")).variant_specs();
+        assert_eq!(many(MAX_VARIANTS).unwrap().len(), 200);
+        assert_eq!(many(MAX_VARIANTS + 1).unwrap_err().field, "scenes");
+    }
+
+    #[test]
     fn strict_passivity_sweep_matches_the_closed_form_for_fdm_damping() {
         // Colgate & Schenkel for FDM: K_max = 2(b − |B|)/T. Vary the device
         // damping b = 1, 2, 4 N·s/m at 1 kHz, B = 0: K = 2000, 4000, 8000 N/m.

@@ -53,9 +53,15 @@ pub struct TradeoffRow {
     pub overlaps_reference: Option<bool>,
 }
 
+/// Every preset on every example scene (`zwidth bench tradeoff`).
 pub fn run() -> Result<Vec<TradeoffRow>, SpecError> {
+    run_on(&EXAMPLES)
+}
+
+/// Every preset on the given scenes, each against its own reference.
+fn run_on(examples: &[(&str, &str, Criterion)]) -> Result<Vec<TradeoffRow>, SpecError> {
     let mut rows = Vec::new();
-    for (name, json, criterion) in EXAMPLES {
+    for &(name, json, criterion) in examples {
         let scene = SceneSpec::from_json(json)?;
         let method = if name.ends_with("(time)") {
             Method::Time
@@ -169,5 +175,60 @@ mod tests {
         // A reference of 0: 0, not ±inf or NaN.
         assert_eq!(relative_error(5.0, 0.0), 0.0);
         assert_eq!(relative_error(0.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn each_preset_is_measured_against_its_scene_s_reference() {
+        // The linear example on the analytic engine: exact at every preset
+        // (Colgate & Schenkel's bound does not depend on the search's
+        // steps beyond its bisection tolerance), so every error is within
+        // the presets' k_rel_tol and B-width is the same column count.
+        let rows = run_on(&EXAMPLES[..1]).unwrap();
+        let presets: Vec<_> = rows.iter().map(|r| r.preset).collect();
+        assert_eq!(
+            presets,
+            [Preset::Reference, Preset::Standard, Preset::Draft]
+        );
+        assert_eq!((rows[0].k_width_error, rows[0].b_width_error), (0.0, 0.0));
+        for r in &rows {
+            assert_eq!(r.scene, "linear_1khz (analytic)");
+            assert!(r.k_width > 0.0 && r.trials > 0, "{r:?}");
+            assert_eq!(r.k_width_error, relative_error(r.k_width, rows[0].k_width));
+            assert_eq!(r.b_width_error, relative_error(r.b_width, rows[0].b_width));
+            assert!(r.k_width_error.abs() <= 0.05, "{r:?}");
+            // A deterministic scene has no interval to overlap.
+            assert_eq!((r.k_width_interval, r.overlaps_reference), (None, None));
+        }
+        let t = table(&rows);
+        assert_eq!(t.lines().count(), 4, "{t}");
+        let last: Vec<&str> = t.lines().nth(3).unwrap().split_whitespace().collect();
+        assert_eq!(last[..3], ["linear_1khz", "(analytic)", "draft"], "{t}");
+    }
+
+    #[test]
+    fn the_table_shows_errors_in_percent_and_the_interval_s_half_width() {
+        let row = TradeoffRow {
+            scene: "s".into(),
+            preset: Preset::Draft,
+            wall_s: 1.5,
+            trials: 7,
+            k_width: 1000.0,
+            b_width: 10.0,
+            k_width_error: 0.034,
+            b_width_error: -0.125,
+            k_width_interval: Some([900.0, 1100.0]),
+            overlaps_reference: Some(false),
+        };
+        let t = table(&[row]);
+        let last = t.lines().nth(1).unwrap();
+        for want in ["draft", "3.40%", "-12.50%", "[900, 1100] ±10.0%", " no"] {
+            assert!(last.contains(want), "{want:?} in {last:?}");
+        }
+        // Half the width over the K-width: 50·(1100 − 900)/1000 = 10 %.
+        assert_eq!(
+            interval_cell(1000.0, Some([900.0, 1100.0])),
+            "[900, 1100] ±10.0%"
+        );
+        assert_eq!(interval_cell(1000.0, None), "-");
     }
 }

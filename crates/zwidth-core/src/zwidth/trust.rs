@@ -226,4 +226,51 @@ mod tests {
         mark_changes(&mut rows);
         assert_eq!(rows[1].change_from_previous, None);
     }
+
+    #[test]
+    fn the_table_shows_changes_spikes_and_intervals_in_percent() {
+        let r = TrustRow {
+            change_from_previous: Some(0.25),
+            spike: 0.123,
+            k_width_interval: Some([25_080.0, 27_720.0]),
+            ..row("seed", 26_400.0)
+        };
+        let t = table(&[r]);
+        assert_eq!(t.lines().count(), 2, "{t}");
+        let last = t.lines().nth(1).unwrap();
+        // 50·(27 720 − 25 080)/26 400 = 5 %.
+        for want in [
+            "seed",
+            "bla",
+            "+25.0%",
+            "12.3%",
+            "[25080, 27720] ±5.0%",
+            "26400",
+        ] {
+            assert!(last.contains(want), "{want:?} in {last:?}");
+        }
+    }
+
+    #[test]
+    fn a_spike_is_relative_only_to_a_boundary_that_renders_something() {
+        // Neighbours at 0: the base is 0 and the point is not judged (the
+        // ratio would be infinite).
+        let zero = BoundaryPoint::new(0.0, 0.0);
+        assert_eq!(spike(&[iv(1000.0, 900.0, 1100.0), zero, zero]), 0.0);
+    }
+
+    #[test]
+    fn the_seed_scene_is_the_2018_paper_s_device() {
+        // Chawda et al. 2018 (../shared/seeds), the simulated device: 1 kHz,
+        // Butterworth at 499 Hz, m = 0.52 kg, b = 13.2 N·s/m, f_c = 0.19 N,
+        // 1 µm encoder.
+        let s = seed_scene().unwrap();
+        assert_eq!((s.control.sample_hz, s.control.render_hz), (1000.0, 1000.0));
+        let d = &s.device;
+        assert_eq!(
+            (d.mass, d.damping, d.coulomb, d.quantization),
+            (0.52, 13.2, 0.19, 1e-6)
+        );
+        assert_eq!(s.estimator.label(), "butterworth(499 Hz, order 2)");
+    }
 }
