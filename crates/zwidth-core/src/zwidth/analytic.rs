@@ -451,6 +451,26 @@ mod tests {
     }
 
     #[test]
+    fn the_lines_are_the_multiples_of_f_min_up_to_f_max() {
+        // The probe's lines (scene.rs): f_min, 2·f_min, … ≤ f_max; at
+        // f_min = 2 Hz to 100 Hz, the 50 lines 2, 4, …, 100 Hz.
+        let sc = SceneSpec::from_json(
+            r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000},"probe":{"f_min_hz":2,"f_max_hz":100}}"#,
+        )
+        .unwrap()
+        .validate()
+        .unwrap();
+        let f = LinearModel::new(&sc)
+            .unwrap()
+            .impedance(1000.0, 0.0)
+            .freq_hz;
+        assert_eq!(f.len(), 50);
+        for (i, hz) in f.iter().enumerate() {
+            assert!((hz - 2.0 * (i + 1) as f64).abs() < 1e-9, "line {i}: {hz}");
+        }
+    }
+
+    #[test]
     fn fdm_strict_passivity_is_colgate() {
         // Colgate & Schenkel for FDM, no delay: passive iff b > KT/2 + |B|,
         // i.e. k_max = 2(b − |B|)/T.

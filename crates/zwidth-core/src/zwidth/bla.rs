@@ -284,6 +284,36 @@ mod tests {
     }
 
     #[test]
+    fn two_realizations_give_a_standard_error_but_no_decision() {
+        // δ = ±d: the sample se over n = 2 is √(2·(d·R)²/1/2) = d·|R| with
+        // R = Re(1/g²) (first order, as `se_of`); fewer than
+        // MIN_REALIZATIONS = 3: the sign of the margin, Re(1/g) = 0.02/0.0029.
+        let g = C::new(0.02, -0.05);
+        let v = one_line(g, &[-1e-3, 1e-3]).verdict(0.05, 10);
+        let want = 1e-3 * (1.0 / (g * g)).re.abs();
+        assert!((v.margin_se / want - 1.0).abs() < 1e-9, "{v:?} vs {want}");
+        assert!(v.passive && !v.decided, "{v:?}");
+        assert!((v.margin - 0.02 / 0.0029).abs() < 1e-9, "{v:?}");
+    }
+
+    #[test]
+    fn lines_in_a_band_are_weighted_by_their_admittance_to_the_fourth() {
+        // 40 lines, bands of 2: G = 1 and 0.5 in turn (Re Z = 1 and 2),
+        // weights |G|⁴ = 1 and 1/16: each band's Re Z is (1 + 2/16)/(1 +
+        // 1/16) = 18/17 (unweighted it would be 1.5).
+        let g: Vec<C> = (0..40)
+            .map(|k| C::new(if k % 2 == 0 { 1.0 } else { 0.5 }, 0.0))
+            .collect();
+        let mut s = BlaStats::new(40, 1);
+        for _ in 0..3 {
+            s.push(std::slice::from_ref(&g));
+        }
+        let v = s.verdict(0.05, 10);
+        assert!((v.margin - 18.0 / 17.0).abs() < 1e-12, "{v:?}");
+        assert_eq!(v.bands, 20);
+    }
+
+    #[test]
     fn margin_and_standard_error_by_hand() {
         let g = C::new(0.02, -0.05);
         let v = one_line(g, &[-1e-3, 0.0, 1e-3]).verdict(0.05, 10);

@@ -108,6 +108,26 @@ mod tests {
     use crate::zwidth::scene::SceneSpec;
 
     #[test]
+    fn a_unilateral_wall_pushes_only_past_its_surface() {
+        // 2011 paper eq. 12: F = −(K(y − x_w) + B·v̂) for y > x_w, else 0.
+        // FDM at 1 kHz, K = 100 N/m, B = 10 N·s/m: from y = −1 mm to 0 the
+        // estimate is 1 m/s, but y = 0 is on the wall, not past it: 0 N;
+        // at y = 1 mm, −(100·0.001 + 10·1) = −10.1 N.
+        let sc = SceneSpec::from_json(
+            r#"{"device":{"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+        )
+        .unwrap()
+        .validate()
+        .unwrap();
+        let mut c = Controller::new(&sc, 100.0, 10.0, 0.0, true);
+        c.sample(-0.001);
+        assert!((c.sample(0.0) - 1.0).abs() < 1e-12);
+        assert_eq!(c.applied, 0.0);
+        assert!((c.sample(0.001) - 1.0).abs() < 1e-12);
+        assert!((c.applied + 10.1).abs() < 1e-12, "{}", c.applied);
+    }
+
+    #[test]
     fn delay_and_render_hold() {
         // FDM at 1 kHz sample / 500 Hz render, delay 1 render period, K = 100,
         // B = 0, bilateral: the force from sample 0 (y = 0.01 → −1 N) is

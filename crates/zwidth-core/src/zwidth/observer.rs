@@ -241,7 +241,7 @@ mod tests {
         // The key is the exact bits of K and B, and the map's scope.
         assert_eq!(r.replay(2, 1500.0, 20.0), None);
         assert_eq!(r.replay(3, 1500.0, 20.000_001), None);
-        assert_eq!(r.replay(3, 1500.000_001, 20.0), None);
+        assert_eq!(r.replay(3, 1_500.000_001, 20.0), None);
         // Evaluations the same way, by key.
         let e = Observer::default().with_evaluations(vec![StoredEvaluation {
             key: "a".into(),

@@ -868,4 +868,154 @@ mod tests {
             );
         }
     }
+
+    /// The 2018 device at 1 kHz with the given extra scene JSON fields.
+    fn scene_1khz(device: &str, probe: &str) -> Scene {
+        SceneSpec::from_json(&format!(
+            r#"{{"device":{device},"loop":{{"sample_hz":1000,"render_hz":1000}},"probe":{probe}}}"#
+        ))
+        .unwrap()
+        .validate()
+        .unwrap()
+    }
+
+    #[test]
+    fn a_clear_bla_verdict_is_taken_at_the_first_look() {
+        // A 1e-12 m encoder: noisy by the scene (BLA) but linear to ~1e-9.
+        // K = 5000, B = 5 is far inside the passive region (Re Z ≈ 15 N·s/m
+        // with a standard error near 1e-9), so the first look, after
+        // MIN_REALIZATIONS = 3 realizations (bla.rs), decides; each ran one
+        // transient period and KNOBS.periods = 2 averaged ones.
+        let sc = scene_1khz(
+            r#"{"coulomb":0,"quantization":1e-12}"#,
+            r#"{"f_min_hz":2,"f_max_hz":100}"#,
+        );
+        let o = probe(&sc, 5000.0, 5.0, KNOBS);
+        let c = o.confidence.expect("a BLA verdict");
+        assert!(c.decided && o.passive, "{c:?}");
+        assert_eq!(c.realizations, 3);
+        assert_eq!(o.periods_run, 3 * (1 + 2));
+        assert!(c.noise_se > 0.0 && c.margin > 100.0 * c.margin_se, "{c:?}");
+        // Its Z is the analytic one (DESIGN.md's formula, analytic.rs).
+        let lin = scene_1khz(
+            r#"{"coulomb":0,"quantization":0}"#,
+            r#"{"f_min_hz":2,"f_max_hz":100}"#,
+        );
+        let want = LinearModel::new(&lin).unwrap().impedance(5000.0, 5.0);
+        for i in 0..want.magnitude.len() {
+            let rel = (o.impedance.magnitude[i] / want.magnitude[i] - 1.0).abs();
+            let dphi = (o.impedance.phase_deg[i] - want.phase_deg[i]).abs();
+            assert!(rel < 1e-3 && dphi < 0.1, "line {i}: {rel} {dphi}");
+        }
+    }
+
+    #[test]
+    fn a_diverged_probe_reads_minus_one_on_every_line() {
+        // K = 1e7 N/m at 1 kHz diverges within the first period; the
+        // outcome's Z stands at −1 (phase 180°, |Z| = 1: "no steady state").
+        let check = |o: &ProbeOutcome| {
+            assert!(o.diverged && !o.passive && !o.settled, "{o:?}");
+            assert_eq!(o.periods_run, 1);
+            assert_eq!(o.last_change, f64::MAX);
+            assert!(o.impedance.phase_deg.iter().all(|&p| p == 180.0), "{o:?}");
+            assert!(o.impedance.magnitude.iter().all(|&m| m == 1.0), "{o:?}");
+        };
+        let lin = scene_1khz(r#"{"coulomb":0,"quantization":0}"#, "{}");
+        let o = probe(&lin, 1e7, 0.0, KNOBS);
+        check(&o);
+        assert_eq!(o.confidence, None);
+        // A noisy scene: decided at once, with no doubt.
+        let seed = scene_1khz("{}", "{}");
+        let o = probe(&seed, 1e7, 0.0, KNOBS);
+        check(&o);
+        assert_eq!(
+            o.confidence,
+            Some(VerdictConfidence {
+                decided: true,
+                margin: -1.0,
+                margin_se: 0.0,
+                noise_se: 0.0,
+                realizations: 1,
+                bands: 0,
+            })
+        );
+    }
+
+    #[test]
+    fn a_linear_loop_settles_after_two_calm_looks_then_averages() {
+        // The first Aitken estimate needs three periods (Z, its change, the
+        // change before); two calm ones in a row settle it, then
+        // KNOBS.periods are averaged. With a tolerance every look meets
+        // (0.5 of the damping scale b + B), periods 3 and 4 are the calm
+        // ones: 4 + 2 periods, the fewest the rule allows.
+        let sc = scene_1khz(
+            r#"{"coulomb":0,"quantization":0}"#,
+            r#"{"f_min_hz":2,"f_max_hz":100}"#,
+        );
+        let loose = ProbeKnobs {
+            settle_tol: 0.5,
+            ..KNOBS
+        };
+        let o = probe(&sc, 5000.0, 5.0, loose);
+        assert!(o.settled && o.passive, "{o:?}");
+        assert_eq!(o.periods_run, 4 + KNOBS.periods);
+        // A tight tolerance takes as long as the transient needs, never less.
+        let o = probe(&sc, 5000.0, 5.0, KNOBS);
+        assert!(o.settled && o.periods_run > 4 + KNOBS.periods, "{o:?}");
+        assert!(o.last_change < KNOBS.settle_tol, "{o:?}");
+        // With at most 2 periods nothing can settle, and a tail of one
+        // period gives no verdict: not passive, Z at −1.
+        let two = ProbeKnobs {
+            max_periods: 2,
+            ..KNOBS
+        };
+        let o = probe(&sc, 5000.0, 5.0, two);
+        assert!(!o.settled && !o.diverged && !o.passive, "{o:?}");
+        assert_eq!((o.periods_run, o.last_change), (2, f64::MAX));
+        assert!(o.impedance.phase_deg.iter().all(|&p| p == 180.0), "{o:?}");
+    }
+
+    #[test]
+    fn the_tail_s_standard_error_divides_by_n_minus_one() {
+        // Six periods; the tail is the last three with Re Z = 1 − d, 1,
+        // 1 + d: sample variance d², se = d/√3. Passive iff 1 − 3d/√3 ≥ 0,
+        // i.e. d ≤ 1/√3 = 0.577: 0.55 passes, 0.6 does not.
+        let hist = |d: f64| {
+            let mut h = vec![vec![C::new(-50.0, 0.0)]; 3];
+            h.extend([1.0 - d, 1.0, 1.0 + d].map(|re| vec![C::new(re, 0.0)]));
+            h
+        };
+        assert!(tail_verdict(&hist(0.55)).unwrap().1);
+        assert!(!tail_verdict(&hist(0.6)).unwrap().1);
+    }
+
+    #[test]
+    fn a_negligible_change_is_no_transient_and_a_ratio_of_one_never_settles() {
+        let c = |re: f64| C::new(re, 0.0);
+        // |d| ≤ 1e-12·|Z|: nothing remains (module doc).
+        assert_eq!(
+            remaining_transient(&[c(10.0)], &[c(1e-12)], &[c(1e-13)]),
+            0.0
+        );
+        assert!(remaining_transient(&[c(10.0)], &[c(1e-10)], &[c(1e-9)]) > 0.0);
+        // r = 1: not decaying.
+        assert_eq!(
+            remaining_transient(&[c(10.0)], &[c(1.0)], &[c(1.0)]),
+            f64::INFINITY
+        );
+    }
+
+    #[test]
+    fn the_loop_stops_past_ten_metres_or_a_kilometre_per_second() {
+        let sc = scene_1khz(r#"{"coulomb":0,"quantization":0}"#, "{}");
+        let setup = ProbeSetup::new(&sc);
+        let mut v = vec![0.0; 1];
+        let mut lp = Loop::<false, false>::new(&setup, &sc, 0.0, 0.0);
+        assert!(lp.period(&[0.0], &mut v), "at rest");
+        lp.st.x = 50.0;
+        assert!(!lp.period(&[0.0], &mut v));
+        lp.st.x = 0.0;
+        lp.st.v = 2000.0;
+        assert!(!lp.period(&[0.0], &mut v));
+    }
 }

@@ -188,6 +188,18 @@ mod tests {
     }
 
     #[test]
+    fn far_tails_keep_their_relative_precision() {
+        // ν = 1 (Cauchy): F(t) = atan(1/|t|)/π for t < 0; ν = 2: F(t) =
+        // 1/(s(s + |t|)) with s = √(2 + t²) (F = ½ + t/(2s), rearranged).
+        let rel = |a: f64, b: f64| ((a - b) / b).abs();
+        let cauchy = (1e-6f64).atan() / std::f64::consts::PI;
+        assert!(rel(student_t_cdf(-1e6, 1.0), cauchy) < 1e-12);
+        let s = (2.0f64 + 1e8).sqrt();
+        assert!(rel(student_t_cdf(-1e4, 2.0), 1.0 / (s * (s + 1e4))) < 1e-12);
+        assert!(rel(1.0 - student_t_cdf(1e6, 1.0), cauchy) < 1e-6);
+    }
+
+    #[test]
     fn ln_gamma_matches_factorials() {
         for (n, fact) in [(1.0, 1.0), (5.0, 24.0), (11.0, 3_628_800.0)] {
             assert!((ln_gamma(n) - f64::ln(fact)).abs() < 1e-12, "{n}");
