@@ -348,5 +348,29 @@ mod tests {
         let c = estimate_c(&seed_2018_scene()).unwrap();
         assert!((c.estimate.lipschitz / 1.098 - 1.0).abs() < 0.005, "{c:?}");
         assert_eq!((c.wall_k, c.wall_b), (C_WALL_K, C_WALL_B));
+        // The window opens 0.1 s (a tenth of its 1 s) before the contact,
+        // and the largest |ẍ| is the impact, just after it.
+        assert!(
+            (0.1..0.15).contains(&c.estimate.at_s),
+            "{}",
+            c.estimate.at_s
+        );
+        // The table states where C came from: 5 and 2 of the 2011 paper's
+        // steps (1488.24 N/m, 14.88 N·s/m) and the fit's window.
+        let t = CompareResult {
+            lipschitz: c.clone(),
+            rows: Vec::new(),
+            tuned_for: None,
+            elapsed_s: 0.0,
+        }
+        .table();
+        let window = 2 * c.estimate.half_window + 1;
+        assert!(
+            t.contains(&format!(
+                "from a wall hit at K = 7441.2 N/m, B = 29.76 N·s/m with butterworth(499 Hz, order 2) (local quadratic fit over {window} samples)"
+            )),
+            "{t}"
+        );
+        assert!(t.contains("the 2018 paper's fixed values"), "{t}");
     }
 }
