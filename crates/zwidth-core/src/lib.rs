@@ -1,8 +1,9 @@
 //! zwidth's pure numerics, with no I/O: the velocity estimators
 //! ([`estimators`]), test signals and spectra ([`signals`], [`spectral`]),
-//! the device model ([`plant`]), the estimators' accuracy and Lipschitz
-//! checks ([`accuracy`], [`lipschitz`]), the Z-width engines and searches
-//! ([`zwidth`]), their plots ([`plot`]) and the tuner ([`tune`]).
+//! the device model ([`plant`]; [`linalg`] discretizes it exactly), the
+//! estimators' accuracy and Lipschitz checks ([`accuracy`], [`lipschitz`]),
+//! the Z-width engines and searches ([`zwidth`]), their plots ([`plot`])
+//! and the tuner ([`tune`]).
 //!
 //! The `zwidth` crate (service, store, queue, CLI) builds on this one and
 //! re-exports each module under its own name. Keeping the numerics apart
@@ -13,6 +14,7 @@ pub mod accuracy;
 pub mod error;
 pub mod estimators;
 pub mod identify;
+pub mod linalg;
 pub mod lipschitz;
 pub mod plant;
 pub mod plot;

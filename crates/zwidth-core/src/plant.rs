@@ -7,10 +7,22 @@
 //! there is no `1/b²`: φ and ψ use `expm1` and, for small a, their Taylor
 //! series, so b = 0 (a pure mass) is exact too.
 //!
+//! An amplifier (current loop) with bandwidth f_a, when the scene names one,
+//! lags the motor force behind its command: `τ Ḟ_a = F_cmd − F_a`,
+//! `τ = 1/(2π f_a)`: a current loop closed to bandwidth f_a, as the 2011
+//! paper's device drives its motor (a PWM amplifier in current mode, §3),
+//! modelled by its dominant pole. External forces act on the handle
+//! directly. Without friction the three states (x, v, F_a) step exactly
+//! (`linalg::zoh`); with friction the step uses the lagged force's mean over
+//! the interval, `F_cmd + (F_a − F_cmd)·φ(T/τ)` (its impulse exact), as the
+//! constant force of the stick–slip step below.
+//!
 //! Coulomb friction with real stick–slip (static = kinetic, 2018 paper §V):
 //! while moving, friction is `−f_c·sign(v)`; when v reaches 0 inside an
 //! interval (found exactly from the closed form) the handle sticks if
 //! `|F| ≤ f_c`, else slips on in the direction of F.
+
+use crate::linalg::{self, Mat};
 
 /// φ(a) = (1 − e^{−a})/a.
 #[inline]
@@ -32,15 +44,28 @@ pub fn psi(a: f64) -> f64 {
     }
 }
 
-/// Position (m) and velocity (m/s).
+/// Position (m), velocity (m/s) and the motor force the actuator delivered
+/// over the last step (N; with an amplifier lag, its value at the step's end).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PlantState {
     pub x: f64,
     pub v: f64,
+    pub f: f64,
+}
+
+/// The amplifier's first-order lag stepped exactly over one interval.
+#[derive(Debug, Clone)]
+struct Lag {
+    /// e^{−T/τ} and φ(T/τ): the force's decay and its mean over a step.
+    decay: f64,
+    mean: f64,
+    /// The exact step of (x, v, F_a) with inputs (F_cmd, F_ext).
+    phi: Mat,
+    gamma: Mat,
 }
 
 /// The plant with its step constants for one fixed interval `dt`.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Plant {
     pub mass: f64,
     pub damping: f64,
@@ -51,6 +76,7 @@ pub struct Plant {
     c_xf: f64,
     c_vv: f64,
     c_vf: f64,
+    lag: Option<Lag>,
 }
 
 impl Plant {
@@ -66,6 +92,67 @@ impl Plant {
             c_xf: dt * dt * psi(a) / mass,
             c_vv: (-a).exp(),
             c_vf: dt * phi(a) / mass,
+            lag: None,
+        }
+    }
+
+    /// The same plant behind an amplifier of bandwidth `hz` (None: ideal).
+    pub fn with_amplifier(mut self, hz: Option<f64>) -> Self {
+        self.lag = hz.map(|hz| {
+            let tau = 1.0 / (2.0 * std::f64::consts::PI * hz);
+            let (m, b) = (self.mass, self.damping);
+            // ẋ = v, m v̇ = −b v + F_a + F_ext, τ Ḟ_a = F_cmd − F_a.
+            let a = vec![
+                vec![0.0, 1.0, 0.0],
+                vec![0.0, -b / m, 1.0 / m],
+                vec![0.0, 0.0, -1.0 / tau],
+            ];
+            let bm = vec![vec![0.0, 0.0], vec![0.0, 1.0 / m], vec![1.0 / tau, 0.0]];
+            let (phi_m, gamma) = linalg::zoh(&a, &bm, self.dt);
+            Lag {
+                decay: (-self.dt / tau).exp(),
+                mean: phi(self.dt / tau),
+                phi: phi_m,
+                gamma,
+            }
+        });
+        self
+    }
+
+    /// The exact step `(x, v, F_a) ← Φ·(x, v, F_a) + Γ·(F_cmd, F_ext)` of
+    /// a plant with an amplifier lag (None without one).
+    pub fn lag_zoh(&self) -> Option<(&Mat, &Mat)> {
+        self.lag.as_ref().map(|l| (&l.phi, &l.gamma))
+    }
+
+    /// One fixed interval with the motor commanded to `motor` (through the
+    /// amplifier, if any) and `ext` acting on the handle; `friction`: with
+    /// Coulomb friction and stick–slip (module doc).
+    #[inline]
+    pub fn step_driven(&self, s: &mut PlantState, motor: f64, ext: f64, friction: bool) {
+        match &self.lag {
+            None => {
+                s.f = motor;
+                if friction {
+                    self.step_friction(s, motor + ext);
+                } else {
+                    self.step_linear(s, motor + ext);
+                }
+            }
+            Some(l) if !friction => {
+                let st = [s.x, s.v, s.f];
+                let next = |i: usize| {
+                    l.phi[i].iter().zip(st).map(|(p, x)| p * x).sum::<f64>()
+                        + l.gamma[i][0] * motor
+                        + l.gamma[i][1] * ext
+                };
+                (s.x, s.v, s.f) = (next(0), next(1), next(2));
+            }
+            Some(l) => {
+                let mean = motor + (s.f - motor) * l.mean;
+                self.step_friction(s, mean + ext);
+                s.f = motor + (s.f - motor) * l.decay;
+            }
         }
     }
 
@@ -215,14 +302,22 @@ mod tests {
         let t_star = 0.25 * 3f64.ln();
         assert!((p.time_to_stop(1.0, -1.0) - t_star).abs() < 1e-14);
         // One 1 s interval: it stops at t* and sticks for the rest.
-        let mut s = PlantState { x: 0.0, v: 1.0 };
+        let mut s = PlantState {
+            x: 0.0,
+            v: 1.0,
+            f: 0.0,
+        };
         p.step_friction(&mut s, 0.0);
         assert_eq!(s.v, 0.0);
         let x_star = -0.125 * 3f64.ln() + 0.25;
         assert!((s.x - x_star).abs() < 1e-12, "{s:?} vs {x_star}");
         // Moving the other way, pushed on by 0.5 N (< f_c): net −0.5 − 1·(−1)
         // = +0.5 N decelerates v0 = −1; v∞ = +0.25, t* = 0.25·ln(1 + 4).
-        let mut s = PlantState { x: 0.0, v: -1.0 };
+        let mut s = PlantState {
+            x: 0.0,
+            v: -1.0,
+            f: 0.0,
+        };
         assert!((p.time_to_stop(-1.0, 0.5) - 0.25 * 5f64.ln()).abs() < 1e-14);
         p.step_friction(&mut s, -0.5);
         assert_eq!(s.v, 0.0);
@@ -236,7 +331,11 @@ mod tests {
         // m = 1, b = 0, f_c = 1, v0 = 1, F = 0.5 (< f_c): decelerates at 0.5 m/s²,
         // stops at t = 2 s after x = v0²/(2·0.5) = 1 m, then sticks.
         let p = Plant::new(1.0, 0.0, 1.0, 0.3);
-        let mut s = PlantState { x: 0.0, v: 1.0 };
+        let mut s = PlantState {
+            x: 0.0,
+            v: 1.0,
+            f: 0.0,
+        };
         for _ in 0..20 {
             p.step_friction(&mut s, 0.5);
         }
@@ -249,9 +348,77 @@ mod tests {
         assert!((s.v - 1.0).abs() < 1e-12 && (s.x - 0.25).abs() < 1e-12);
         // Reversal: moving at −1 m/s with F = +3: stops after 0.25 s (net 4 N),
         // then slips forward with net 2 N for the remaining 0.25 s.
-        let mut s = PlantState { x: 0.0, v: -1.0 };
+        let mut s = PlantState {
+            x: 0.0,
+            v: -1.0,
+            f: 0.0,
+        };
         p.step_friction(&mut s, 3.0);
         assert!((s.v - 0.5).abs() < 1e-12, "{s:?}");
         assert!((s.x - (-0.125 + 0.0625)).abs() < 1e-12, "{s:?}");
+    }
+
+    #[test]
+    fn an_amplifier_lag_is_stepped_exactly() {
+        // A pure mass (m = 2 kg, b = 0) from rest, command c = 3 N from
+        // F_a = 0, τ = 1/(2π·50 Hz): F_a = c(1 − e^{−t/τ}),
+        // v = (c/m)(t − τ(1 − e^{−t/τ})), x = (c/m)(t²/2 − τt + τ²(1 − e^{−t/τ})).
+        let (m, c, dt) = (2.0, 3.0, 1e-3);
+        let tau = 1.0 / (2.0 * std::f64::consts::PI * 50.0);
+        let p = Plant::new(m, 0.0, 0.0, dt).with_amplifier(Some(50.0));
+        let mut s = PlantState::default();
+        for _ in 0..100 {
+            p.step_driven(&mut s, c, 0.0, false);
+        }
+        let t: f64 = 0.1;
+        let e = 1.0 - (-t / tau).exp();
+        let (f, v, x) = (
+            c * e,
+            c / m * (t - tau * e),
+            c / m * (t * t / 2.0 - tau * t + tau * tau * e),
+        );
+        assert!(
+            (s.f - f).abs() < 1e-12 && (s.v - v).abs() < 1e-13 && (s.x - x).abs() < 1e-14,
+            "{s:?} vs {x} {v} {f}"
+        );
+        // An external force acts at once, not through the lag: with the
+        // motor off, as the plant without an amplifier.
+        let (lagged, plain) = (p.clone(), Plant::new(m, 0.0, 0.0, dt));
+        let (mut a, mut b) = (PlantState::default(), PlantState::default());
+        for _ in 0..10 {
+            lagged.step_driven(&mut a, 0.0, 1.0, false);
+            plain.step_driven(&mut b, 0.0, 1.0, false);
+        }
+        assert!(
+            (a.x - b.x).abs() < 1e-16 && (a.v - b.v).abs() < 1e-15,
+            "{a:?} vs {b:?}"
+        );
+        // Without an amplifier the motor force is applied as commanded.
+        plain.step_driven(&mut b, 2.5, 0.0, false);
+        assert_eq!(b.f, 2.5);
+    }
+
+    #[test]
+    fn with_friction_the_lagged_force_s_impulse_is_exact() {
+        // The same mass sliding forward (never stopping) against f_c =
+        // 0.5 N: each step applies the lagged force's mean, so the velocity
+        // is the exact impulse, v = (c(t − τ(1 − e^{−t/τ})) − f_c·t)/m + v0.
+        let (m, c, fc, dt, v0) = (2.0, 3.0, 0.5, 1e-3, 1.0);
+        let tau = 1.0 / (2.0 * std::f64::consts::PI * 50.0);
+        let p = Plant::new(m, 0.0, fc, dt).with_amplifier(Some(50.0));
+        let mut s = PlantState {
+            v: v0,
+            ..PlantState::default()
+        };
+        for _ in 0..100 {
+            p.step_driven(&mut s, c, 0.0, true);
+        }
+        let t: f64 = 0.1;
+        let e = 1.0 - (-t / tau).exp();
+        let v = v0 + (c * (t - tau * e) - fc * t) / m;
+        assert!(
+            (s.v - v).abs() < 1e-12 && (s.f - c * e).abs() < 1e-12,
+            "{s:?} vs {v}"
+        );
     }
 }

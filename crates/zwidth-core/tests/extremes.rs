@@ -186,6 +186,11 @@ mod scenes {
             r#"{"device":{"mass":100,"damping":0,"coulomb":0.19,"quantization":1e-9},"hit":{"home_distance":0.0001}}"#,
             r#"{"device":{"damping":0,"force_limit":4},"estimator":{"kind":"kalman","q":1e12},"hit":{"home_distance":0.0001}}"#,
             r#"{"estimator":{"kind":"levant","rule":"hba_sc","lipschitz":1},"hit":{"home_distance":0.0001}}"#,
+            // Amplifier lags from 0.1 Hz to the encoder's Nyquist frequency,
+            // with friction and quantization (the averaged-force step).
+            r#"{"device":{"amplifier_hz":0.1},"hit":{"home_distance":0.0001}}"#,
+            r#"{"device":{"amplifier_hz":5000,"coulomb":0,"quantization":0},"hit":{"home_distance":0.0001}}"#,
+            r#"{"device":{"amplifier_hz":5000,"force_limit":1},"hit":{"home_distance":0.0001}}"#,
         ] {
             let sc = SceneSpec::from_json(json).unwrap().validate().unwrap();
             for (k, b) in [(1e7, 0.0), (1e7, 1e3), (1.0, 0.0), (1e5, -50.0)] {
@@ -239,9 +244,34 @@ mod scenes {
             r#"{"device":{"mass":0.001,"damping":0,"coulomb":0,"quantization":0},"loop":{"sample_hz":1000000,"render_hz":1000000},"probe":{"f_max_hz":1000}}"#,
             r#"{"device":{"mass":100,"damping":0,"coulomb":0,"quantization":0},"loop":{"sample_hz":100,"render_hz":100},"probe":{"f_max_hz":40}}"#,
             r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000,"delay_samples":3},"estimator":{"kind":"kalman","q":1e12}}"#,
+            // Amplifier lags at 0.01 Hz and at Nyquist (1 MHz and 100 Hz loops).
+            r#"{"device":{"mass":0.001,"coulomb":0,"quantization":0,"amplifier_hz":500000},"loop":{"sample_hz":1000000,"render_hz":1000000},"probe":{"f_max_hz":1000}}"#,
+            r#"{"device":{"coulomb":0,"quantization":0,"amplifier_hz":0.01},"loop":{"sample_hz":100,"render_hz":100},"probe":{"f_max_hz":40}}"#,
         ] {
             let sc = SceneSpec::from_json(json).unwrap().validate().unwrap();
             let m = LinearModel::new(&sc).unwrap();
+            if sc.spec.device.amplifier_hz.is_some() {
+                for (k, b) in [(1e7, 0.0), (1.0, 1e3), (1e5, -5.0), (1.0, 0.0)] {
+                    let c = m.impedance(k, b);
+                    assert!(
+                        c.magnitude
+                            .iter()
+                            .chain(&c.phase_deg)
+                            .all(|v| v.is_finite())
+                            && c.fidelity.is_finite()
+                            && m.spectral_radius(k, b).is_finite(),
+                        "{json} {k} {b}"
+                    );
+                }
+                // A soft wall (1 N/m, no B) on a damped device is stable
+                // whatever the lag; 1e7 N/m at 100 Hz is 4000× past the
+                // lag-free 2b/T (a lag only lowers the boundary).
+                assert!(m.spectral_radius(1.0, 0.0) < 1.0, "{json}");
+                if sc.spec.control.sample_hz == 100.0 {
+                    assert!(m.spectral_radius(1e7, 0.0) > 1.0, "{json}");
+                }
+                continue;
+            }
             for (k, b) in [(1e7, 0.0), (1.0, 1e3), (1e5, -5.0)] {
                 let c = m.impedance(k, b);
                 assert!(
@@ -299,6 +329,13 @@ mod scenes {
             (r#"{"loop":{"delay_samples":1000}}"#, "loop.delay_samples"),
             (r#"{"hit":{"settle_s":-1}}"#, "hit.settle_s"),
             (r#"{"probe":{"amplitude":0}}"#, "probe.amplitude"),
+            // An amplifier bandwidth > 0 and at most Nyquist (5 kHz here).
+            (r#"{"device":{"amplifier_hz":0}}"#, "device.amplifier_hz"),
+            (r#"{"device":{"amplifier_hz":-100}}"#, "device.amplifier_hz"),
+            (
+                r#"{"device":{"amplifier_hz":5000.5}}"#,
+                "device.amplifier_hz",
+            ),
         ] {
             let e = SceneSpec::from_json(json).unwrap().validate().unwrap_err();
             assert_eq!(e.field, field, "{json}: {e}");

@@ -5,7 +5,9 @@
 //! function of G.
 //!
 //! - Impedance at the excitation frequency (what the 2018 paper's multisine
-//!   test measures): `X/F(jω) = G(jω)·[1 − Z_h(jω)·H·G(jω) / (T·(1 + H·G_d))]`,
+//!   test measures): `X/F(jω) = G(jω)·[1 − L·Z_h(jω)·H·G(jω) / (T·(1 + H·G_d))]`,
+//!   with an amplifier lag `L(jω) = 1/(1 + jωτ)` on the motor's path only
+//!   (L = 1 without one; then `G_d` is the pulse transfer function of L·G),
 //!   `Z_h(s) = (1 − e^{−sT})/s`, `Z = 1/(jω·X/F)`; passive on the band iff
 //!   `Re Z ≥ 0` there (phase within ±90°).
 //! - Strict passivity (Colgate & Schenkel 1994): passive iff
@@ -29,6 +31,7 @@ use super::scene::Scene;
 use crate::error::SpecError;
 use crate::estimators::butterworth::design_lowpass;
 use crate::estimators::{EstimatorKind, QModel};
+use crate::linalg;
 use crate::plant::Plant;
 
 #[derive(Debug, Clone)]
@@ -38,6 +41,8 @@ pub struct LinearModel {
     /// Sample (= render) period T (s).
     pub t: f64,
     pub delay: usize,
+    /// The amplifier's time constant τ = 1/(2π f_a) (s), if it lags.
+    pub lag_tau: Option<f64>,
     v_num: Poly,
     v_den: Poly,
     g_num: Poly,
@@ -80,47 +85,6 @@ impl ImpedanceCurve {
             fidelity,
         }
     }
-}
-
-/// Transfer function (num, den) in ascending powers of z of the SISO system
-/// `s_k = F s_{k−1} + g·y_k`, output `c·s_k`: `c·(I − F z⁻¹)⁻¹ g = z·c·adj(zI − F)·g / det(zI − F)`.
-fn state_space_tf(f: &[[f64; 3]; 3], g: [f64; 3], c: [f64; 3]) -> (Poly, Poly) {
-    // Faddeev–LeVerrier: M_1 = I, c_{n−k} = −tr(F M_k)/k, M_{k+1} = F M_k + c_{n−k} I.
-    let n = 3;
-    let matmul = |a: &[[f64; 3]; 3], b: &[[f64; 3]; 3]| {
-        let mut r = [[0.0; 3]; 3];
-        for i in 0..3 {
-            for j in 0..3 {
-                r[i][j] = (0..3).map(|k| a[i][k] * b[k][j]).sum();
-            }
-        }
-        r
-    };
-    let mut m = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    let mut den = vec![0.0; n + 1];
-    den[n] = 1.0;
-    let mut adj_terms = Vec::new(); // c·M_k·g for k = 1..n, coefficient of z^{n−k}
-    for k in 1..=n {
-        adj_terms.push(
-            (0..3)
-                .map(|i| c[i] * (0..3).map(|j| m[i][j] * g[j]).sum::<f64>())
-                .sum::<f64>(),
-        );
-        let fm = matmul(f, &m);
-        let ck = -(fm[0][0] + fm[1][1] + fm[2][2]) / k as f64;
-        den[n - k] = ck;
-        m = fm;
-        for (i, row) in m.iter_mut().enumerate() {
-            row[i] += ck;
-        }
-    }
-    // num = z · Σ_k z^{n−k} (c M_k g).
-    let mut num = vec![0.0; n + 2];
-    for (idx, v) in adj_terms.iter().enumerate() {
-        let k = idx + 1;
-        num[n - k + 1] += v;
-    }
-    (num, den)
 }
 
 /// The smallest θ (rad/sample) the strict-passivity scan looks at: θ = 0
@@ -215,17 +179,32 @@ impl LinearModel {
                         f[i][j] = a[i][j] - g[i] * a[0][j];
                     }
                 }
-                // Output: velocity = (scaled state 1)/T.
-                state_space_tf(&f, g, [0.0, 1.0 / t, 0.0])
+                // Output: velocity = (scaled state 1)/T, of
+                // s_k = F s_{k−1} + g·y_k: c·(I − F z⁻¹)⁻¹·g = z·c·adj(zI − F)·g / det.
+                let f: linalg::Mat = f.iter().map(|r| r.to_vec()).collect();
+                let (num, den) = linalg::transfer_function(&f, &g, &[0.0, 1.0 / t, 0.0]);
+                (poly::shift(&num, 1), den)
             }
             _ => unreachable!("linear_reason() admits only FDM, Butterworth and Kalman"),
         };
-        let plant = Plant::new(s.device.mass, s.device.damping, 0.0, t);
-        let (a, b) = plant.zoh();
-        let e = a[1][1];
-        // G_d(z) = (B0 z + (A01 B1 − e B0)) / ((z − 1)(z − e)).
-        let g_num = vec![a[0][1] * b[1] - e * b[0], b[0]];
-        let g_den = poly::mul(&[-1.0, 1.0], &[-e, 1.0]);
+        let plant = Plant::new(s.device.mass, s.device.damping, 0.0, t)
+            .with_amplifier(s.device.amplifier_hz);
+        let (g_num, g_den) = match plant.lag_zoh() {
+            // G_d(z) = c·(zI − Φ)⁻¹·Γ_motor for the states (x, v, F_a).
+            Some((phi, gamma)) => {
+                let g: Vec<f64> = gamma.iter().map(|r| r[0]).collect();
+                linalg::transfer_function(phi, &g, &[1.0, 0.0, 0.0])
+            }
+            None => {
+                let (a, b) = plant.zoh();
+                let e = a[1][1];
+                // G_d(z) = (B0 z + (A01 B1 − e B0)) / ((z − 1)(z − e)).
+                (
+                    vec![a[0][1] * b[1] - e * b[0], b[0]],
+                    poly::mul(&[-1.0, 1.0], &[-e, 1.0]),
+                )
+            }
+        };
         let p = &s.probe;
         let lines = (p.f_max_hz / p.f_min_hz + 1e-9).floor() as usize;
         let omegas = (1..=lines)
@@ -236,6 +215,10 @@ impl LinearModel {
             damping: s.device.damping,
             t,
             delay: s.control.delay_samples as usize,
+            lag_tau: s
+                .device
+                .amplifier_hz
+                .map(|fa| 1.0 / (2.0 * std::f64::consts::PI * fa)),
             v_num,
             v_den,
             g_num,
@@ -264,7 +247,12 @@ impl LinearModel {
         let h = self.h(k, b, theta);
         let z = C::from_polar(1.0, theta);
         let gd = poly::eval(&self.g_num, z) / poly::eval(&self.g_den, z);
-        let xf = g * (C::new(1.0, 0.0) - zh * h * g / (t * (C::new(1.0, 0.0) + h * gd)));
+        // The motor's force passes the amplifier, L(jω) = 1/(1 + jωτ); the
+        // excitation acts on the handle directly (G_d then includes L).
+        let lag = self
+            .lag_tau
+            .map_or(C::new(1.0, 0.0), |tau| 1.0 / (1.0 + j * w * tau));
+        let xf = g * (C::new(1.0, 0.0) - lag * zh * h * g / (t * (C::new(1.0, 0.0) + h * gd)));
         C::new(1.0, 0.0) / (j * w * xf)
     }
 

@@ -109,7 +109,8 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
     rec: &mut impl Recorder,
 ) -> HitOutcome {
     let s = &scene.spec;
-    let plant = Plant::new(s.device.mass, s.device.damping, s.device.coulomb, scene.dt);
+    let plant = Plant::new(s.device.mass, s.device.damping, s.device.coulomb, scene.dt)
+        .with_amplifier(s.device.amplifier_hz);
     let q = s.device.quantization;
     let wall = s.wall.position;
     let push = s.hit.push_force;
@@ -141,7 +142,7 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
     let mut touched = false;
     let mut st = PlantState {
         x: wall - s.hit.home_distance,
-        v: 0.0,
+        ..PlantState::default()
     };
     // Welford mean/variance of y over the measure window.
     let (mut n, mut mean, mut m2) = (0.0f64, 0.0f64, 0.0f64);
@@ -180,13 +181,15 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
             m2 += dlt * (y - mean);
         }
         if FRICTION {
-            plant.step_friction(&mut st, applied);
+            plant.step_driven(&mut st, applied, 0.0, true);
             // Stuck: friction holds the handle, the measured position cannot
             // change, so the wall force changes only through B·v̂, which
             // decays. Held for 0.2 s with the force well inside the friction
-            // band, it stays stuck: the rest of the trial is y constant.
+            // band (and an amplifier's force settled on it), it stays stuck:
+            // the rest of the trial is y constant.
             let held = st.v == 0.0
                 && applied.abs() <= 0.9 * s.device.coulomb
+                && (st.f - applied).abs() <= 0.05 * s.device.coulomb
                 && (b * v_est).abs() <= 0.05 * s.device.coulomb;
             stuck_for = if held && y == last_y {
                 stuck_for + 1
@@ -219,7 +222,7 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
                 };
             }
         } else {
-            plant.step_linear(&mut st, applied);
+            plant.step_driven(&mut st, applied, 0.0, false);
         }
         if !(st.x.abs() < DIVERGED_X && st.v.abs() < DIVERGED_V) {
             return HitOutcome {

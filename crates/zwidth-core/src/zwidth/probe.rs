@@ -207,11 +207,12 @@ impl<const FRICTION: bool, const QUANT: bool> Loop<FRICTION, QUANT> {
     fn new(setup: &ProbeSetup, scene: &Scene, k: f64, b: f64) -> Self {
         let s = &scene.spec;
         Self {
-            plant: Plant::new(s.device.mass, s.device.damping, s.device.coulomb, setup.h),
+            plant: Plant::new(s.device.mass, s.device.damping, s.device.coulomb, setup.h)
+                .with_amplifier(s.device.amplifier_hz),
             ctl: Controller::new(scene, k, b, 0.0, false),
             st: PlantState {
                 x: s.wall.position,
-                v: 0.0,
+                ..PlantState::default()
             },
             q: s.device.quantization,
             nsub: setup.nsub,
@@ -237,12 +238,8 @@ impl<const FRICTION: bool, const QUANT: bool> Loop<FRICTION, QUANT> {
                 self.sub + 1
             };
             let x0 = self.st.x;
-            let f = self.ctl.applied + f_ext;
-            if FRICTION {
-                self.plant.step_friction(&mut self.st, f);
-            } else {
-                self.plant.step_linear(&mut self.st, f);
-            }
+            self.plant
+                .step_driven(&mut self.st, self.ctl.applied, *f_ext, FRICTION);
             // Mean velocity over the step: exact, and its aliases are a
             // factor ωh smaller than those of point samples.
             *vb = (self.st.x - x0) / self.h;
@@ -808,12 +805,16 @@ mod tests {
     fn matches_analytic_impedance_on_a_linear_scene() {
         // Independent formula: DESIGN.md's X/F(jω) (analytic.rs). A stable,
         // well-damped point: the measured Z must agree on every line.
-        for est in [
-            r#"{"kind":"fdm"}"#,
-            r#"{"kind":"butterworth","cutoff_hz":200}"#,
+        // With an amplifier lag the simulation steps (x, v, F_a) exactly
+        // and the formula carries L(jω) = 1/(1 + jωτ): the two must agree.
+        for (est, amp) in [
+            (r#"{"kind":"fdm"}"#, "null"),
+            (r#"{"kind":"butterworth","cutoff_hz":200}"#, "null"),
+            (r#"{"kind":"fdm"}"#, "100"),
+            (r#"{"kind":"butterworth","cutoff_hz":200}"#, "300"),
         ] {
             let j = format!(
-                r#"{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{est},"probe":{{"f_min_hz":2,"f_max_hz":100}}}}"#
+                r#"{{"device":{{"coulomb":0,"quantization":0,"amplifier_hz":{amp}}},"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{est},"probe":{{"f_min_hz":2,"f_max_hz":100}}}}"#
             );
             let sc = SceneSpec::from_json(&j).unwrap().validate().unwrap();
             let m = LinearModel::new(&sc).unwrap();

@@ -43,6 +43,12 @@ pub struct DeviceSpec {
     /// Off unless named.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub force_resolution: Option<f64>,
+    /// Amplifier (current-loop) bandwidth f_a (Hz): the motor force lags its
+    /// command by a first-order pole at f_a (`plant.rs`); null for an ideal
+    /// amplifier. At most the Nyquist frequency of `loop.sample_hz`. Off
+    /// unless named.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub amplifier_hz: Option<f64>,
 }
 
 fn d_mass() -> f64 {
@@ -67,6 +73,7 @@ impl Default for DeviceSpec {
             quantization: d_quantization(),
             force_limit: None,
             force_resolution: None,
+            amplifier_hz: None,
         }
     }
 }
@@ -380,6 +387,16 @@ impl SceneSpec {
                 l.delay_samples,
                 "must be 0 to 100 render periods",
             ));
+        }
+        if let Some(fa) = d.amplifier_hz {
+            let nyq = l.sample_hz / 2.0;
+            if !(fa.is_finite() && fa > 0.0 && fa <= nyq) {
+                return Err(SpecError::new(
+                    "device.amplifier_hz",
+                    fa,
+                    format!("must be a bandwidth > 0 Hz and at most the Nyquist frequency of loop.sample_hz, {nyq} Hz (null for an ideal amplifier)"),
+                ));
+            }
         }
         let h = &self.hit;
         let hp = |e: SpecError| e.within("hit");
@@ -807,6 +824,24 @@ mod tests {
             assert_eq!(failing(&ok), "", "{ok}");
             assert_eq!(failing(&bad), field, "{bad}");
         }
+        // An amplifier bandwidth at most the encoder's Nyquist frequency.
+        assert_eq!(failing(r#"{"device":{"amplifier_hz":5000}}"#), "");
+        assert_eq!(
+            failing(r#"{"device":{"amplifier_hz":5001}}"#),
+            "device.amplifier_hz"
+        );
+        assert_eq!(
+            failing(
+                r#"{"device":{"amplifier_hz":500},"loop":{"sample_hz":1000,"render_hz":1000}}"#
+            ),
+            ""
+        );
+        assert_eq!(
+            failing(
+                r#"{"device":{"amplifier_hz":501},"loop":{"sample_hz":1000,"render_hz":1000}}"#
+            ),
+            "device.amplifier_hz"
+        );
         // f_max must lie above f_min.
         assert_eq!(
             failing(r#"{"probe":{"f_min_hz":1,"f_max_hz":1}}"#),

@@ -181,6 +181,13 @@ impl Evaluator {
             },
             m => m,
         };
+        if criterion == Criterion::StrictPassivity && scene.spec.device.amplifier_hz.is_some() {
+            return Err(SpecError::new(
+                "criterion",
+                "strict_passivity",
+                "Colgate & Schenkel's condition is for a rigid device driven without lag; with device.amplifier_hz use impedance or stability",
+            ));
+        }
         let bad = |allowed: &str| {
             Err(SpecError::new(
                 "criterion",
@@ -222,8 +229,14 @@ impl Evaluator {
         let est = s.estimator.label();
         match self.method {
             Method::Analytic => format!(
-                "analytic: linear single-rate loop at {} Hz, ZOH plant m = {} kg, b = {} N·s/m, estimator {est} (exact V(z)), delay {} samples",
-                s.control.sample_hz, s.device.mass, s.device.damping, s.control.delay_samples
+                "analytic: linear single-rate loop at {} Hz, ZOH plant m = {} kg, b = {} N·s/m{}, estimator {est} (exact V(z)), delay {} samples",
+                s.control.sample_hz,
+                s.device.mass,
+                s.device.damping,
+                s.device
+                    .amplifier_hz
+                    .map_or(String::new(), |fa| format!(" behind a {fa} Hz amplifier lag")),
+                s.control.delay_samples
             ),
             Method::Time | Method::Frequency => {
                 let mut parts = vec![format!("exact ZOH plant m = {} kg, b = {} N·s/m", s.device.mass, s.device.damping)];
@@ -238,6 +251,9 @@ impl Evaluator {
                 }
                 if let Some(r) = s.device.force_resolution {
                     parts.push(format!("force command in steps of {r} N"));
+                }
+                if let Some(fa) = s.device.amplifier_hz {
+                    parts.push(format!("amplifier lag {fa} Hz"));
                 }
                 parts.push(format!("encoder {} Hz, render {} Hz, delay {}", s.control.sample_hz, s.control.render_hz, s.control.delay_samples));
                 parts.push(format!("estimator {est}"));
@@ -1126,8 +1142,22 @@ mod tests {
         assert_eq!(ev.classify(30_000.0, 0.0).passive, Some(false));
         assert_eq!(ev.classify(20_000.0, 0.0).passive, Some(true));
         // A linear scene on `auto` is answered by the analytic engine.
-        let ev = Evaluator::new(sc, Method::Auto, Criterion::Stability, res).unwrap();
+        let ev = Evaluator::new(sc.clone(), Method::Auto, Criterion::Stability, res).unwrap();
         assert_eq!(ev.method, Method::Analytic);
+        // Colgate & Schenkel's condition assumes the force is applied as
+        // commanded: with an amplifier lag it is refused, naming why.
+        let mut lag = sc.spec.clone();
+        lag.device.amplifier_hz = Some(100.0);
+        let e = Evaluator::new(
+            lag.validate().unwrap(),
+            Method::Auto,
+            Criterion::StrictPassivity,
+            res,
+        )
+        .err()
+        .unwrap();
+        assert_eq!(e.field, "criterion");
+        assert!(e.to_string().contains("device.amplifier_hz"), "{e}");
     }
 
     #[test]

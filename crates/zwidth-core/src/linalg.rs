@@ -1,0 +1,178 @@
+//! Small dense matrices for linear device models: the matrix exponential
+//! (exact zero-order-hold discretization) and a state-space system's
+//! transfer function. Sizes here are at most a handful of states.
+
+/// A square or rectangular matrix, row-major.
+pub type Mat = Vec<Vec<f64>>;
+
+pub fn identity(n: usize) -> Mat {
+    (0..n)
+        .map(|i| (0..n).map(|j| if i == j { 1.0 } else { 0.0 }).collect())
+        .collect()
+}
+
+pub fn mul(a: &Mat, b: &Mat) -> Mat {
+    let (n, m) = (a.len(), b.first().map_or(0, Vec::len));
+    (0..n)
+        .map(|i| {
+            (0..m)
+                .map(|j| (0..b.len()).map(|k| a[i][k] * b[k][j]).sum())
+                .collect()
+        })
+        .collect()
+}
+
+/// `A·x`.
+pub fn apply(a: &Mat, x: &[f64]) -> Vec<f64> {
+    a.iter()
+        .map(|row| row.iter().zip(x).map(|(a, x)| a * x).sum())
+        .collect()
+}
+
+/// e^A by scaling and squaring (Moler & Van Loan 2003, "Nineteen dubious
+/// ways…", method 3): A/2^s with ‖A/2^s‖∞ ≤ 1/2, its Taylor series to 18
+/// terms (remainder below 1/2^18/18! ≈ 6e-22 relative), squared s times.
+pub fn expm(a: &Mat) -> Mat {
+    let n = a.len();
+    let norm = a
+        .iter()
+        .map(|r| r.iter().map(|x| x.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    let s = if norm > 0.5 {
+        (norm / 0.5).log2().ceil() as i32
+    } else {
+        0
+    };
+    let scale = 0.5f64.powi(s);
+    let a: Mat = a
+        .iter()
+        .map(|r| r.iter().map(|x| x * scale).collect())
+        .collect();
+    let mut sum = identity(n);
+    let mut term = identity(n);
+    for k in 1..=18 {
+        term = mul(&term, &a);
+        for row in term.iter_mut() {
+            for x in row.iter_mut() {
+                *x /= k as f64;
+            }
+        }
+        for (srow, trow) in sum.iter_mut().zip(&term) {
+            for (s, t) in srow.iter_mut().zip(trow) {
+                *s += t;
+            }
+        }
+    }
+    for _ in 0..s {
+        sum = mul(&sum, &sum);
+    }
+    sum
+}
+
+/// The exact zero-order-hold discretization of `ẋ = A x + B u` over `t`:
+/// `x_{k+1} = Φ x_k + Γ u_k` with `Φ = e^{At}`, `Γ = ∫₀ᵗ e^{As} ds B`, both
+/// read off one exponential of the block matrix `[[A, B], [0, 0]]·t`
+/// (Van Loan 1978, "Computing integrals involving the matrix exponential").
+pub fn zoh(a: &Mat, b: &Mat, t: f64) -> (Mat, Mat) {
+    let (n, m) = (a.len(), b.first().map_or(0, Vec::len));
+    let mut big = vec![vec![0.0; n + m]; n + m];
+    for i in 0..n {
+        for j in 0..n {
+            big[i][j] = a[i][j] * t;
+        }
+        for j in 0..m {
+            big[i][n + j] = b[i][j] * t;
+        }
+    }
+    let e = expm(&big);
+    let phi = (0..n).map(|i| e[i][..n].to_vec()).collect();
+    let gamma = (0..n).map(|i| e[i][n..].to_vec()).collect();
+    (phi, gamma)
+}
+
+/// The transfer function `c·(zI − F)⁻¹·g = c·adj(zI − F)·g / det(zI − F)`
+/// as (numerator, denominator) in ascending powers of z, by the
+/// Faddeev–LeVerrier algorithm: `M₁ = I`, `c_{n−k} = −tr(F M_k)/k`,
+/// `M_{k+1} = F M_k + c_{n−k} I`, `adj(zI − F) = Σ_k z^{n−k} M_k`.
+pub fn transfer_function(f: &Mat, g: &[f64], c: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let n = f.len();
+    let mut m = identity(n);
+    let mut den = vec![0.0; n + 1];
+    den[n] = 1.0;
+    let mut num = vec![0.0; n];
+    for k in 1..=n {
+        num[n - k] = c.iter().zip(apply(&m, g)).map(|(c, x)| c * x).sum();
+        let fm = mul(f, &m);
+        let ck = -(0..n).map(|i| fm[i][i]).sum::<f64>() / k as f64;
+        den[n - k] = ck;
+        m = fm;
+        for (i, row) in m.iter_mut().enumerate() {
+            row[i] += ck;
+        }
+    }
+    (num, den)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exponential_of_a_rotation_and_of_a_jordan_block() {
+        // e^{[[0, −w], [w, 0]]} is the rotation by w (cos, sin);
+        // e^{[[a, 1], [0, a]]} = e^a·[[1, 1], [0, 1]].
+        let w = 2.5;
+        let r = expm(&vec![vec![0.0, -w], vec![w, 0.0]]);
+        let want = [[w.cos(), -w.sin()], [w.sin(), w.cos()]];
+        for i in 0..2 {
+            for j in 0..2 {
+                assert!((r[i][j] - want[i][j]).abs() < 1e-14, "{r:?}");
+            }
+        }
+        let a = -3.0f64;
+        let e = expm(&vec![vec![a, 1.0], vec![0.0, a]]);
+        let ea = a.exp();
+        assert!((e[0][0] - ea).abs() < 1e-15 && (e[0][1] - ea).abs() < 1e-15);
+        assert!(e[1][0].abs() < 1e-18 && (e[1][1] - ea).abs() < 1e-15);
+        // A large norm is scaled down and squared back: e^{−40}.
+        let big = expm(&vec![vec![-40.0]]);
+        assert!((big[0][0] / (-40f64).exp() - 1.0).abs() < 1e-12, "{big:?}");
+    }
+
+    #[test]
+    fn zoh_of_a_mass_damper_is_the_plant_s_closed_form() {
+        // ẋ = v, m v̇ = −b v + F: the plant's closed-form step (plant.rs,
+        // DESIGN.md "Plant between force updates").
+        let (m, b, t) = (0.52, 13.2, 1e-3);
+        let (phi, gamma) = zoh(
+            &vec![vec![0.0, 1.0], vec![0.0, -b / m]],
+            &vec![vec![0.0], vec![1.0 / m]],
+            t,
+        );
+        let p = crate::plant::Plant::new(m, b, 0.0, t);
+        let (a, g) = p.zoh();
+        for i in 0..2 {
+            for j in 0..2 {
+                assert!((phi[i][j] - a[i][j]).abs() <= 1e-15 * a[i][j].abs().max(1e-3));
+            }
+            assert!(
+                (gamma[i][0] - g[i]).abs() <= 1e-13 * g[i].abs(),
+                "{gamma:?} vs {g:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn transfer_function_by_hand() {
+        // F = [[1, 0.1], [0, 0.5]], g = [0, 1], c = [1, 0]:
+        // det(zI − F) = (z − 1)(z − 0.5) = z² − 1.5z + 0.5;
+        // adj(zI − F) = [[z − 0.5, 0.1], [0, z − 1]]: c·adj·g = 0.1.
+        let f = vec![vec![1.0, 0.1], vec![0.0, 0.5]];
+        let (num, den) = transfer_function(&f, &[0.0, 1.0], &[1.0, 0.0]);
+        assert_eq!(den, [0.5, -1.5, 1.0]);
+        assert!((num[0] - 0.1).abs() < 1e-15 && num[1] == 0.0, "{num:?}");
+        // g = [1, 0]: c·adj·g = z − 0.5.
+        let (num, _) = transfer_function(&f, &[1.0, 0.0], &[1.0, 0.0]);
+        assert_eq!(num, [-0.5, 1.0]);
+    }
+}
