@@ -113,6 +113,45 @@ pub fn transfer_function(f: &Mat, g: &[f64], c: &[f64]) -> (Vec<f64>, Vec<f64>) 
     (num, den)
 }
 
+/// The frequency response `c·(jωI − A)⁻¹·b` of a continuous system at ω
+/// (rad/s), by Gaussian elimination with partial pivoting.
+pub fn frequency_response(a: &Mat, b: &[f64], c: &[f64], w: f64) -> num_complex::Complex64 {
+    use num_complex::Complex64 as C;
+    let n = a.len();
+    // [jωI − A | b]
+    let mut m: Vec<Vec<C>> = (0..n)
+        .map(|i| {
+            let mut row: Vec<C> = (0..n)
+                .map(|j| C::new(-a[i][j], if i == j { w } else { 0.0 }))
+                .collect();
+            row.push(C::new(b[i], 0.0));
+            row
+        })
+        .collect();
+    for col in 0..n {
+        let p = (col..n)
+            .max_by(|&x, &y| m[x][col].norm().total_cmp(&m[y][col].norm()))
+            .unwrap_or(col);
+        m.swap(col, p);
+        let piv = m[col][col];
+        for r in col + 1..n {
+            let f = m[r][col] / piv;
+            if f != C::new(0.0, 0.0) {
+                for k in col..=n {
+                    let v = m[col][k];
+                    m[r][k] -= f * v;
+                }
+            }
+        }
+    }
+    let mut x = vec![C::new(0.0, 0.0); n];
+    for i in (0..n).rev() {
+        let s: C = (i + 1..n).map(|k| m[i][k] * x[k]).sum();
+        x[i] = (m[i][n] - s) / m[i][i];
+    }
+    c.iter().zip(&x).map(|(c, x)| c * x).sum()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -174,5 +213,17 @@ mod tests {
         // g = [1, 0]: c·adj·g = z − 0.5.
         let (num, _) = transfer_function(&f, &[1.0, 0.0], &[1.0, 0.0]);
         assert_eq!(num, [-0.5, 1.0]);
+    }
+
+    #[test]
+    fn frequency_response_of_a_mass_damper() {
+        // x/F = 1/(jω(jωm + b)) for ẋ = v, m v̇ = −b v + F.
+        use num_complex::Complex64 as C;
+        let (m, b, w) = (0.52, 13.2, 2.0 * std::f64::consts::PI * 30.0);
+        let a = vec![vec![0.0, 1.0], vec![0.0, -b / m]];
+        let got = frequency_response(&a, &[0.0, 1.0 / m], &[1.0, 0.0], w);
+        let j = C::new(0.0, 1.0);
+        let want = 1.0 / (j * w * (j * w * m + b));
+        assert!((got - want).norm() < 1e-14 * want.norm(), "{got} vs {want}");
     }
 }

@@ -44,22 +44,54 @@ pub fn psi(a: f64) -> f64 {
     }
 }
 
-/// Position (m), velocity (m/s) and the motor force the actuator delivered
-/// over the last step (N; with an amplifier lag, its value at the step's end).
+/// The handle's position (m) and velocity (m/s), the motor force the
+/// actuator delivered over the last step (N; with an amplifier lag, its
+/// value at the step's end), and with a transmission the motor side's
+/// position and velocity (else unused).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PlantState {
     pub x: f64,
     pub v: f64,
     pub f: f64,
+    pub xm: f64,
+    pub vm: f64,
 }
 
-/// The amplifier's first-order lag stepped exactly over one interval.
+/// A cable (capstan) transmission: the motor side is a second mass coupled
+/// to the handle by a spring and a damper (a two-mass model).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transmission {
+    /// Motor-side mass (kg; its inertia reflected to the handle's axis).
+    pub motor_mass: f64,
+    /// Motor-side viscous damping (N·s/m).
+    pub motor_damping: f64,
+    /// Cable stiffness (N/m) and damping (N·s/m) between the two masses.
+    pub stiffness: f64,
+    pub damping: f64,
+    /// The encoder reads the motor side (true) or the handle (false).
+    pub encoder_on_motor: bool,
+}
+
+/// The device as a continuous linear system `ż = A z + B·(F_cmd, F_ext)`:
+/// states (x, v) of the handle, then (x_m, v_m) of the motor side with a
+/// transmission, then F_a with an amplifier lag; the handle's and the
+/// encoder's positions are `handle·z` and `encoder·z`.
 #[derive(Debug, Clone)]
-struct Lag {
-    /// e^{−T/τ} and φ(T/τ): the force's decay and its mean over a step.
+pub struct StateSpace {
+    pub a: Mat,
+    pub b: Mat,
+    pub handle: Vec<f64>,
+    pub encoder: Vec<f64>,
+}
+
+/// The exact step of a plant with a lag or a transmission.
+#[derive(Debug, Clone)]
+struct LinearStep {
+    /// e^{−T/τ} and φ(T/τ): the lagged force's decay and its mean over a
+    /// step (rigid device with friction).
     decay: f64,
     mean: f64,
-    /// The exact step of (x, v, F_a) with inputs (F_cmd, F_ext).
+    /// z ← Φ z + Γ·(F_cmd, F_ext).
     phi: Mat,
     gamma: Mat,
 }
@@ -76,7 +108,10 @@ pub struct Plant {
     c_xf: f64,
     c_vv: f64,
     c_vf: f64,
-    lag: Option<Lag>,
+    /// The amplifier's time constant τ = 1/(2π f_a) (s), if it lags.
+    tau: Option<f64>,
+    transmission: Option<Transmission>,
+    linear: Option<LinearStep>,
 }
 
 impl Plant {
@@ -92,45 +127,116 @@ impl Plant {
             c_xf: dt * dt * psi(a) / mass,
             c_vv: (-a).exp(),
             c_vf: dt * phi(a) / mass,
-            lag: None,
+            tau: None,
+            transmission: None,
+            linear: None,
         }
     }
 
-    /// The same plant behind an amplifier of bandwidth `hz` (None: ideal).
-    pub fn with_amplifier(mut self, hz: Option<f64>) -> Self {
-        self.lag = hz.map(|hz| {
-            let tau = 1.0 / (2.0 * std::f64::consts::PI * hz);
-            let (m, b) = (self.mass, self.damping);
-            // ẋ = v, m v̇ = −b v + F_a + F_ext, τ Ḟ_a = F_cmd − F_a.
-            let a = vec![
-                vec![0.0, 1.0, 0.0],
-                vec![0.0, -b / m, 1.0 / m],
-                vec![0.0, 0.0, -1.0 / tau],
-            ];
-            let bm = vec![vec![0.0, 0.0], vec![0.0, 1.0 / m], vec![1.0 / tau, 0.0]];
-            let (phi_m, gamma) = linalg::zoh(&a, &bm, self.dt);
-            Lag {
-                decay: (-self.dt / tau).exp(),
-                mean: phi(self.dt / tau),
+    /// The same plant behind an amplifier of bandwidth `amplifier_hz` and
+    /// through a `transmission` (None: ideal, rigid).
+    pub fn with_drive(mut self, amplifier_hz: Option<f64>, transmission: Option<Transmission>) -> Self {
+        self.tau = amplifier_hz.map(|hz| 1.0 / (2.0 * std::f64::consts::PI * hz));
+        self.transmission = transmission;
+        if self.tau.is_some() || transmission.is_some() {
+            let ss = self.state_space();
+            let (phi_m, gamma) = linalg::zoh(&ss.a, &ss.b, self.dt);
+            let r = self.tau.map_or(0.0, |tau| self.dt / tau);
+            self.linear = Some(LinearStep {
+                decay: (-r).exp(),
+                mean: phi(r),
                 phi: phi_m,
                 gamma,
-            }
-        });
+            });
+        }
         self
     }
 
-    /// The exact step `(x, v, F_a) ← Φ·(x, v, F_a) + Γ·(F_cmd, F_ext)` of
-    /// a plant with an amplifier lag (None without one).
-    pub fn lag_zoh(&self) -> Option<(&Mat, &Mat)> {
-        self.lag.as_ref().map(|l| (&l.phi, &l.gamma))
+    /// The continuous-time model (see [`StateSpace`]). Handle:
+    /// `m ẍ = −b ẋ + F_ext (+ F_motor when rigid) + k(x_m − x) + c(ẋ_m − ẋ)`;
+    /// motor side: `m_m ẍ_m = −b_m ẋ_m + F_motor − k(x_m − x) − c(ẋ_m − ẋ)`;
+    /// amplifier: `τ Ḟ_a = F_cmd − F_a`, F_motor = F_a (F_cmd without one).
+    pub fn state_space(&self) -> StateSpace {
+        let (m, b) = (self.mass, self.damping);
+        let n = 2 + 2 * usize::from(self.transmission.is_some()) + usize::from(self.tau.is_some());
+        let mut a = vec![vec![0.0; n]; n];
+        let mut bm = vec![vec![0.0; 2]; n];
+        let mut handle = vec![0.0; n];
+        handle[0] = 1.0;
+        let mut encoder = handle.clone();
+        a[0][1] = 1.0;
+        a[1][1] = -b / m;
+        bm[1][1] = 1.0 / m;
+        // Where the motor force acts: the handle (rigid) or the motor side.
+        let motor_v = match self.transmission {
+            None => 1,
+            Some(t) => {
+                let (k, c, mm) = (t.stiffness, t.damping, t.motor_mass);
+                a[1][0] = -k / m;
+                a[1][1] -= c / m;
+                a[1][2] = k / m;
+                a[1][3] = c / m;
+                a[2][3] = 1.0;
+                a[3][0] = k / mm;
+                a[3][1] = c / mm;
+                a[3][2] = -k / mm;
+                a[3][3] = -(t.motor_damping + c) / mm;
+                if t.encoder_on_motor {
+                    encoder = vec![0.0; n];
+                    encoder[2] = 1.0;
+                }
+                3
+            }
+        };
+        let scale = if motor_v == 1 { 1.0 / m } else { 1.0 / self.transmission.map_or(m, |t| t.motor_mass) };
+        match self.tau {
+            None => bm[motor_v][0] = scale,
+            Some(tau) => {
+                let f = n - 1;
+                a[motor_v][f] = scale;
+                a[f][f] = -1.0 / tau;
+                bm[f][0] = 1.0 / tau;
+            }
+        }
+        StateSpace {
+            a,
+            b: bm,
+            handle,
+            encoder,
+        }
+    }
+
+    /// The exact step `z ← Φ z + Γ·(F_cmd, F_ext)` of a plant with a lag or
+    /// a transmission (None for the rigid, ideal device: see [`Plant::zoh`]).
+    pub fn linear_zoh(&self) -> Option<(&Mat, &Mat)> {
+        self.linear.as_ref().map(|l| (&l.phi, &l.gamma))
+    }
+
+    /// A state at rest at handle position `x` (an unstretched cable).
+    pub fn at_rest(&self, x: f64) -> PlantState {
+        PlantState {
+            x,
+            xm: x,
+            ..PlantState::default()
+        }
+    }
+
+    /// What the encoder reads (before quantization).
+    #[inline]
+    pub fn encoder(&self, s: &PlantState) -> f64 {
+        match self.transmission {
+            Some(t) if t.encoder_on_motor => s.xm,
+            _ => s.x,
+        }
     }
 
     /// One fixed interval with the motor commanded to `motor` (through the
     /// amplifier, if any) and `ext` acting on the handle; `friction`: with
-    /// Coulomb friction and stick–slip (module doc).
+    /// Coulomb friction and stick–slip (module doc; the scene allows
+    /// friction on the rigid device only).
     #[inline]
     pub fn step_driven(&self, s: &mut PlantState, motor: f64, ext: f64, friction: bool) {
-        match &self.lag {
+        match &self.linear {
             None => {
                 s.f = motor;
                 if friction {
@@ -139,19 +245,34 @@ impl Plant {
                     self.step_linear(s, motor + ext);
                 }
             }
-            Some(l) if !friction => {
-                let st = [s.x, s.v, s.f];
-                let next = |i: usize| {
-                    l.phi[i].iter().zip(st).map(|(p, x)| p * x).sum::<f64>()
-                        + l.gamma[i][0] * motor
-                        + l.gamma[i][1] * ext
-                };
-                (s.x, s.v, s.f) = (next(0), next(1), next(2));
-            }
-            Some(l) => {
+            Some(l) if friction && self.transmission.is_none() => {
                 let mean = motor + (s.f - motor) * l.mean;
                 self.step_friction(s, mean + ext);
                 s.f = motor + (s.f - motor) * l.decay;
+            }
+            Some(l) => {
+                let mut z = [s.x, s.v, 0.0, 0.0, 0.0];
+                let n = l.phi.len();
+                if self.transmission.is_some() {
+                    (z[2], z[3]) = (s.xm, s.vm);
+                }
+                if self.tau.is_some() {
+                    z[n - 1] = s.f;
+                }
+                let next = |i: usize| {
+                    l.phi[i].iter().zip(&z).map(|(p, x)| p * x).sum::<f64>()
+                        + l.gamma[i][0] * motor
+                        + l.gamma[i][1] * ext
+                };
+                let mut z = [0.0; 5];
+                for (i, zi) in z.iter_mut().enumerate().take(n) {
+                    *zi = next(i);
+                }
+                (s.x, s.v) = (z[0], z[1]);
+                if self.transmission.is_some() {
+                    (s.xm, s.vm) = (z[2], z[3]);
+                }
+                s.f = if self.tau.is_some() { z[n - 1] } else { motor };
             }
         }
     }
@@ -303,9 +424,8 @@ mod tests {
         assert!((p.time_to_stop(1.0, -1.0) - t_star).abs() < 1e-14);
         // One 1 s interval: it stops at t* and sticks for the rest.
         let mut s = PlantState {
-            x: 0.0,
             v: 1.0,
-            f: 0.0,
+            ..PlantState::default()
         };
         p.step_friction(&mut s, 0.0);
         assert_eq!(s.v, 0.0);
@@ -314,9 +434,8 @@ mod tests {
         // Moving the other way, pushed on by 0.5 N (< f_c): net −0.5 − 1·(−1)
         // = +0.5 N decelerates v0 = −1; v∞ = +0.25, t* = 0.25·ln(1 + 4).
         let mut s = PlantState {
-            x: 0.0,
             v: -1.0,
-            f: 0.0,
+            ..PlantState::default()
         };
         assert!((p.time_to_stop(-1.0, 0.5) - 0.25 * 5f64.ln()).abs() < 1e-14);
         p.step_friction(&mut s, -0.5);
@@ -332,9 +451,8 @@ mod tests {
         // stops at t = 2 s after x = v0²/(2·0.5) = 1 m, then sticks.
         let p = Plant::new(1.0, 0.0, 1.0, 0.3);
         let mut s = PlantState {
-            x: 0.0,
             v: 1.0,
-            f: 0.0,
+            ..PlantState::default()
         };
         for _ in 0..20 {
             p.step_friction(&mut s, 0.5);
@@ -349,9 +467,8 @@ mod tests {
         // Reversal: moving at −1 m/s with F = +3: stops after 0.25 s (net 4 N),
         // then slips forward with net 2 N for the remaining 0.25 s.
         let mut s = PlantState {
-            x: 0.0,
             v: -1.0,
-            f: 0.0,
+            ..PlantState::default()
         };
         p.step_friction(&mut s, 3.0);
         assert!((s.v - 0.5).abs() < 1e-12, "{s:?}");
@@ -365,7 +482,7 @@ mod tests {
         // v = (c/m)(t − τ(1 − e^{−t/τ})), x = (c/m)(t²/2 − τt + τ²(1 − e^{−t/τ})).
         let (m, c, dt) = (2.0, 3.0, 1e-3);
         let tau = 1.0 / (2.0 * std::f64::consts::PI * 50.0);
-        let p = Plant::new(m, 0.0, 0.0, dt).with_amplifier(Some(50.0));
+        let p = Plant::new(m, 0.0, 0.0, dt).with_drive(Some(50.0), None);
         let mut s = PlantState::default();
         for _ in 0..100 {
             p.step_driven(&mut s, c, 0.0, false);
@@ -405,7 +522,7 @@ mod tests {
         // is the exact impulse, v = (c(t − τ(1 − e^{−t/τ})) − f_c·t)/m + v0.
         let (m, c, fc, dt, v0) = (2.0, 3.0, 0.5, 1e-3, 1.0);
         let tau = 1.0 / (2.0 * std::f64::consts::PI * 50.0);
-        let p = Plant::new(m, 0.0, fc, dt).with_amplifier(Some(50.0));
+        let p = Plant::new(m, 0.0, fc, dt).with_drive(Some(50.0), None);
         let mut s = PlantState {
             v: v0,
             ..PlantState::default()

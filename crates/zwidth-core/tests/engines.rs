@@ -542,7 +542,7 @@ fn an_amplifier_lag_is_exact_in_the_analytic_engine_and_the_time_engine_agrees()
         );
         assert!(
             eig.model
-                .contains(&format!("behind a {fa} Hz amplifier lag")),
+                .contains(&format!(", amplifier lag {fa} Hz, estimator")),
             "{}",
             eig.model
         );

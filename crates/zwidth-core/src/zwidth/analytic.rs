@@ -32,7 +32,7 @@ use crate::error::SpecError;
 use crate::estimators::butterworth::design_lowpass;
 use crate::estimators::{EstimatorKind, QModel};
 use crate::linalg;
-use crate::plant::Plant;
+use crate::plant::StateSpace;
 
 #[derive(Debug, Clone)]
 pub struct LinearModel {
@@ -41,8 +41,9 @@ pub struct LinearModel {
     /// Sample (= render) period T (s).
     pub t: f64,
     pub delay: usize,
-    /// The amplifier's time constant τ = 1/(2π f_a) (s), if it lags.
-    pub lag_tau: Option<f64>,
+    /// The continuous device with an amplifier lag or a transmission
+    /// (None: the rigid device `1/(ms² + bs)`).
+    ss: Option<StateSpace>,
     v_num: Poly,
     v_den: Poly,
     g_num: Poly,
@@ -187,15 +188,15 @@ impl LinearModel {
             }
             _ => unreachable!("linear_reason() admits only FDM, Butterworth and Kalman"),
         };
-        let plant = Plant::new(s.device.mass, s.device.damping, 0.0, t)
-            .with_amplifier(s.device.amplifier_hz);
-        let (g_num, g_den) = match plant.lag_zoh() {
-            // G_d(z) = c·(zI − Φ)⁻¹·Γ_motor for the states (x, v, F_a).
-            Some((phi, gamma)) => {
+        let plant = s.device.plant(t);
+        let ss = plant.linear_zoh().map(|_| plant.state_space());
+        let (g_num, g_den) = match (plant.linear_zoh(), &ss) {
+            // G_d(z) = c_enc·(zI − Φ)⁻¹·Γ_motor of the lagged or two-mass plant.
+            (Some((phi, gamma)), Some(ss)) => {
                 let g: Vec<f64> = gamma.iter().map(|r| r[0]).collect();
-                linalg::transfer_function(phi, &g, &[1.0, 0.0, 0.0])
+                linalg::transfer_function(phi, &g, &ss.encoder)
             }
-            None => {
+            _ => {
                 let (a, b) = plant.zoh();
                 let e = a[1][1];
                 // G_d(z) = (B0 z + (A01 B1 − e B0)) / ((z − 1)(z − e)).
@@ -215,10 +216,7 @@ impl LinearModel {
             damping: s.device.damping,
             t,
             delay: s.control.delay_samples as usize,
-            lag_tau: s
-                .device
-                .amplifier_hz
-                .map(|fa| 1.0 / (2.0 * std::f64::consts::PI * fa)),
+            ss,
             v_num,
             v_den,
             g_num,
@@ -242,18 +240,33 @@ impl LinearModel {
         let j = C::new(0.0, 1.0);
         let t = self.t;
         let theta = w * t;
-        let g = C::new(1.0, 0.0) / (j * w * (j * w * self.mass + self.damping));
         let zh = (C::new(1.0, 0.0) - C::from_polar(1.0, -theta)) / (j * w);
         let h = self.h(k, b, theta);
         let z = C::from_polar(1.0, theta);
         let gd = poly::eval(&self.g_num, z) / poly::eval(&self.g_den, z);
-        // The motor's force passes the amplifier, L(jω) = 1/(1 + jωτ); the
-        // excitation acts on the handle directly (G_d then includes L).
-        let lag = self
-            .lag_tau
-            .map_or(C::new(1.0, 0.0), |tau| 1.0 / (1.0 + j * w * tau));
-        let xf = g * (C::new(1.0, 0.0) - lag * zh * h * g / (t * (C::new(1.0, 0.0) + h * gd)));
-        C::new(1.0, 0.0) / (j * w * xf)
+        let one = C::new(1.0, 0.0);
+        let xf = match &self.ss {
+            None => {
+                let g = one / (j * w * (j * w * self.mass + self.damping));
+                g * (one - zh * h * g / (t * (one + h * gd)))
+            }
+            // The excitation acts on the handle, the wall's force on the
+            // motor (through the amplifier): X_h/F = G_he − Z_h·H·G_hm·G_ee
+            // / (T(1 + H·G_d)) with G_ab the response of output a (handle,
+            // encoder) to input b (motor command, external force).
+            Some(ss) => {
+                let col = |i: usize| -> Vec<f64> { ss.b.iter().map(|r| r[i]).collect() };
+                let (cmd, ext) = (col(0), col(1));
+                let resp = |c: &[f64], b: &[f64]| linalg::frequency_response(&ss.a, b, c, w);
+                let (g_he, g_hm, g_ee) = (
+                    resp(&ss.handle, &ext),
+                    resp(&ss.handle, &cmd),
+                    resp(&ss.encoder, &ext),
+                );
+                g_he - zh * h * g_hm * g_ee / (t * (one + h * gd))
+            }
+        };
+        one / (j * w * xf)
     }
 
     pub fn impedance(&self, k: f64, b: f64) -> ImpedanceCurve {

@@ -26,7 +26,6 @@ use serde::Serialize;
 
 use super::controller::Controller;
 use super::scene::Scene;
-use crate::plant::{Plant, PlantState};
 use crate::signals::quantize;
 
 /// Time-domain knobs the accuracy setting may override.
@@ -109,8 +108,7 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
     rec: &mut impl Recorder,
 ) -> HitOutcome {
     let s = &scene.spec;
-    let plant = Plant::new(s.device.mass, s.device.damping, s.device.coulomb, scene.dt)
-        .with_amplifier(s.device.amplifier_hz);
+    let plant = s.device.plant(scene.dt);
     let q = s.device.quantization;
     let wall = s.wall.position;
     let push = s.hit.push_force;
@@ -140,17 +138,18 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
         settle + measure
     };
     let mut touched = false;
-    let mut st = PlantState {
-        x: wall - s.hit.home_distance,
-        ..PlantState::default()
-    };
+    let mut st = plant.at_rest(wall - s.hit.home_distance);
     // Welford mean/variance of y over the measure window.
     let (mut n, mut mean, mut m2) = (0.0f64, 0.0f64, 0.0f64);
     let (mut stuck_for, mut last_y) = (0usize, f64::NAN);
     let stuck_limit = (0.2 / scene.dt).ceil() as usize;
     let mut i = 0usize;
     while i < total {
-        let y = if QUANT { quantize(st.x, q) } else { st.x };
+        let y = if QUANT {
+            quantize(plant.encoder(&st), q)
+        } else {
+            plant.encoder(&st)
+        };
         if measure_from == usize::MAX {
             // Not measuring yet: waiting for the first contact (or the cap).
             if y > wall {

@@ -206,14 +206,11 @@ struct Loop<const FRICTION: bool, const QUANT: bool> {
 impl<const FRICTION: bool, const QUANT: bool> Loop<FRICTION, QUANT> {
     fn new(setup: &ProbeSetup, scene: &Scene, k: f64, b: f64) -> Self {
         let s = &scene.spec;
+        let plant = s.device.plant(setup.h);
         Self {
-            plant: Plant::new(s.device.mass, s.device.damping, s.device.coulomb, setup.h)
-                .with_amplifier(s.device.amplifier_hz),
+            st: plant.at_rest(s.wall.position),
+            plant,
             ctl: Controller::new(scene, k, b, 0.0, false),
-            st: PlantState {
-                x: s.wall.position,
-                ..PlantState::default()
-            },
             q: s.device.quantization,
             nsub: setup.nsub,
             sub: 0,
@@ -226,11 +223,8 @@ impl<const FRICTION: bool, const QUANT: bool> Loop<FRICTION, QUANT> {
     fn period(&mut self, force: &[f64], vbuf: &mut [f64]) -> bool {
         for (vb, f_ext) in vbuf.iter_mut().zip(force) {
             if self.sub == 0 {
-                self.ctl.sample(if QUANT {
-                    quantize(self.st.x, self.q)
-                } else {
-                    self.st.x
-                });
+                let y = self.plant.encoder(&self.st);
+                self.ctl.sample(if QUANT { quantize(y, self.q) } else { y });
             }
             self.sub = if self.sub + 1 == self.nsub {
                 0

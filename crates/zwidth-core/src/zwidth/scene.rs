@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{require_non_negative, require_positive, require_range, SpecError};
 use crate::estimators::{Estimator, EstimatorKind, EstimatorSpec, Sampling};
+use crate::plant::{Plant, Transmission};
 
 /// The encoder step the estimators are built for when the scene's sensor is
 /// ideal (`quantization: 0`): Kalman needs `r = d²/3 > 0`. 1 nm is finer than
@@ -49,6 +50,58 @@ pub struct DeviceSpec {
     /// unless named.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub amplifier_hz: Option<f64>,
+    /// A compliant transmission (two-mass model): the motor side coupled
+    /// to the handle (whose mass and damping are `mass` and `damping`)
+    /// by a cable's stiffness and damping; null for a rigid device. Off
+    /// unless named; needs `coulomb: 0` (friction is modelled on the rigid
+    /// device only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transmission: Option<TransmissionSpec>,
+}
+
+/// A cable (capstan) transmission between the motor and the handle.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct TransmissionSpec {
+    /// Motor-side mass (kg): the motor and capstan inertia reflected to the
+    /// handle's axis, J/r².
+    pub motor_mass: f64,
+    /// Motor-side viscous damping (N·s/m).
+    #[serde(default)]
+    pub motor_damping: f64,
+    /// Cable stiffness (N/m) and damping (N·s/m), handle to motor side.
+    pub stiffness: f64,
+    #[serde(default)]
+    pub damping: f64,
+    /// Where the encoder sits: `motor` (on the motor shaft, the common
+    /// case) or `handle`.
+    #[serde(default)]
+    pub encoder: EncoderSide,
+}
+
+/// Which side of a transmission the encoder reads.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum EncoderSide {
+    #[default]
+    Motor,
+    Handle,
+}
+
+impl DeviceSpec {
+    /// The plant of this device for steps of `dt` (every engine's).
+    pub fn plant(&self, dt: f64) -> Plant {
+        Plant::new(self.mass, self.damping, self.coulomb, dt).with_drive(
+            self.amplifier_hz,
+            self.transmission.as_ref().map(|t| Transmission {
+                motor_mass: t.motor_mass,
+                motor_damping: t.motor_damping,
+                stiffness: t.stiffness,
+                damping: t.damping,
+                encoder_on_motor: t.encoder == EncoderSide::Motor,
+            }),
+        )
+    }
 }
 
 fn d_mass() -> f64 {
@@ -74,6 +127,7 @@ impl Default for DeviceSpec {
             force_limit: None,
             force_resolution: None,
             amplifier_hz: None,
+            transmission: None,
         }
     }
 }
@@ -387,6 +441,20 @@ impl SceneSpec {
                 l.delay_samples,
                 "must be 0 to 100 render periods",
             ));
+        }
+        if let Some(t) = &d.transmission {
+            let tp = |e: SpecError| e.within("device.transmission");
+            require_range("motor_mass", t.motor_mass, 1e-6, 1e4, "kg").map_err(tp)?;
+            require_non_negative("motor_damping", t.motor_damping, "N·s/m").map_err(tp)?;
+            require_range("stiffness", t.stiffness, 1.0, 1e8, "N/m").map_err(tp)?;
+            require_non_negative("damping", t.damping, "N·s/m").map_err(tp)?;
+            if d.coulomb > 0.0 {
+                return Err(SpecError::new(
+                    "device.coulomb",
+                    d.coulomb,
+                    "must be 0 with a transmission: friction is modelled on the rigid device only",
+                ));
+            }
         }
         if let Some(fa) = d.amplifier_hz {
             let nyq = l.sample_hz / 2.0;

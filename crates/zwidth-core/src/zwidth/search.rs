@@ -181,11 +181,12 @@ impl Evaluator {
             },
             m => m,
         };
-        if criterion == Criterion::StrictPassivity && scene.spec.device.amplifier_hz.is_some() {
+        let d = &scene.spec.device;
+        if criterion == Criterion::StrictPassivity && (d.amplifier_hz.is_some() || d.transmission.is_some()) {
             return Err(SpecError::new(
                 "criterion",
                 "strict_passivity",
-                "Colgate & Schenkel's condition is for a rigid device driven without lag; with device.amplifier_hz use impedance or stability",
+                "Colgate & Schenkel's condition is for a rigid device driven without lag; with device.amplifier_hz or device.transmission use impedance or stability",
             ));
         }
         let bad = |allowed: &str| {
@@ -233,9 +234,7 @@ impl Evaluator {
                 s.control.sample_hz,
                 s.device.mass,
                 s.device.damping,
-                s.device
-                    .amplifier_hz
-                    .map_or(String::new(), |fa| format!(" behind a {fa} Hz amplifier lag")),
+                drive_description(&s.device),
                 s.control.delay_samples
             ),
             Method::Time | Method::Frequency => {
@@ -252,8 +251,9 @@ impl Evaluator {
                 if let Some(r) = s.device.force_resolution {
                     parts.push(format!("force command in steps of {r} N"));
                 }
-                if let Some(fa) = s.device.amplifier_hz {
-                    parts.push(format!("amplifier lag {fa} Hz"));
+                let drive = drive_description(&s.device);
+                if !drive.is_empty() {
+                    parts.push(drive.trim_start_matches(", ").to_string());
                 }
                 parts.push(format!("encoder {} Hz, render {} Hz, delay {}", s.control.sample_hz, s.control.render_hz, s.control.delay_samples));
                 parts.push(format!("estimator {est}"));
@@ -505,6 +505,25 @@ fn saturation_note(points: &[Point], boundary: &[BoundaryPoint], limit: f64) -> 
         points.len(),
         boundary.len()
     ))
+}
+
+/// The amplifier lag and transmission a device names, as ", …" (or "").
+fn drive_description(d: &super::scene::DeviceSpec) -> String {
+    let mut s = String::new();
+    if let Some(t) = &d.transmission {
+        s.push_str(&format!(
+            ", two-mass transmission (motor side {} kg, {} N·s/m; cable {} N/m, {} N·s/m; encoder on the {})",
+            t.motor_mass,
+            t.motor_damping,
+            t.stiffness,
+            t.damping,
+            if t.encoder == super::scene::EncoderSide::Motor { "motor" } else { "handle" }
+        ));
+    }
+    if let Some(fa) = d.amplifier_hz {
+        s.push_str(&format!(", amplifier lag {fa} Hz"));
+    }
+    s
 }
 
 /// Run a map, reporting trials to and honouring cancellation from
