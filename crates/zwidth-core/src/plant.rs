@@ -135,7 +135,11 @@ impl Plant {
 
     /// The same plant behind an amplifier of bandwidth `amplifier_hz` and
     /// through a `transmission` (None: ideal, rigid).
-    pub fn with_drive(mut self, amplifier_hz: Option<f64>, transmission: Option<Transmission>) -> Self {
+    pub fn with_drive(
+        mut self,
+        amplifier_hz: Option<f64>,
+        transmission: Option<Transmission>,
+    ) -> Self {
         self.tau = amplifier_hz.map(|hz| 1.0 / (2.0 * std::f64::consts::PI * hz));
         self.transmission = transmission;
         if self.tau.is_some() || transmission.is_some() {
@@ -188,7 +192,11 @@ impl Plant {
                 3
             }
         };
-        let scale = if motor_v == 1 { 1.0 / m } else { 1.0 / self.transmission.map_or(m, |t| t.motor_mass) };
+        let scale = if motor_v == 1 {
+            1.0 / m
+        } else {
+            1.0 / self.transmission.map_or(m, |t| t.motor_mass)
+        };
         match self.tau {
             None => bm[motor_v][0] = scale,
             Some(tau) => {

@@ -578,6 +578,131 @@ fn an_amplifier_lag_is_exact_in_the_analytic_engine_and_the_time_engine_agrees()
     }
 }
 
+/// The stability boundary of a two-mass (cable) device at 1 kHz with FDM,
+/// no delay: handle 0.3 kg and 13.2 N·s/m, motor side 0.22 kg, cable
+/// 5e4 N/m and 2 N·s/m (a 100 Hz mode), encoder on the motor or the
+/// handle, B = 0 and 20 N·s/m. From an independent mpmath derivation at 50
+/// digits: the ZOH pulse transfer function of N(s)/(s·P₃(s)) by residues
+/// at the poles, the closed-loop polynomial T z D_d + N_d(KTz + B(z − 1)),
+/// K* bisected to 1e-10. (A stiff cable, 1e8 N/m, gives 26 520: the rigid
+/// 0.52 kg device's 26 512 within 0.03 %.)
+const TWO_MASS: [(&str, f64, f64); 4] = [
+    ("motor", 0.0, 20_171.108_510_704_2),
+    ("motor", 20.0, 43_381.168_708_881_3),
+    ("handle", 0.0, 21_003.035_958_464_6),
+    ("handle", 20.0, 45_359.872_655_687),
+];
+
+fn two_mass(encoder: &str, amplifier: &str) -> SceneSpec {
+    scene(&format!(
+        r#"{{"device":{{"mass":0.3,"damping":13.2,"coulomb":0,"quantization":0{amplifier},"transmission":{{"motor_mass":0.22,"stiffness":5e4,"damping":2,"encoder":"{encoder}"}}}},"loop":{{"sample_hz":1000,"render_hz":1000}}}}"#
+    ))
+}
+
+#[test]
+fn a_two_mass_transmission_is_exact_in_the_analytic_engine_and_the_simulations_agree() {
+    let fine = Accuracy::Knobs(AccuracyKnobs {
+        preset: Preset::Standard,
+        settle_s: Some(20.0),
+        measure_s: Some(2.0),
+        k_rel_tol: Some(0.001),
+        ..Default::default()
+    });
+    for encoder in ["motor", "handle"] {
+        let sc = two_mass(encoder, "");
+        let eig = run(
+            sc.clone(),
+            Method::Auto,
+            Criterion::Stability,
+            &[0.0, 20.0],
+            fine.clone(),
+        );
+        assert!(
+            eig.model.contains(&format!("two-mass transmission (motor side 0.22 kg, 0 N·s/m; cable 50000 N/m, 2 N·s/m; encoder on the {encoder})")),
+            "{}",
+            eig.model
+        );
+        let time = run(
+            sc,
+            Method::Time,
+            Criterion::Stability,
+            &[20.0],
+            fine.clone(),
+        );
+        for &(_, b, want) in TWO_MASS.iter().filter(|r| r.0 == encoder) {
+            let e = k_at(&eig, b);
+            assert!(
+                e <= want && e >= 0.999 * want,
+                "{encoder}, B={b}: eigenvalues {e} vs {want}"
+            );
+            if b == 20.0 {
+                // The wall hit's verdict is practical: an RMS below the
+                // threshold after the settle. With the encoder on the handle
+                // the loop's slowest mode near the boundary decays over tens
+                // of seconds, so a 20 s settle calls it unstable early
+                // (measured −5.3 %; −2.8 % with 80 s).
+                let t = k_at(&time, b);
+                let floor = if encoder == "motor" { 0.985 } else { 0.94 };
+                assert!(
+                    t <= want * 1.005 && t >= floor * want,
+                    "{encoder}, B={b}: time {t} vs {want}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_stiff_cable_is_the_rigid_device() {
+    // 1e8 N/m, no cable damping, encoder on the motor: the mpmath
+    // derivation above gives 26 520.301 (the rigid 0.52 kg device: 26 512).
+    let sc = scene(
+        r#"{"device":{"mass":0.3,"coulomb":0,"quantization":0,"transmission":{"motor_mass":0.22,"stiffness":1e8}},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+    );
+    let acc = Accuracy::Knobs(AccuracyKnobs {
+        k_rel_tol: Some(0.001),
+        ..Default::default()
+    });
+    let k = k_at(
+        &run(sc, Method::Analytic, Criterion::Stability, &[0.0], acc),
+        0.0,
+    );
+    assert!(k <= 26_520.301 && k >= 0.999 * 26_520.301, "{k}");
+}
+
+#[test]
+fn a_two_mass_impedance_boundary_is_the_same_in_the_frequency_engine() {
+    // The issue's target: analytic and frequency engines agree within the
+    // stated resolution (standard: K to 1 %, and the frequency engine's
+    // settling, about 2 % near B = 0) on a two-mass scene, with an
+    // amplifier lag too.
+    for (encoder, amp) in [("handle", ""), ("motor", r#","amplifier_hz":300"#)] {
+        let acc = Accuracy::Preset(Preset::Standard);
+        let sc = two_mass(encoder, amp);
+        let freq = run(
+            sc.clone(),
+            Method::Frequency,
+            Criterion::Impedance,
+            &[0.0, 10.0],
+            acc.clone(),
+        );
+        let ana = run(
+            sc,
+            Method::Analytic,
+            Criterion::Impedance,
+            &[0.0, 10.0],
+            acc,
+        );
+        for b in [0.0, 10.0] {
+            let (f, a) = (k_at(&freq, b), k_at(&ana, b));
+            assert!(
+                a > 0.0 && (f / a - 1.0).abs() <= 0.02,
+                "{encoder}{amp} B={b}: frequency {f} vs analytic {a}"
+            );
+        }
+    }
+}
+
 #[test]
 fn friction_and_quantization_carry_intervals_that_cover_the_reference() {
     // The seed scene (10 kHz encoder, 1 kHz render, 1 µm, 0.19 N Coulomb)

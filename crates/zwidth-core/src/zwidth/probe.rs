@@ -801,26 +801,56 @@ mod tests {
         // well-damped point: the measured Z must agree on every line.
         // With an amplifier lag the simulation steps (x, v, F_a) exactly
         // and the formula carries L(jω) = 1/(1 + jωτ): the two must agree.
-        for (est, amp) in [
-            (r#"{"kind":"fdm"}"#, "null"),
-            (r#"{"kind":"butterworth","cutoff_hz":200}"#, "null"),
-            (r#"{"kind":"fdm"}"#, "100"),
-            (r#"{"kind":"butterworth","cutoff_hz":200}"#, "300"),
+        // So with a two-mass transmission (encoder on either side): the
+        // formula's G_he, G_hm, G_ee against the exact five-state steps.
+        let cable = |enc: &str| {
+            format!(r#"{{"motor_mass":0.22,"stiffness":5e4,"damping":2,"encoder":"{enc}"}}"#)
+        };
+        for (est, amp, tr) in [
+            (r#"{"kind":"fdm"}"#, "null", "null".to_string()),
+            (
+                r#"{"kind":"butterworth","cutoff_hz":200}"#,
+                "null",
+                "null".into(),
+            ),
+            (r#"{"kind":"fdm"}"#, "100", "null".into()),
+            (
+                r#"{"kind":"butterworth","cutoff_hz":200}"#,
+                "300",
+                "null".into(),
+            ),
+            (r#"{"kind":"fdm"}"#, "null", cable("motor")),
+            (
+                r#"{"kind":"butterworth","cutoff_hz":200}"#,
+                "300",
+                cable("handle"),
+            ),
         ] {
             let j = format!(
-                r#"{{"device":{{"coulomb":0,"quantization":0,"amplifier_hz":{amp}}},"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{est},"probe":{{"f_min_hz":2,"f_max_hz":100}}}}"#
+                r#"{{"device":{{"coulomb":0,"quantization":0,"amplifier_hz":{amp},"transmission":{tr}}},"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{est},"probe":{{"f_min_hz":2,"f_max_hz":100}}}}"#
             );
             let sc = SceneSpec::from_json(&j).unwrap().validate().unwrap();
             let m = LinearModel::new(&sc).unwrap();
-            let o = probe(&sc, 5000.0, 5.0, KNOBS);
+            // Settled to 1e-9 of the damping scale: the cable mode (2 N·s/m
+            // over 0.127 kg reduced mass) keeps 2 % a period.
+            let tight = ProbeKnobs {
+                settle_tol: 1e-9,
+                ..KNOBS
+            };
+            let o = probe(&sc, 5000.0, 5.0, tight);
             assert!(o.settled, "{est}: {o:?}");
             let want = m.impedance(5000.0, 5.0);
+            // The formula keeps each line's fundamental only; the handle
+            // encoder's path, (cs + k)/(s·P₃), rolls off more slowly than
+            // the rigid 1/s², and the phase there differs by up to 1.05e-3°
+            // at 74 Hz (|Z| by 2.3e-6): 2e-3° for the transmission rows.
+            let phase_tol = if tr == "null" { 1e-3 } else { 2e-3 };
             for i in 0..want.magnitude.len() {
                 let rel = (o.impedance.magnitude[i] / want.magnitude[i] - 1.0).abs();
                 let dphi = (o.impedance.phase_deg[i] - want.phase_deg[i]).abs();
                 assert!(
-                    rel < 1e-5 && dphi < 1e-3,
-                    "{est} line {i}: |Z| {} vs {}, phase {} vs {}",
+                    rel < 1e-5 && dphi < phase_tol,
+                    "{est} {tr} line {i}: |Z| {} vs {}, phase {} vs {}",
                     o.impedance.magnitude[i],
                     want.magnitude[i],
                     o.impedance.phase_deg[i],

@@ -182,7 +182,9 @@ impl Evaluator {
             m => m,
         };
         let d = &scene.spec.device;
-        if criterion == Criterion::StrictPassivity && (d.amplifier_hz.is_some() || d.transmission.is_some()) {
+        if criterion == Criterion::StrictPassivity
+            && (d.amplifier_hz.is_some() || d.transmission.is_some())
+        {
             return Err(SpecError::new(
                 "criterion",
                 "strict_passivity",
