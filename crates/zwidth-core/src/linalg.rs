@@ -133,14 +133,12 @@ pub fn frequency_response(a: &Mat, b: &[f64], c: &[f64], w: f64) -> num_complex:
             .max_by(|&x, &y| m[x][col].norm().total_cmp(&m[y][col].norm()))
             .unwrap_or(col);
         m.swap(col, p);
-        let piv = m[col][col];
-        for r in col + 1..n {
-            let f = m[r][col] / piv;
-            if f != C::new(0.0, 0.0) {
-                for k in col..=n {
-                    let v = m[col][k];
-                    m[r][k] -= f * v;
-                }
+        let (top, rest) = m.split_at_mut(col + 1);
+        let pivot_row = &top[col];
+        for row in rest.iter_mut() {
+            let f = row[col] / pivot_row[col];
+            for (x, p) in row.iter_mut().zip(pivot_row).skip(col) {
+                *x -= f * p;
             }
         }
     }
