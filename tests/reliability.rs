@@ -272,6 +272,51 @@ fn a_stored_spec_beyond_the_limits_fails_instead_of_taking_the_server_down() {
     assert_eq!(get(&format!("{}/healthz", s.base))["status"], "ok");
 }
 
+/// An experiment whose stored trials cannot be read (here their table is
+/// gone: a permanent fault, not a busy database) fails saying so, at once,
+/// and the server goes on.
+#[test]
+fn stored_work_that_cannot_be_read_fails_the_experiment_saying_so() {
+    let dir = temp_dir("unreadable");
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let st = zwidth::store::Store::open(&dir.join("test.db"))
+            .await
+            .unwrap();
+        st.insert(zwidth::store::NewExperiment {
+            id: "unreadable-1",
+            kind: "map",
+            spec: SMALL,
+            priority: 0,
+            key: None,
+            not_before_ms: None,
+            rig: "sim",
+        })
+        .await
+        .unwrap();
+        st.close().await.unwrap();
+        use sqlx::Connection;
+        let url = format!("sqlite://{}", dir.join("test.db").display());
+        let mut c = sqlx::SqliteConnection::connect(&url).await.unwrap();
+        sqlx::query("ALTER TABLE trials RENAME TO trials_gone")
+            .execute(&mut c)
+            .await
+            .unwrap();
+        c.close().await.unwrap();
+    });
+    let s = start_in(dir);
+    let done = wait_end(&s.base, "unreadable-1", 10);
+    assert_eq!(done["state"], "failed", "{done}");
+    assert!(
+        done["error"]
+            .as_str()
+            .unwrap()
+            .starts_with("its stored trials could not be read"),
+        "{done}"
+    );
+    assert_eq!(get(&format!("{}/healthz", s.base))["status"], "ok");
+}
+
 /// Defect 7: one Idempotency-Key, many concurrent submissions: one
 /// experiment, every answer names it, no 500. A different body under the
 /// same key is a 422 naming the key.

@@ -236,13 +236,11 @@ async fn run_one(
             return;
         }
     };
-    if !done.is_empty() || !evals.is_empty() {
-        tracing::info!(
-            trials = done.len(),
-            evaluations = evals.len(),
-            "resuming from stored work"
-        );
-    }
+    tracing::info!(
+        stored_trials = done.len(),
+        stored_evaluations = evals.len(),
+        "starting (stored work is replayed, not redone)"
+    );
     let observer = Arc::new(Observer::resuming(done).with_evaluations(evals));
     observer.limit_trials(usize::try_from(cost.trial_limit()).unwrap_or(usize::MAX));
     running
@@ -434,5 +432,57 @@ mod tests {
             seen.push(w.as_millis());
         }
         assert_eq!(seen, [100, 200, 400, 800, 1600, 3200, 5000, 5000, 5000]);
+    }
+
+    /// The quick spec of tests/reliability.rs: one exact strict-passivity
+    /// point (microseconds of work).
+    const SMALL: &str = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
+
+    #[tokio::test(flavor = "multi_thread")]
+    async fn a_final_store_blocked_by_another_writer_is_retried_until_it_works() {
+        // Another connection holds the write lock for 6 s while the run
+        // ends: its final store is busy (the store's busy timeout), retried
+        // with back-off, and the run ends `succeeded` with its trial
+        // stored, not `interrupted` (that is for shutdown only).
+        use sqlx::Connection;
+        let (store, guard) = temp_store("busy-end").await;
+        store
+            .insert(crate::store::NewExperiment {
+                id: "e1",
+                kind: "map",
+                spec: SMALL,
+                priority: 0,
+                key: None,
+                not_before_ms: None,
+                rig: "sim",
+            })
+            .await
+            .unwrap();
+        assert_eq!(store.claim_next("sim").await.unwrap().unwrap().id, "e1");
+        let url = format!("sqlite://{}", guard.0.join("z.db").display());
+        let mut lock = sqlx::SqliteConnection::connect(&url).await.unwrap();
+        sqlx::query("BEGIN IMMEDIATE")
+            .execute(&mut lock)
+            .await
+            .unwrap();
+        let release = tokio::spawn(async move {
+            tokio::time::sleep(Duration::from_secs(6)).await;
+            sqlx::query("ROLLBACK").execute(&mut lock).await.unwrap();
+        });
+        let rig = Arc::new(crate::rig::SimulatedRig::new("sim", 1).unwrap());
+        let (_tx, shutdown) = tokio::sync::watch::channel(false);
+        run_one(
+            &store,
+            rig,
+            &Running::default(),
+            "e1".into(),
+            SMALL.into(),
+            shutdown,
+        )
+        .await;
+        release.await.unwrap();
+        let row = store.get("e1").await.unwrap().unwrap();
+        assert_eq!(row.state, "succeeded", "{:?}", row.error);
+        assert_eq!(store.trials("e1").await.unwrap().len(), 1);
     }
 }
