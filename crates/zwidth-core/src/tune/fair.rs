@@ -346,4 +346,25 @@ mod tests {
         let w: Objective = serde_json::from_str(r#"{"weighted":{"k_width":1}}"#).unwrap();
         assert_eq!(objective_name(&w), r#"{"weighted":{"k_width":1.0}}"#);
     }
+
+    #[test]
+    fn a_tuned_compare_costs_four_maps_and_three_tunes() {
+        // The module doc: the four paper estimators mapped once each, and a
+        // tune for each but FOAW (nothing to tune): its search budget plus
+        // its finalists (3) mapped at the final accuracy.
+        let mut scene = compare::seed_2018_scene();
+        scene.device.coulomb = 0.0;
+        scene.device.quantization = 0.0;
+        let t: TunedCompare =
+            serde_json::from_str(r#"{"objective":"k_width","max_evaluations":5}"#).unwrap();
+        let c = t.cost(&scene, &Accuracy::Preset(Preset::Draft)).unwrap();
+        assert_eq!(c.maps, 4 + 3 * (5 + 3));
+        // Each tune is of its own estimator, bounded below Nyquist.
+        let bw = compare::paper_estimators(&scene, 1.0).remove(0).2;
+        let s = t
+            .spec(&scene, &bw, &Accuracy::Preset(Preset::Draft))
+            .unwrap();
+        assert_eq!(s.scene.estimator, bw);
+        assert_eq!(s.params["cutoff_hz"].max, 0.499 * 1000.0);
+    }
 }

@@ -692,4 +692,25 @@ mod tests {
             .validate()
             .unwrap();
     }
+
+    #[test]
+    fn finalists_and_weights_are_checked_at_their_limits() {
+        // "finalists must be 0 to 20"; weights within ±WEIGHT_MAX = 1e6.
+        let ok = |extra| match spec(extra).validate() {
+            Ok(_) => true,
+            Err(e) => panic!("{e}"),
+        };
+        let field = |extra| spec(extra).validate().err().unwrap().field;
+        // (At draft finals, so the cost stays inside the trial limit.)
+        let finals = |n: usize| serde_json::json!({"finalists": n, "final_accuracy": "draft"});
+        assert!(ok(finals(20)));
+        assert_eq!(field(finals(21)), "finalists");
+        assert!(ok(
+            serde_json::json!({"objective": {"weighted": {"k_width": 1e6}}})
+        ));
+        assert_eq!(
+            field(serde_json::json!({"objective": {"weighted": {"k_width": 1e7}}})),
+            "objective.weighted.k_width"
+        );
+    }
 }

@@ -328,4 +328,34 @@ mod tests {
             "params"
         );
     }
+
+    #[test]
+    fn bounds_must_be_finite_and_the_error_lists_what_is_tunable() {
+        let scene: SceneSpec = serde_json::from_str(
+            r#"{"loop":{"sample_hz":1000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":100}}"#,
+        )
+        .unwrap();
+        let one = |b: Bounds| BTreeMap::from([("cutoff_hz".to_string(), b)]);
+        let b = |min: f64, max: f64| Bounds {
+            min,
+            max,
+            scale: Scale::Linear,
+            step: None,
+        };
+        let field = |p| Space::new(&scene, &p).err().unwrap().field;
+        assert_eq!(field(one(b(10.0, f64::INFINITY))), "params.cutoff_hz.min");
+        assert_eq!(field(one(b(f64::NAN, 100.0))), "params.cutoff_hz.min");
+        // docs/tuning.md's table: Butterworth tunes cutoff_hz and order; FDM nothing.
+        let e = space(
+            r#"{"kind":"butterworth","cutoff_hz":100}"#,
+            r#"{"q":{"min":1,"max":10}}"#,
+        )
+        .err()
+        .unwrap();
+        assert!(e.allowed.ends_with("tunable: cutoff_hz, order"), "{e}");
+        let e = space(r#"{"kind":"fdm"}"#, r#"{"q":{"min":1,"max":10}}"#)
+            .err()
+            .unwrap();
+        assert!(e.allowed.ends_with("tunable: none"), "{e}");
+    }
 }

@@ -316,4 +316,15 @@ mod tests {
             assert!(d.abs() < 1e-12 || (d.abs() - 1.0).abs() < 1e-12);
         }
     }
+
+    #[test]
+    fn shifted_halton_points_stay_in_the_unit_cube() {
+        // A Cranley–Patterson rotation adds the seed's offset mod 1: every
+        // coordinate in [0, 1).
+        for seed in 0..5 {
+            for p in halton(16, 2, seed) {
+                assert!(p.iter().all(|x| (0.0..1.0).contains(x)), "{seed}: {p:?}");
+            }
+        }
+    }
 }

@@ -115,6 +115,21 @@ fn finals_are_mapped_at_the_final_accuracy_and_the_search_at_its_own() {
         "{:?} vs {want}",
         c.saved_s
     );
+    // The means are over the computed evaluations of each phase (not the
+    // cache hits), recomputed here from the history.
+    let mean = |phase: &str| {
+        let t: Vec<f64> = r
+            .history
+            .iter()
+            .filter(|e| e.phase == phase && !e.cached)
+            .map(|e| e.elapsed_s)
+            .collect();
+        t.iter().sum::<f64>() / t.len() as f64
+    };
+    assert!((c.mean_search_evaluation_s - mean("search")).abs() < 1e-12);
+    assert!((c.mean_final_evaluation_s - mean("final")).abs() < 1e-12);
+    // One finalist: it is trivially still the best, and its rank held.
+    assert!(c.best_held && c.ranking_held);
 }
 
 #[test]

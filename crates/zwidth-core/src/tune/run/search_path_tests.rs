@@ -180,3 +180,12 @@ fn cache_hits_do_not_end_a_search_before_its_grid_is_walked() {
         s.len()
     );
 }
+
+#[test]
+fn the_one_dimensional_tolerance_is_an_eighth_of_a_step_per_map() {
+    // 1/(8·budget) in u, within [1e-5, 1e-2] (run.rs).
+    assert_eq!(tolerance(60), 1.0 / 480.0);
+    assert_eq!(tolerance(200), 6.25e-4);
+    assert_eq!(tolerance(12), 1e-2);
+    assert_eq!(tolerance(20_000), 1e-5);
+}
