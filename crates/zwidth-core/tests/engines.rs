@@ -664,10 +664,26 @@ fn a_stiff_cable_is_the_rigid_device() {
         ..Default::default()
     });
     let k = k_at(
-        &run(sc, Method::Analytic, Criterion::Stability, &[0.0], acc),
+        &run(
+            sc,
+            Method::Analytic,
+            Criterion::Stability,
+            &[0.0],
+            acc.clone(),
+        ),
         0.0,
     );
     assert!((0.999 * 26_520.301..=26_520.301).contains(&k), "{k}");
+    // The damping split between the two sides (6.6 + 6.6 N·s/m) is the
+    // rigid device's 13.2 as well: Jury's 26 512 (JURY above) within 0.5 %.
+    let split = scene(
+        r#"{"device":{"mass":0.3,"damping":6.6,"coulomb":0,"quantization":0,"transmission":{"motor_mass":0.22,"motor_damping":6.6,"stiffness":1e8}},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+    );
+    let k = k_at(
+        &run(split, Method::Analytic, Criterion::Stability, &[0.0], acc),
+        0.0,
+    );
+    assert!((k / jury(0, 0.0) - 1.0).abs() < 0.005, "{k}");
 }
 
 #[test]
