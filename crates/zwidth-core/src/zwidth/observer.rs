@@ -268,10 +268,19 @@ mod tests {
         o.hold(None);
         waiter.join().unwrap();
         assert_eq!(o.held(), None);
-        // A cancel ends the wait too.
+        // A cancel ends the wait too (within a few of its 50 ms looks; a
+        // waiter that never ends fails here rather than hanging the suite).
         o.hold(Some("disk full".into()));
         o.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
-        o.wait_while_held();
+        let waiter = {
+            let o = o.clone();
+            std::thread::spawn(move || o.wait_while_held())
+        };
+        let start = std::time::Instant::now();
+        while !waiter.is_finished() && start.elapsed().as_secs() < 5 {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        assert!(waiter.is_finished(), "a cancelled run stops waiting");
         assert!(o.held().is_some());
     }
 
