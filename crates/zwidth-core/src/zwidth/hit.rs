@@ -120,15 +120,22 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
     // friction never moves the handle: measure right after `settle`. Else
     // wait for contact up to ten times the approach time (terminal-velocity
     // estimate), then measure anyway.
+    // With a transmission the push moves both masses against both dampers.
     let dev = &s.device;
+    let (mass, damping) = dev
+        .transmission
+        .as_ref()
+        .map_or((dev.mass, dev.damping), |t| {
+            (dev.mass + t.motor_mass, dev.damping + t.motor_damping)
+        });
     let drive = push.abs().min(limit) - dev.coulomb;
     let will_move = push > 0.0 && drive > 0.0 && s.hit.home_distance > 0.0;
     let approach_s = if !will_move {
         0.0
-    } else if dev.damping > 0.0 {
-        s.hit.home_distance * dev.damping / drive + dev.mass / dev.damping
+    } else if damping > 0.0 {
+        s.hit.home_distance * damping / drive + mass / damping
     } else {
-        (2.0 * s.hit.home_distance * dev.mass / drive).sqrt()
+        (2.0 * s.hit.home_distance * mass / drive).sqrt()
     };
     let cap = ((10.0 * approach_s + 1.0) / scene.dt).min(1e9) as usize;
     let mut measure_from = if will_move { usize::MAX } else { settle };
@@ -541,5 +548,30 @@ mod tests {
                 .any(|r| r.y != tail[0].y || r.v != 0.0),
             "held for more than 0.2 s before the end"
         );
+    }
+
+    #[test]
+    fn with_a_transmission_the_wait_counts_both_masses() {
+        // A 1e4 kg motor side behind a 1 N/m cable, the 0.3 kg handle
+        // 1e-4 m from the wall, encoder on the handle, 1 kHz: the push
+        // (0.3572 N) drags both masses; the estimate d·(b + b_m)/F +
+        // (m + m_m)/(b + b_m) = 3.7e-3 + 757.6 s sets the wait, so the trial
+        // measures after the contact (the soft cable makes the handle
+        // trail the motor: ~6 s), not at home. The handle alone would give
+        // 1e-4·13.2/0.3572 + 0.3/13.2 = 26.4 ms: a cap of ⌊(0.264 + 1)/1 ms⌋
+        // = 1263 samples, before the contact.
+        let sc = scene_1khz(
+            r#"{"mass":0.3,"coulomb":0,"quantization":0,"transmission":{"motor_mass":1e4,"stiffness":1,"encoder":"handle"}}"#,
+            r#"{"home_distance":1e-4}"#,
+        );
+        let kn = HitKnobs {
+            settle_s: 0.05,
+            measure_s: 0.02,
+        };
+        let mut trace = Vec::new();
+        let o = wall_hit(&sc, 1000.0, 20.0, kn, &mut trace);
+        let c = trace.iter().position(|r| r.y > 0.0).expect("contact");
+        assert!(c > 1263, "contact at sample {c}");
+        assert_eq!(o.samples, c + 50 + 20);
     }
 }
