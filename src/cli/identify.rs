@@ -48,7 +48,10 @@ pub(super) fn run_record(
 }
 
 /// The scene `identify` writes: the base (or the default scene at the
-/// trace's rate) with the identified device.
+/// trace's rate) with the identified device, which is rigid and driven
+/// without lag (the fitted model): a base scene's transmission and
+/// amplifier lag are dropped, not combined with it (its mass is the whole
+/// moving mass).
 fn identified_scene(id: &Identified, base: Option<SceneSpec>) -> SceneSpec {
     let mut spec = base.unwrap_or_else(|| {
         let mut s = SceneSpec::default();
@@ -60,6 +63,8 @@ fn identified_scene(id: &Identified, base: Option<SceneSpec>) -> SceneSpec {
     spec.device.damping = id.damping.value;
     spec.device.coulomb = id.coulomb.value;
     spec.device.quantization = id.quantization;
+    spec.device.transmission = None;
+    spec.device.amplifier_hz = None;
     spec
 }
 
@@ -130,4 +135,48 @@ pub(super) fn run_identify(
         }
         s
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_written_scene_is_the_identified_rigid_device() {
+        // A base scene with a transmission and a lag: the identified mass
+        // is the whole moving mass of a rigid model driven without lag, so
+        // both are dropped (keeping the transmission would count the motor
+        // side twice); the rest of the base (its loop, its estimator) stays.
+        let e = |value: f64| Estimate {
+            value,
+            std_error: 0.0,
+            lo: value,
+            hi: value,
+        };
+        let id = Identified {
+            model: Model::MassDamperCoulomb,
+            mass: e(0.52),
+            damping: e(13.2),
+            coulomb: e(0.19),
+            quantization: 1e-6,
+            sample_hz: 1000.0,
+            duration_s: 20.0,
+            windows_used: 1,
+            windows_tried: 1,
+            blocks: 10,
+            residual_rms_n: 0.0,
+        };
+        let base = SceneSpec::from_json(
+            r#"{"device":{"coulomb":0,"amplifier_hz":300,"transmission":{"motor_mass":0.2,"stiffness":5e4}},"loop":{"sample_hz":2000,"render_hz":1000}}"#,
+        )
+        .unwrap();
+        let s = identified_scene(&id, Some(base));
+        assert_eq!(
+            (&s.device.transmission, s.device.amplifier_hz),
+            (&None, None)
+        );
+        assert_eq!((s.device.mass, s.device.coulomb), (0.52, 0.19));
+        assert_eq!((s.control.sample_hz, s.control.render_hz), (2000.0, 1000.0));
+        s.validate().unwrap();
+    }
 }

@@ -29,10 +29,69 @@ pub fn apply(a: &Mat, x: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// e^A by scaling and squaring (Moler & Van Loan 2003, "Nineteen dubious
-/// ways…", method 3): A/2^s with ‖A/2^s‖∞ ≤ 1/2, its Taylor series to 18
-/// terms (remainder below 1/2^18/18! ≈ 6e-22 relative), squared s times.
+/// Balance `a` in place by a diagonal similarity `D⁻¹·a·D` with powers of
+/// two (exact in floating point), evening out each state's row and column
+/// norms (Parlett & Reinsch 1969, as LAPACK's gebal); returns D. A stiff
+/// cable on a light motor side puts ~1e13 in the velocity rows against
+/// ~1e-3 in the position rows: unbalanced, the exponential below needs ~46
+/// squarings and loses up to 2 % (a spurious growing mode); balanced,
+/// ~20 and 1e-9.
+fn balance(a: &mut Mat) -> Vec<f64> {
+    let n = a.len();
+    let mut d = vec![1.0; n];
+    for _ in 0..100 {
+        let mut done = true;
+        for i in 0..n {
+            let c: f64 = (0..n).filter(|&j| j != i).map(|j| a[j][i].abs()).sum();
+            let r: f64 = (0..n).filter(|&j| j != i).map(|j| a[i][j].abs()).sum();
+            if c == 0.0 || r == 0.0 {
+                continue;
+            }
+            let (mut f, mut cc, mut rr) = (1.0, c, r);
+            while cc < rr / 2.0 {
+                (f, cc, rr) = (f * 2.0, cc * 2.0, rr / 2.0);
+            }
+            while cc > rr * 2.0 {
+                (f, cc, rr) = (f / 2.0, cc / 2.0, rr * 2.0);
+            }
+            if cc + rr < 0.95 * (c + r) {
+                done = false;
+                d[i] *= f;
+                for row in a.iter_mut() {
+                    row[i] *= f;
+                }
+                for x in a[i].iter_mut() {
+                    *x /= f;
+                }
+            }
+        }
+        if done {
+            break;
+        }
+    }
+    d
+}
+
+/// e^A = D·e^{D⁻¹AD}·D⁻¹ ([`balance`]), the balanced exponential by scaling
+/// and squaring (Moler & Van Loan 2003, "Nineteen dubious ways…", method
+/// 3): A/2^s with ‖A/2^s‖∞ ≤ 1/2, its Taylor series to 18 terms (remainder
+/// below 1/2^18/18! ≈ 6e-22 relative), squared s times.
 pub fn expm(a: &Mat) -> Mat {
+    let mut b = a.clone();
+    let d = balance(&mut b);
+    let e = expm_balanced(&b);
+    e.iter()
+        .enumerate()
+        .map(|(i, row)| {
+            row.iter()
+                .enumerate()
+                .map(|(j, x)| x * d[i] / d[j])
+                .collect()
+        })
+        .collect()
+}
+
+fn expm_balanced(a: &Mat) -> Mat {
     let n = a.len();
     let norm = a
         .iter()

@@ -248,10 +248,10 @@ mod scenes {
             r#"{"device":{"mass":0.001,"damping":0,"coulomb":0,"quantization":0},"loop":{"sample_hz":1000000,"render_hz":1000000},"probe":{"f_max_hz":1000}}"#,
             r#"{"device":{"mass":100,"damping":0,"coulomb":0,"quantization":0},"loop":{"sample_hz":100,"render_hz":100},"probe":{"f_max_hz":40}}"#,
             r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000,"delay_samples":3},"estimator":{"kind":"kalman","q":1e12}}"#,
-            // Amplifier lags at 0.01 Hz and at Nyquist (1 MHz and 100 Hz loops).
-            r#"{"device":{"mass":0.001,"coulomb":0,"quantization":0,"amplifier_hz":500000},"loop":{"sample_hz":1000000,"render_hz":1000000},"probe":{"f_max_hz":1000}}"#,
+            // Amplifier lags at 0.01 Hz and at Nyquist (20 kHz and 100 Hz loops).
+            r#"{"device":{"mass":0.001,"coulomb":0,"quantization":0,"amplifier_hz":10000},"loop":{"sample_hz":20000,"render_hz":20000},"probe":{"f_max_hz":1000}}"#,
             r#"{"device":{"coulomb":0,"quantization":0,"amplifier_hz":0.01},"loop":{"sample_hz":100,"render_hz":100},"probe":{"f_max_hz":40}}"#,
-            r#"{"device":{"coulomb":0,"quantization":0,"transmission":{"motor_mass":1e-6,"stiffness":1e8,"damping":1}},"loop":{"sample_hz":100000,"render_hz":100000},"probe":{"f_max_hz":1000}}"#,
+            r#"{"device":{"coulomb":0,"quantization":0,"transmission":{"motor_mass":1e-6,"stiffness":1e8,"damping":1}},"loop":{"sample_hz":20000,"render_hz":20000},"probe":{"f_max_hz":1000}}"#,
             r#"{"device":{"coulomb":0,"quantization":0,"transmission":{"motor_mass":1e4,"stiffness":1,"encoder":"handle"}},"loop":{"sample_hz":100,"render_hz":100},"probe":{"f_max_hz":40}}"#,
         ] {
             let sc = SceneSpec::from_json(json).unwrap().validate().unwrap();
@@ -323,6 +323,30 @@ mod scenes {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_line_on_an_undamped_mode_is_finite() {
+        // No damping anywhere: two 1 kg masses on a cable of k = 2π²·100 N/m
+        // have their mode at √(2k)/(2π) = 10 Hz, on the probe's 10th line.
+        use zwidth_core::zwidth::analytic::LinearModel;
+        let k = 2.0 * std::f64::consts::PI.powi(2) * 100.0;
+        let sc = SceneSpec::from_json(&format!(
+            r#"{{"device":{{"mass":1,"damping":0,"coulomb":0,"quantization":0,"transmission":{{"motor_mass":1,"stiffness":{k},"encoder":"handle"}}}},"loop":{{"sample_hz":1000,"render_hz":1000}}}}"#
+        ))
+        .unwrap()
+        .validate()
+        .unwrap();
+        let c = LinearModel::new(&sc).unwrap().impedance(100.0, 1.0);
+        assert!((c.freq_hz[9] - 10.0).abs() < 1e-12);
+        assert!(
+            c.magnitude
+                .iter()
+                .chain(&c.phase_deg)
+                .all(|v| v.is_finite())
+                && c.fidelity.is_finite(),
+            "{c:?}"
+        );
     }
 
     #[test]

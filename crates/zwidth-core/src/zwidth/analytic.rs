@@ -266,7 +266,15 @@ impl LinearModel {
                 g_he - zh * h * g_hm * g_ee / (t * (one + h * gd))
             }
         };
-        one / (j * w * xf)
+        let z = one / (j * w * xf);
+        // A line exactly on an undamped mode has no steady state (X/F is
+        // infinite): not passive, as the frequency engine reads a loop
+        // that never settles, and never NaN.
+        if z.is_finite() {
+            z
+        } else {
+            C::new(-1.0, 0.0)
+        }
     }
 
     pub fn impedance(&self, k: f64, b: f64) -> ImpedanceCurve {
