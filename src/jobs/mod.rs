@@ -485,4 +485,50 @@ mod tests {
         assert_eq!(row.state, "succeeded", "{:?}", row.error);
         assert_eq!(store.trials("e1").await.unwrap().len(), 1);
     }
+
+    #[tokio::test(flavor = "multi_thread")]
+    async fn at_shutdown_a_final_store_blocked_by_another_writer_is_left_to_resume() {
+        // Shutting down while another connection holds the write lock: the
+        // final store is busy and not retried (the run is left to resume
+        // from what is stored at the next start), so the runner returns
+        // within a few busy timeouts instead of waiting for the lock.
+        use sqlx::Connection;
+        let (store, guard) = temp_store("busy-shutdown").await;
+        store
+            .insert(crate::store::NewExperiment {
+                id: "e2",
+                kind: "map",
+                spec: SMALL,
+                priority: 0,
+                key: None,
+                not_before_ms: None,
+                rig: "sim",
+            })
+            .await
+            .unwrap();
+        assert_eq!(store.claim_next("sim").await.unwrap().unwrap().id, "e2");
+        let url = format!("sqlite://{}", guard.0.join("z.db").display());
+        let mut lock = sqlx::SqliteConnection::connect(&url).await.unwrap();
+        sqlx::query("BEGIN IMMEDIATE")
+            .execute(&mut lock)
+            .await
+            .unwrap();
+        let rig = Arc::new(crate::rig::SimulatedRig::new("sim", 1).unwrap());
+        let (_tx, shutdown) = tokio::sync::watch::channel(true);
+        let ended = tokio::time::timeout(
+            Duration::from_secs(40),
+            run_one(
+                &store,
+                rig,
+                &Running::default(),
+                "e2".into(),
+                SMALL.into(),
+                shutdown,
+            ),
+        )
+        .await;
+        sqlx::query("ROLLBACK").execute(&mut lock).await.unwrap();
+        assert!(ended.is_ok(), "the runner waited for the lock at shutdown");
+        assert_ne!(store.get("e2").await.unwrap().unwrap().state, "succeeded");
+    }
 }
