@@ -899,8 +899,10 @@ fn a_full_disk_loses_no_acknowledged_submission_and_recovers() {
     std::fs::create_dir_all(&data).unwrap();
     let s = start_in(data.clone());
     let url = format!("{}/v1/experiments", s.base);
-    // A running experiment of a few seconds (time-domain, 10 kHz).
-    let long = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":10000,"render_hz":1000}},"method":"time","criterion":"stability","b":[0,10,20,30],"accuracy":"draft"}"#;
+    // A running experiment of several seconds (time-domain, 10 kHz, 41
+    // columns at standard accuracy: the claim must be seen before it ends,
+    // also on a loaded machine, where four draft columns once ended first).
+    let long = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":10000,"render_hz":1000}},"method":"time","criterion":"stability","b":[0,1,2,3,4,5,6,7,8,9,10,11,12,13,14,15,16,17,18,19,20,21,22,23,24,25,26,27,28,29,30,31,32,33,34,35,36,37,38,39,40],"accuracy":"standard"}"#;
     let (code, _, v) = call(post_json(&url).send_string(long));
     assert_eq!(code, 202, "{v}");
     let running = v["id"].as_str().unwrap().to_string();
