@@ -438,17 +438,17 @@ mod tests {
     /// point (microseconds of work).
     const SMALL: &str = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
 
-    #[tokio::test(flavor = "multi_thread")]
-    async fn a_final_store_blocked_by_another_writer_is_retried_until_it_works() {
-        // Another connection holds the write lock for 6 s while the run
-        // ends: its final store is busy (the store's busy timeout), retried
-        // with back-off, and the run ends `succeeded` with its trial
-        // stored, not `interrupted` (that is for shutdown only).
+    /// A store with experiment `id` (SMALL) claimed on rig "sim", and a
+    /// second connection holding SQLite's write lock (`BEGIN IMMEDIATE`).
+    async fn claimed_behind_a_lock(
+        tag: &str,
+        id: &str,
+    ) -> (Store, TempStore, sqlx::SqliteConnection) {
         use sqlx::Connection;
-        let (store, guard) = temp_store("busy-end").await;
+        let (store, guard) = temp_store(tag).await;
         store
             .insert(crate::store::NewExperiment {
-                id: "e1",
+                id,
                 kind: "map",
                 spec: SMALL,
                 priority: 0,
@@ -458,13 +458,23 @@ mod tests {
             })
             .await
             .unwrap();
-        assert_eq!(store.claim_next("sim").await.unwrap().unwrap().id, "e1");
+        assert_eq!(store.claim_next("sim").await.unwrap().unwrap().id, id);
         let url = format!("sqlite://{}", guard.0.join("z.db").display());
         let mut lock = sqlx::SqliteConnection::connect(&url).await.unwrap();
         sqlx::query("BEGIN IMMEDIATE")
             .execute(&mut lock)
             .await
             .unwrap();
+        (store, guard, lock)
+    }
+
+    #[tokio::test(flavor = "multi_thread")]
+    async fn a_final_store_blocked_by_another_writer_is_retried_until_it_works() {
+        // Another connection holds the write lock for 6 s while the run
+        // ends: its final store is busy (the store's busy timeout), retried
+        // with back-off, and the run ends `succeeded` with its trial
+        // stored, not `interrupted` (that is for shutdown only).
+        let (store, _guard, mut lock) = claimed_behind_a_lock("busy-end", "e1").await;
         let release = tokio::spawn(async move {
             tokio::time::sleep(Duration::from_secs(6)).await;
             sqlx::query("ROLLBACK").execute(&mut lock).await.unwrap();
@@ -492,27 +502,7 @@ mod tests {
         // final store is busy and not retried (the run is left to resume
         // from what is stored at the next start), so the runner returns
         // within a few busy timeouts instead of waiting for the lock.
-        use sqlx::Connection;
-        let (store, guard) = temp_store("busy-shutdown").await;
-        store
-            .insert(crate::store::NewExperiment {
-                id: "e2",
-                kind: "map",
-                spec: SMALL,
-                priority: 0,
-                key: None,
-                not_before_ms: None,
-                rig: "sim",
-            })
-            .await
-            .unwrap();
-        assert_eq!(store.claim_next("sim").await.unwrap().unwrap().id, "e2");
-        let url = format!("sqlite://{}", guard.0.join("z.db").display());
-        let mut lock = sqlx::SqliteConnection::connect(&url).await.unwrap();
-        sqlx::query("BEGIN IMMEDIATE")
-            .execute(&mut lock)
-            .await
-            .unwrap();
+        let (store, _guard, mut lock) = claimed_behind_a_lock("busy-shutdown", "e2").await;
         let rig = Arc::new(crate::rig::SimulatedRig::new("sim", 1).unwrap());
         let (_tx, shutdown) = tokio::sync::watch::channel(true);
         let ended = tokio::time::timeout(

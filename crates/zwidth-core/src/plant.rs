@@ -192,11 +192,8 @@ impl Plant {
                 3
             }
         };
-        let scale = if motor_v == 1 {
-            1.0 / m
-        } else {
-            1.0 / self.transmission.map_or(m, |t| t.motor_mass)
-        };
+        // The mass the motor force accelerates: the handle, or the motor side.
+        let scale = 1.0 / self.transmission.map_or(m, |t| t.motor_mass);
         match self.tau {
             None => bm[motor_v][0] = scale,
             Some(tau) => {
