@@ -13,6 +13,7 @@
 pub mod accuracy;
 pub mod error;
 pub mod estimators;
+pub mod friction;
 pub mod identify;
 pub mod linalg;
 pub mod lipschitz;

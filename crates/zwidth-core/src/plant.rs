@@ -21,8 +21,29 @@
 //! while moving, friction is `−f_c·sign(v)`; when v reaches 0 inside an
 //! interval (found exactly from the closed form) the handle sticks if
 //! `|F| ≤ f_c`, else slips on in the direction of F.
+//!
+//! LuGre friction, when the scene names it (Canudas de Wit, Olsson, Åström
+//! & Lischinsky 1995, IEEE TAC 40(3), eqs. 1–3): a bristle deflection z
+//! with `ż = v − σ0·|v|·z / g(v)`, friction `F_f = σ0 z + σ1 ż` (their σ2 v
+//! is the device's viscous damping), and the Stribeck curve
+//! `g(v) = F_c + (F_s − F_c)·e^{−(v/v_s)²}`. Static friction above kinetic,
+//! and a pre-sliding spring σ0: a force below breakaway moves the handle
+//! by F/σ0 instead of holding it exactly still. Stepped in substeps h: z
+//! exactly for v held over h (an exponential toward `sign(v)·g(v)/σ0` at
+//! rate `σ0|v|/g(v)`), then F_f from z and its mean rate held over h while
+//! the linear part steps exactly (`linalg::zoh`), predicted with the
+//! velocity at the substep's start and corrected with its mean (Heun:
+//! second order). h is 3 % of the pre-sliding mode's `√(m/σ0)` and a tenth
+//! of `m/σ1` ([`lugre_substeps`]).
 
+use crate::friction::{lugre_substeps, LuGre};
 use crate::linalg::{self, Mat};
+
+/// Σ a_i·b_i over the shorter of the two.
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
 
 /// φ(a) = (1 − e^{−a})/a.
 #[inline]
@@ -55,6 +76,21 @@ pub struct PlantState {
     pub f: f64,
     pub xm: f64,
     pub vm: f64,
+    /// LuGre bristle deflection z (m); 0 without LuGre friction.
+    pub z: f64,
+}
+
+/// The substepped plant with LuGre friction.
+#[derive(Debug, Clone)]
+struct LuGreStep {
+    model: LuGre,
+    n: usize,
+    h: f64,
+    /// The state's velocity the friction acts on.
+    body: usize,
+    /// z ← Φ z + Γ·(F_cmd, F_ext, F_f) over h.
+    phi: Mat,
+    gamma: Mat,
 }
 
 /// A cable (capstan) transmission: the motor side is a second mass coupled
@@ -112,6 +148,7 @@ pub struct Plant {
     tau: Option<f64>,
     transmission: Option<Transmission>,
     linear: Option<LinearStep>,
+    lugre: Option<LuGreStep>,
 }
 
 impl Plant {
@@ -130,6 +167,7 @@ impl Plant {
             tau: None,
             transmission: None,
             linear: None,
+            lugre: None,
         }
     }
 
@@ -156,13 +194,41 @@ impl Plant {
         self
     }
 
+    /// The same plant with LuGre friction (after [`Plant::with_drive`]; the
+    /// scene bounds its substeps).
+    pub fn with_lugre(mut self, model: Option<LuGre>) -> Self {
+        let Some(model) = model else {
+            return self;
+        };
+        let mut ss = self.state_space();
+        let (body, m) = match self.transmission {
+            Some(t) if model.on_motor => (3, t.motor_mass),
+            _ => (1, self.mass),
+        };
+        for (i, row) in ss.b.iter_mut().enumerate() {
+            row.push(if i == body { -1.0 / m } else { 0.0 });
+        }
+        let n = lugre_substeps(m, model.stiffness, model.damping, self.dt) as usize;
+        let h = self.dt / n as f64;
+        let (phi, gamma) = linalg::zoh(&ss.a, &ss.b, h);
+        self.lugre = Some(LuGreStep {
+            model,
+            n,
+            h,
+            body,
+            phi,
+            gamma,
+        });
+        self
+    }
+
     /// The continuous-time model (see [`StateSpace`]). Handle:
     /// `m ẍ = −b ẋ + F_ext (+ F_motor when rigid) + k(x_m − x) + c(ẋ_m − ẋ)`;
     /// motor side: `m_m ẍ_m = −b_m ẋ_m + F_motor − k(x_m − x) − c(ẋ_m − ẋ)`;
     /// amplifier: `τ Ḟ_a = F_cmd − F_a`, F_motor = F_a (F_cmd without one).
     pub fn state_space(&self) -> StateSpace {
         let (m, b) = (self.mass, self.damping);
-        let n = 2 + 2 * usize::from(self.transmission.is_some()) + usize::from(self.tau.is_some());
+        let n = self.order();
         let mut a = vec![vec![0.0; n]; n];
         let mut bm = vec![vec![0.0; 2]; n];
         let mut handle = vec![0.0; n];
@@ -241,6 +307,10 @@ impl Plant {
     /// friction on the rigid device only).
     #[inline]
     pub fn step_driven(&self, s: &mut PlantState, motor: f64, ext: f64, friction: bool) {
+        if let (true, Some(l)) = (friction, &self.lugre) {
+            self.step_lugre(l, s, motor, ext);
+            return;
+        }
         match &self.linear {
             None => {
                 s.f = motor;
@@ -256,30 +326,80 @@ impl Plant {
                 s.f = motor + (s.f - motor) * l.decay;
             }
             Some(l) => {
-                let mut z = [s.x, s.v, 0.0, 0.0, 0.0];
-                let n = l.phi.len();
-                if self.transmission.is_some() {
-                    (z[2], z[3]) = (s.xm, s.vm);
+                let z = self.pack(s);
+                let mut next = [0.0; 5];
+                for (i, zi) in next.iter_mut().enumerate().take(l.phi.len()) {
+                    *zi = dot(&l.phi[i], &z) + l.gamma[i][0] * motor + l.gamma[i][1] * ext;
                 }
-                if self.tau.is_some() {
-                    z[n - 1] = s.f;
-                }
-                let next = |i: usize| {
-                    l.phi[i].iter().zip(&z).map(|(p, x)| p * x).sum::<f64>()
-                        + l.gamma[i][0] * motor
-                        + l.gamma[i][1] * ext
-                };
-                let mut z = [0.0; 5];
-                for (i, zi) in z.iter_mut().enumerate().take(n) {
-                    *zi = next(i);
-                }
-                (s.x, s.v) = (z[0], z[1]);
-                if self.transmission.is_some() {
-                    (s.xm, s.vm) = (z[2], z[3]);
-                }
-                s.f = if self.tau.is_some() { z[n - 1] } else { motor };
+                self.unpack(&next, motor, s);
             }
         }
+    }
+
+    /// The state as the state-space model's vector (see [`StateSpace`]).
+    #[inline]
+    fn pack(&self, s: &PlantState) -> [f64; 5] {
+        let mut z = [s.x, s.v, 0.0, 0.0, 0.0];
+        if self.transmission.is_some() {
+            (z[2], z[3]) = (s.xm, s.vm);
+        }
+        if self.tau.is_some() {
+            z[self.order() - 1] = s.f;
+        }
+        z
+    }
+
+    /// [`Plant::pack`] undone; the delivered force is `motor` without a lag.
+    #[inline]
+    fn unpack(&self, z: &[f64; 5], motor: f64, s: &mut PlantState) {
+        (s.x, s.v) = (z[0], z[1]);
+        if self.transmission.is_some() {
+            (s.xm, s.vm) = (z[2], z[3]);
+        }
+        s.f = if self.tau.is_some() {
+            z[self.order() - 1]
+        } else {
+            motor
+        };
+    }
+
+    /// The state-space model's order.
+    #[inline]
+    fn order(&self) -> usize {
+        2 + 2 * usize::from(self.transmission.is_some()) + usize::from(self.tau.is_some())
+    }
+
+    /// One interval with LuGre friction (module doc): per substep h, the
+    /// bristle exactly for the velocity held, then the friction force
+    /// `σ0 z + σ1 ż` (ż its mean over h) held while the rest steps exactly.
+    #[inline]
+    fn step_lugre(&self, l: &LuGreStep, s: &mut PlantState, motor: f64, ext: f64) {
+        let mut z = self.pack(s);
+        let n = l.phi.len();
+        let (k0, k1) = (l.model.stiffness, l.model.damping);
+        let advance = |z: &[f64; 5], friction: f64| {
+            let mut next = [0.0; 5];
+            for (i, zi) in next.iter_mut().enumerate().take(n) {
+                *zi = dot(&l.phi[i], z)
+                    + l.gamma[i][0] * motor
+                    + l.gamma[i][1] * ext
+                    + l.gamma[i][2] * friction;
+            }
+            next
+        };
+        for _ in 0..l.n {
+            // Predict with the velocity at the start, then correct with the
+            // bristle stepped at the mean velocity and its spring force's
+            // mean over h (trapezoid): second order in h (Heun).
+            let v0 = z[l.body];
+            let b = l.model.bristle(s.z, v0, l.h);
+            let predicted = advance(&z, k0 * b + k1 * (b - s.z) / l.h);
+            let vm = 0.5 * (v0 + predicted[l.body]);
+            let b = l.model.bristle(s.z, vm, l.h);
+            z = advance(&z, k0 * 0.5 * (s.z + b) + k1 * (b - s.z) / l.h);
+            s.z = b;
+        }
+        self.unpack(&z, motor, s);
     }
 
     /// The ZOH-discretized plant `x_{k+1} = A x_k + B F_k` for the fixed dt:

@@ -195,6 +195,13 @@ mod scenes {
             // 1e4 kg one on 1 N/m, encoder on either side.
             r#"{"device":{"coulomb":0,"transmission":{"motor_mass":1e-6,"stiffness":1e8}},"hit":{"home_distance":0.0001}}"#,
             r#"{"device":{"coulomb":0,"amplifier_hz":50,"transmission":{"motor_mass":1e4,"stiffness":1,"encoder":"handle"}},"hit":{"home_distance":0.0001}}"#,
+            // LuGre friction at its edges: the stiffest bristles the
+            // substep bound allows at 10 kHz, undamped bristles, a Stribeck
+            // dip over a nanometre per second, a 1e4 N static level the
+            // push never breaks; on the motor side of a light motor.
+            r#"{"device":{"friction":{"bristle_stiffness":1e9,"bristle_damping":0}},"hit":{"home_distance":0.0001}}"#,
+            r#"{"device":{"friction":{"static":1e4,"stribeck_velocity":1e-9,"bristle_stiffness":1}},"hit":{"home_distance":0.0001}}"#,
+            r#"{"device":{"friction":{"on":"motor","static":0.3,"bristle_damping":1},"amplifier_hz":500,"transmission":{"motor_mass":0.01,"stiffness":1e4}},"loop":{"sample_hz":1000,"render_hz":1000},"hit":{"home_distance":0.0001}}"#,
         ] {
             let sc = SceneSpec::from_json(json).unwrap().validate().unwrap();
             for (k, b) in [(1e7, 0.0), (1e7, 1e3), (1.0, 0.0), (1e5, -50.0)] {
@@ -390,6 +397,43 @@ mod scenes {
             (
                 r#"{"device":{"transmission":{"motor_mass":0.1,"stiffness":1e4}}}"#,
                 "device.coulomb",
+            ),
+            // LuGre friction: a kinetic level > 0, static ≥ kinetic, a
+            // Stribeck velocity > 0, bristles in range, on the motor only
+            // with a transmission, at most 1000 substeps per sample.
+            (
+                r#"{"device":{"coulomb":0,"friction":{}}}"#,
+                "device.coulomb",
+            ),
+            (
+                r#"{"device":{"coulomb":0.2,"friction":{"static":0.19}}}"#,
+                "device.friction.static",
+            ),
+            (
+                r#"{"device":{"friction":{"stribeck_velocity":0}}}"#,
+                "device.friction.stribeck_velocity",
+            ),
+            (
+                r#"{"device":{"friction":{"stribeck_velocity":-1e-3}}}"#,
+                "device.friction.stribeck_velocity",
+            ),
+            (
+                r#"{"device":{"friction":{"bristle_stiffness":0}}}"#,
+                "device.friction.bristle_stiffness",
+            ),
+            (
+                r#"{"device":{"friction":{"bristle_damping":-1}}}"#,
+                "device.friction.bristle_damping",
+            ),
+            (
+                r#"{"device":{"friction":{"on":"motor"}}}"#,
+                "device.friction.on",
+            ),
+            // 1 kHz, 0.52 kg: 1e9 N/m needs 3 % of √(m/σ0) = 6.8e-7 s
+            // steps, 1 467 per sample.
+            (
+                r#"{"device":{"friction":{"bristle_stiffness":1e9}},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+                "device.friction.bristle_stiffness",
             ),
         ] {
             let e = SceneSpec::from_json(json).unwrap().validate().unwrap_err();

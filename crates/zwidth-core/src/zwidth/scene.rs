@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{require_non_negative, require_positive, require_range, SpecError};
 use crate::estimators::{Estimator, EstimatorKind, EstimatorSpec, Sampling};
+use crate::friction::{lugre_substeps, LuGre};
 use crate::plant::{Plant, Transmission};
 
 /// The encoder step the estimators are built for when the scene's sensor is
@@ -21,6 +22,8 @@ pub const MAX_PROBE_LINES: usize = 1000;
 /// z = 1) lose digits as the rate grows (an independent check: G_d wrong by
 /// 3e-7 at 10 kHz, 1.2e-2 at 100 kHz); above it the simulations answer.
 pub const MAX_ANALYTIC_DRIVE_HZ: f64 = 20_000.0;
+/// Most LuGre substeps in one encoder sample (`plant::lugre_substeps`).
+pub const MAX_FRICTION_SUBSTEPS: f64 = 1000.0;
 /// Most simulation steps in one probe period (memory: one f64 per step, twice).
 pub const MAX_PROBE_PERIOD_STEPS: usize = 4_000_000;
 
@@ -35,7 +38,9 @@ pub struct DeviceSpec {
     /// Viscous damping b (N·s/m).
     #[serde(default = "d_damping")]
     pub damping: f64,
-    /// Coulomb friction f_c (N); static equals kinetic, as the 2018 paper assumes.
+    /// Coulomb friction f_c (N): the kinetic level. Static equals kinetic
+    /// with ideal stick–slip, as the 2018 paper assumes, unless `friction`
+    /// names a LuGre model.
     #[serde(default = "d_coulomb")]
     pub coulomb: f64,
     /// Encoder step (m); 0 is an ideal sensor.
@@ -62,6 +67,56 @@ pub struct DeviceSpec {
     /// device only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub transmission: Option<TransmissionSpec>,
+    /// Friction beyond ideal Coulomb: the LuGre model (static above
+    /// kinetic, a Stribeck curve, pre-sliding bristles; `plant.rs`), with
+    /// `coulomb` as its kinetic level; null for ideal Coulomb stick–slip.
+    /// Off unless named.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub friction: Option<FrictionSpec>,
+}
+
+/// LuGre friction (Canudas de Wit, Olsson, Åström & Lischinsky 1995). The
+/// defaults are that paper's example values (σ0 = 1e5 N/m, σ1 = √1e5 N·s/m,
+/// v_s = 1 mm/s) with static = kinetic.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FrictionSpec {
+    /// Static (breakaway) friction F_s (N), at least `device.coulomb`;
+    /// null for `device.coulomb` (no Stribeck dip).
+    #[serde(rename = "static", default, skip_serializing_if = "Option::is_none")]
+    pub static_force: Option<f64>,
+    /// Stribeck velocity v_s (m/s): friction falls from F_s to F_c over it.
+    #[serde(default = "d_stribeck_velocity")]
+    pub stribeck_velocity: f64,
+    /// Bristle stiffness σ0 (N/m): the pre-sliding spring.
+    #[serde(default = "d_bristle_stiffness")]
+    pub bristle_stiffness: f64,
+    /// Bristle damping σ1 (N·s/m).
+    #[serde(default = "d_bristle_damping")]
+    pub bristle_damping: f64,
+    /// Where it acts: `handle`, or `motor` (the motor side of a
+    /// transmission: bearings, brushes).
+    #[serde(default)]
+    pub on: FrictionSide,
+}
+
+/// The body friction acts on.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum FrictionSide {
+    #[default]
+    Handle,
+    Motor,
+}
+
+fn d_stribeck_velocity() -> f64 {
+    1e-3
+}
+fn d_bristle_stiffness() -> f64 {
+    1e5
+}
+fn d_bristle_damping() -> f64 {
+    1e5f64.sqrt()
 }
 
 /// A cable (capstan) transmission between the motor and the handle.
@@ -96,16 +151,39 @@ pub enum EncoderSide {
 impl DeviceSpec {
     /// The plant of this device for steps of `dt` (every engine's).
     pub fn plant(&self, dt: f64) -> Plant {
-        Plant::new(self.mass, self.damping, self.coulomb, dt).with_drive(
-            self.amplifier_hz,
-            self.transmission.as_ref().map(|t| Transmission {
-                motor_mass: t.motor_mass,
-                motor_damping: t.motor_damping,
-                stiffness: t.stiffness,
-                damping: t.damping,
-                encoder_on_motor: t.encoder == EncoderSide::Motor,
-            }),
-        )
+        Plant::new(self.mass, self.damping, self.coulomb, dt)
+            .with_drive(
+                self.amplifier_hz,
+                self.transmission.as_ref().map(|t| Transmission {
+                    motor_mass: t.motor_mass,
+                    motor_damping: t.motor_damping,
+                    stiffness: t.stiffness,
+                    damping: t.damping,
+                    encoder_on_motor: t.encoder == EncoderSide::Motor,
+                }),
+            )
+            .with_lugre(self.lugre())
+    }
+
+    /// The LuGre model the scene names, if any.
+    pub fn lugre(&self) -> Option<LuGre> {
+        self.friction.as_ref().map(|f| LuGre {
+            kinetic: self.coulomb,
+            static_force: self.static_friction(),
+            stribeck_velocity: f.stribeck_velocity,
+            stiffness: f.bristle_stiffness,
+            damping: f.bristle_damping,
+            on_motor: f.on == FrictionSide::Motor,
+        })
+    }
+
+    /// The force that breaks the device loose (N): LuGre's static level,
+    /// else the Coulomb level.
+    pub fn static_friction(&self) -> f64 {
+        self.friction
+            .as_ref()
+            .and_then(|f| f.static_force)
+            .unwrap_or(self.coulomb)
     }
 }
 
@@ -133,6 +211,7 @@ impl Default for DeviceSpec {
             force_resolution: None,
             amplifier_hz: None,
             transmission: None,
+            friction: None,
         }
     }
 }
@@ -369,6 +448,65 @@ fn is_whole(x: f64) -> bool {
     (x - x.round()).abs() <= 1e-9 * x.abs().max(1.0)
 }
 
+/// LuGre friction's fields (`FrictionSpec`) against the device and the rate.
+fn validate_friction(d: &DeviceSpec, f: &FrictionSpec, sample_hz: f64) -> Result<(), SpecError> {
+    let fp = |e: SpecError| e.within("device.friction");
+    if d.coulomb <= 0.0 {
+        return Err(SpecError::new(
+            "device.coulomb",
+            d.coulomb,
+            "must be > 0 N with device.friction: it is the LuGre model's kinetic level F_c",
+        ));
+    }
+    if let Some(fs) = f.static_force {
+        if !(fs.is_finite() && fs >= d.coulomb && fs <= 1e4) {
+            return Err(SpecError::new(
+                "device.friction.static",
+                fs,
+                format!(
+                    "must be at least the kinetic level device.coulomb = {} N and at most 1e4 N",
+                    d.coulomb
+                ),
+            ));
+        }
+    }
+    require_range(
+        "stribeck_velocity",
+        f.stribeck_velocity,
+        1e-9,
+        10.0,
+        "m/s, > 0",
+    )
+    .map_err(fp)?;
+    require_range("bristle_stiffness", f.bristle_stiffness, 1.0, 1e9, "N/m").map_err(fp)?;
+    require_range("bristle_damping", f.bristle_damping, 0.0, 1e6, "N·s/m").map_err(fp)?;
+    let body = match (&d.transmission, f.on) {
+        (_, FrictionSide::Handle) => d.mass,
+        (Some(t), FrictionSide::Motor) => t.motor_mass,
+        (None, FrictionSide::Motor) => {
+            return Err(SpecError::new(
+                "device.friction.on",
+                "motor",
+                "must be handle on a rigid device (motor needs device.transmission)",
+            ))
+        }
+    };
+    let n = lugre_substeps(
+        body,
+        f.bristle_stiffness,
+        f.bristle_damping,
+        1.0 / sample_hz,
+    );
+    if n > MAX_FRICTION_SUBSTEPS {
+        return Err(SpecError::new(
+            "device.friction.bristle_stiffness",
+            f.bristle_stiffness,
+            format!("needs {n} substeps per sample at loop.sample_hz = {sample_hz} Hz with bristle_damping = {} N·s/m on {body} kg (each at most 3 % of √(m/σ0) and a tenth of m/σ1); at most {MAX_FRICTION_SUBSTEPS}: lower the bristles' stiffness or damping, or raise the rate", f.bristle_damping),
+        ));
+    }
+    Ok(())
+}
+
 impl SceneSpec {
     pub fn from_json(text: &str) -> Result<Self, SpecError> {
         crate::error::parse_json(text, "scene", "scene")
@@ -453,13 +591,16 @@ impl SceneSpec {
             require_non_negative("motor_damping", t.motor_damping, "N·s/m").map_err(tp)?;
             require_range("stiffness", t.stiffness, 1.0, 1e8, "N/m").map_err(tp)?;
             require_non_negative("damping", t.damping, "N·s/m").map_err(tp)?;
-            if d.coulomb > 0.0 {
+            if d.coulomb > 0.0 && d.friction.is_none() {
                 return Err(SpecError::new(
                     "device.coulomb",
                     d.coulomb,
-                    "must be 0 with a transmission: friction is modelled on the rigid device only",
+                    "must be 0 with a transmission unless device.friction names a LuGre model (ideal stick–slip is modelled on the rigid device only)",
                 ));
             }
+        }
+        if let Some(f) = &d.friction {
+            validate_friction(d, f, l.sample_hz)?;
         }
         if let Some(fa) = d.amplifier_hz {
             let nyq = l.sample_hz / 2.0;

@@ -241,8 +241,20 @@ impl Evaluator {
             ),
             Method::Time | Method::Frequency => {
                 let mut parts = vec![format!("exact ZOH plant m = {} kg, b = {} N·s/m", s.device.mass, s.device.damping)];
-                if s.device.coulomb > 0.0 {
-                    parts.push(format!("Coulomb stick-slip f_c = {} N", s.device.coulomb));
+                match (&s.device.friction, s.device.coulomb > 0.0) {
+                    (Some(f), _) => parts.push(format!(
+                        "LuGre friction on the {} F_c = {} N, F_s = {} N, v_s = {} m/s, σ0 = {} N/m, σ1 = {} N·s/m",
+                        if f.on == super::scene::FrictionSide::Motor { "motor side" } else { "handle" },
+                        s.device.coulomb,
+                        s.device.static_friction(),
+                        f.stribeck_velocity,
+                        f.bristle_stiffness,
+                        f.bristle_damping
+                    )),
+                    (None, true) => {
+                        parts.push(format!("Coulomb stick-slip f_c = {} N", s.device.coulomb))
+                    }
+                    (None, false) => {}
                 }
                 if s.device.quantization > 0.0 {
                     parts.push(format!("quantization {} m", s.device.quantization));
