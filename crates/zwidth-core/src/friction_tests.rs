@@ -83,7 +83,7 @@ fn steady_sliding_settles_on_the_stribeck_curve() {
 fn below_breakaway_the_bristles_give_as_a_damped_spring() {
     // A force far below F_c deflects the bristles only (σ0|z| ≪ g): the
     // handle is the mass–spring–damper m ẍ + σ1 ẋ + σ0 x = F (1995 paper
-    // §II, the pre-sliding spring), with ω0 = √(σ0/m) = 447.2 rad/s and
+    // its pre-sliding spring), with ω0 = √(σ0/m) = 447.2 rad/s and
     // ζ = σ1/(2√(σ0 m)) = 0.0224, so it rings at ω_d = ω0√(1 − ζ²) and comes
     // to rest at F/σ0, where ideal Coulomb friction holds it at 0.
     let lg = LuGre {
@@ -134,7 +134,7 @@ fn below_breakaway_the_bristles_give_as_a_damped_spring() {
 #[test]
 fn a_slow_ramp_breaks_loose_where_the_reference_does() {
     // F = 0.5 N/s · t from rest: the handle creeps in pre-sliding, then
-    // breaks loose near F_s (Canudas de Wit 1995, §III: break-away at F_s
+    // breaks loose near F_s (Canudas de Wit 1995: break-away at F_s
     // for slow ramps); "loose" here is v > v_s, reached a little below F_s
     // as friction falls along the Stribeck curve. The sample it happens at
     // is the RK4 reference's (to one sample: 0.5 mN); with F_s = F_c it is
@@ -237,7 +237,7 @@ fn a_step_below_static_friction_breaks_loose_when_its_rate_is_high() {
     // v_s = 1 mm/s: a 0.3572 N step is below F_s, yet the bristle damper
     // lets the handle reach F/σ1 ≈ 1.1 mm/s > v_s within a millisecond,
     // the Stribeck curve drops to F_c, and it slides (LuGre's break-away
-    // force falls as the force's rate rises, Canudas de Wit 1995 §III). It
+    // force falls as the force's rate rises, Canudas de Wit 1995). It
     // ends at the terminal velocity (F − F_c)/b, as the RK4 reference does.
     let lg = LuGre {
         kinetic: 0.19,
