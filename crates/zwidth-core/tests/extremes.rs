@@ -429,6 +429,9 @@ mod scenes {
                 r#"{"device":{"friction":{"on":"motor"}}}"#,
                 "device.friction.on",
             ),
+            // 1 to 32 hits per time-domain verdict.
+            (r#"{"hit":{"replicates":0}}"#, "hit.replicates"),
+            (r#"{"hit":{"replicates":33}}"#, "hit.replicates"),
             // 1 kHz, 0.52 kg: 1e9 N/m needs 3 % of √(m/σ0) = 6.8e-7 s
             // steps, 1 467 per sample.
             (

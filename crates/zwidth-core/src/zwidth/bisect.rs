@@ -194,7 +194,12 @@ pub(super) fn interval(
     if hi.is_infinite() {
         return (lo, None);
     }
-    let hi_bottom = max_k(points, &|p| !p.surely_not_ok() && p.k < hi).max(lo);
+    // Never below the smallest K searched: with nothing kept below `hi`
+    // (every K decided not passive, an empty column) the edge would halve
+    // towards 0 until f64 runs out (a thousand trials).
+    let hi_bottom = max_k(points, &|p| !p.surely_not_ok() && p.k < hi)
+        .max(lo)
+        .max(bounds.k0.min(hi));
     let keep = |p: &Point| !p.surely_not_ok();
     let hi = bisect_edge(&mut classify, hi_bottom, hi, rel_tol, points, keep).1;
     (lo, Some(hi))
@@ -432,6 +437,28 @@ mod tests {
         assert_eq!(lo, 0.0);
         assert!(pts.iter().all(|p| p.k >= 100.0), "nothing below k0");
         assert!((1234.0..=1234.0 * 1.0011).contains(&hi.unwrap()));
+    }
+
+    #[test]
+    fn an_empty_column_costs_no_trials_below_the_search() {
+        // Decided not passive everywhere (a B no K renders at): bisection
+        // gives up at k0/1024 (ten halvings), and the interval's upper edge
+        // is the smallest K it tried, with no trial below it (the edge used
+        // to halve on towards 0 until f64 ran out: 1 074 trials a column).
+        let none = |k: f64| Point {
+            k,
+            passive: Some(false),
+            decided: Some(true),
+            ..Point::default()
+        };
+        let b = NOISY;
+        let mut pts = Vec::new();
+        assert_eq!(bisect_k(none, b, false, &mut pts), None);
+        let floor = pts.iter().map(|p| p.k).fold(f64::INFINITY, f64::min);
+        assert_eq!((pts.len(), floor), (11, b.k0 / 1024.0));
+        let (lo, hi) = interval(none, 0.0, b, &mut pts);
+        assert_eq!((lo, hi), (0.0, Some(floor)));
+        assert_eq!(pts.len(), 11, "no trial added");
     }
 
     #[test]

@@ -314,6 +314,27 @@ mod tests {
     }
 
     #[test]
+    fn a_line_with_no_response_is_decided_not_passive() {
+        // Two lines, one band each: G = 0.02 − 0.05j (Re Z = 6.9 > 0) and
+        // G = 0 exactly (the handle did not move at that frequency: Z is
+        // not a number). The passive line alone would be decided passive;
+        // a Z that cannot be formed is decided not passive, never skipped.
+        let good = C::new(0.02, -0.05);
+        let mut s = BlaStats::new(2, 1);
+        for d in [-1e-6, 0.0, 1e-6] {
+            s.push(&[vec![good + d, C::new(0.0, 0.0)]]);
+        }
+        let v = s.verdict(0.05, 10);
+        assert!(v.decided && !v.passive, "{v:?}");
+        let mut only_good = BlaStats::new(1, 1);
+        for d in [-1e-6, 0.0, 1e-6] {
+            only_good.push(&[vec![good + d]]);
+        }
+        let v = only_good.verdict(0.05, 10);
+        assert!(v.decided && v.passive, "{v:?}");
+    }
+
+    #[test]
     fn margin_and_standard_error_by_hand() {
         let g = C::new(0.02, -0.05);
         let v = one_line(g, &[-1e-3, 0.0, 1e-3]).verdict(0.05, 10);

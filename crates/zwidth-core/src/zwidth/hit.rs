@@ -89,13 +89,70 @@ pub fn wall_hit(
     knobs: HitKnobs,
     rec: &mut impl Recorder,
 ) -> HitOutcome {
+    replicate_hit(scene, k, b, knobs, 0, rec)
+}
+
+/// Replicate `r` of `hit.replicates`: the hit from `r/R` of an encoder step
+/// (1 µm with an ideal sensor) farther from the wall (`HitSpec::replicates`).
+pub fn replicate_hit(
+    scene: &Scene,
+    k: f64,
+    b: f64,
+    knobs: HitKnobs,
+    r: u32,
+    rec: &mut impl Recorder,
+) -> HitOutcome {
     let d = &scene.spec.device;
+    let step = if d.quantization > 0.0 {
+        d.quantization
+    } else {
+        1e-6
+    };
+    let home = scene.spec.hit.home_distance
+        + step * f64::from(r) / f64::from(scene.spec.hit.replicates.max(1));
     match (d.coulomb > 0.0, d.quantization > 0.0) {
-        (true, true) => run::<true, true, true>(scene, k, b, knobs, rec),
-        (true, false) => run::<true, false, true>(scene, k, b, knobs, rec),
-        (false, true) => run::<false, true, true>(scene, k, b, knobs, rec),
-        (false, false) => run::<false, false, true>(scene, k, b, knobs, rec),
+        (true, true) => run::<true, true, true>(scene, k, b, knobs, home, rec),
+        (true, false) => run::<true, false, true>(scene, k, b, knobs, home, rec),
+        (false, true) => run::<false, true, true>(scene, k, b, knobs, home, rec),
+        (false, false) => run::<false, false, true>(scene, k, b, knobs, home, rec),
     }
+}
+
+/// The verdict of `hit.replicates` hits (`HitSpec::replicates`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Replicated {
+    /// Hits run and hits stable.
+    pub hits: u32,
+    pub stable: u32,
+    /// Any hit's force was clipped by the force limit.
+    pub saturated: bool,
+}
+
+impl Replicated {
+    /// The majority (a tie is unstable).
+    pub fn stable(&self) -> bool {
+        2 * self.stable > self.hits
+    }
+
+    /// Every hit agreed.
+    pub fn decided(&self) -> bool {
+        self.stable == 0 || self.stable == self.hits
+    }
+}
+
+pub fn replicated_hits(scene: &Scene, k: f64, b: f64, knobs: HitKnobs) -> Replicated {
+    let hits = scene.spec.hit.replicates.max(1);
+    let mut out = Replicated {
+        hits,
+        stable: 0,
+        saturated: false,
+    };
+    for r in 0..hits {
+        let o = replicate_hit(scene, k, b, knobs, r, &mut NoTrace);
+        out.stable += u32::from(o.stable);
+        out.saturated |= o.saturated_renders > 0;
+    }
+    out
 }
 
 /// `EARLY`: end a trial once friction holds the handle (module doc); off
@@ -105,6 +162,7 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
     k: f64,
     b: f64,
     knobs: HitKnobs,
+    home_distance: f64,
     rec: &mut impl Recorder,
 ) -> HitOutcome {
     let s = &scene.spec;
@@ -131,13 +189,13 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
     // (With LuGre friction a push above F_c but below F_s may break loose
     // or not, depending on how fast the force rises: wait for it.)
     let drive = push.abs().min(limit) - dev.coulomb;
-    let will_move = push > 0.0 && drive > 0.0 && s.hit.home_distance > 0.0;
+    let will_move = push > 0.0 && drive > 0.0 && home_distance > 0.0;
     let approach_s = if !will_move {
         0.0
     } else if damping > 0.0 {
-        s.hit.home_distance * damping / drive + mass / damping
+        home_distance * damping / drive + mass / damping
     } else {
-        (2.0 * s.hit.home_distance * mass / drive).sqrt()
+        (2.0 * home_distance * mass / drive).sqrt()
     };
     let cap = ((10.0 * approach_s + 1.0) / scene.dt).min(1e9) as usize;
     let mut measure_from = if will_move { usize::MAX } else { settle };
@@ -147,7 +205,7 @@ fn run<const FRICTION: bool, const QUANT: bool, const EARLY: bool>(
         settle + measure
     };
     let mut touched = false;
-    let mut st = plant.at_rest(wall - s.hit.home_distance);
+    let mut st = plant.at_rest(wall - home_distance);
     // Welford mean/variance of y over the measure window.
     let (mut n, mut mean, mut m2) = (0.0f64, 0.0f64, 0.0f64);
     let (mut stuck_for, mut last_y) = (0usize, f64::NAN);
@@ -366,7 +424,14 @@ mod tests {
                 let early = wall_hit(&sc, k, b, kn, &mut rows);
                 // `samples` counts the steps simulated, one trace row each.
                 assert_eq!(rows.len(), early.samples, "K={k} B={b}");
-                let full = run::<true, true, false>(&sc, k, b, kn, &mut NoTrace);
+                let full = run::<true, true, false>(
+                    &sc,
+                    k,
+                    b,
+                    kn,
+                    sc.spec.hit.home_distance,
+                    &mut NoTrace,
+                );
                 assert_eq!(early.stable, full.stable, "K={k} B={b}");
                 assert_eq!(early.diverged, full.diverged, "K={k} B={b}");
                 let (re, rf) = (early.rms.unwrap(), full.rms.unwrap());
@@ -481,6 +546,41 @@ mod tests {
         .unwrap()
         .validate()
         .unwrap()
+    }
+
+    #[test]
+    fn replicate_r_starts_r_over_r_of_an_encoder_step_farther() {
+        // hit.replicates = 4 on a 2 µm encoder: replicate 3 starts 1.5 µm
+        // farther from the wall than the scene's home; with an ideal sensor
+        // the step is 1 µm. Replicate 0 is the plain hit.
+        let rows = |device: &str, r: u32| {
+            let sc = scene_1khz(
+                device,
+                r#"{"replicates":4,"settle_s":0.01,"measure_s":0.01}"#,
+            );
+            let kn = HitKnobs {
+                settle_s: 0.01,
+                measure_s: 0.01,
+            };
+            let mut t: Vec<TraceRow> = Vec::new();
+            replicate_hit(&sc, 1000.0, 0.0, kn, r, &mut t);
+            (t[0].x, sc.spec.hit.home_distance)
+        };
+        let (x, home) = rows(r#"{"quantization":2e-6}"#, 3);
+        assert_eq!(x, -(home + 1.5e-6));
+        let (x, home) = rows(r#"{"quantization":0}"#, 1);
+        assert_eq!(x, -(home + 0.25e-6));
+        let (x, home) = rows(r#"{"quantization":2e-6}"#, 0);
+        assert_eq!(x, -home);
+        // The verdict of R hits: the majority, a tie unstable, decided
+        // only when all agree.
+        let v = |hits, stable| Replicated {
+            hits,
+            stable,
+            saturated: false,
+        };
+        assert!(v(3, 2).stable() && !v(3, 1).stable() && !v(2, 1).stable() && v(2, 2).stable());
+        assert!(v(3, 3).decided() && v(3, 0).decided() && !v(3, 2).decided() && !v(3, 1).decided());
     }
 
     #[test]

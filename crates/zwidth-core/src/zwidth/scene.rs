@@ -277,6 +277,24 @@ pub struct HitSpec {
     /// Stable iff that RMS is below this (m); 1.06e-4 mm in the paper.
     #[serde(default = "d_threshold")]
     pub threshold: f64,
+    /// Hits per verdict (1–32): replicate r starts `r/R` of an encoder step
+    /// (1 µm with an ideal sensor) farther from the wall, so the hits see
+    /// the quantization grid and the approach at different phases. With
+    /// more than one the verdict is the majority (a tie is unstable),
+    /// decided only when every hit agrees, and the map's boundary carries
+    /// intervals (`search.rs`). 1, the default, is the paper's single hit.
+    #[serde(default = "d_replicates", skip_serializing_if = "is_one")]
+    pub replicates: u32,
+}
+
+/// Most hits per time-domain verdict (`hit.replicates`).
+pub const MAX_HIT_REPLICATES: u32 = 32;
+
+fn d_replicates() -> u32 {
+    1
+}
+fn is_one(n: &u32) -> bool {
+    *n == 1
 }
 
 fn d_home() -> f64 {
@@ -303,6 +321,7 @@ impl Default for HitSpec {
             settle_s: d_settle(),
             measure_s: d_measure(),
             threshold: d_threshold(),
+            replicates: d_replicates(),
         }
     }
 }
@@ -615,6 +634,13 @@ impl SceneSpec {
         let h = &self.hit;
         let hp = |e: SpecError| e.within("hit");
         require_non_negative("home_distance", h.home_distance, "m").map_err(hp)?;
+        if !(1..=MAX_HIT_REPLICATES).contains(&h.replicates) {
+            return Err(SpecError::new(
+                "hit.replicates",
+                h.replicates,
+                format!("must be 1 to {MAX_HIT_REPLICATES} hits per verdict"),
+            ));
+        }
         if !h.push_force.is_finite() {
             return Err(SpecError::new(
                 "hit.push_force",
@@ -632,11 +658,11 @@ impl SceneSpec {
                 "settle_s + measure_s must be at most 3600 s",
             ));
         }
-        if (h.settle_s + h.measure_s) * l.sample_hz > 1e9 {
+        if (h.settle_s + h.measure_s) * l.sample_hz * f64::from(h.replicates) > 1e9 {
             return Err(SpecError::new(
                 "hit.measure_s",
                 h.measure_s,
-                "a trial may have at most 1e9 samples",
+                "a trial may have at most 1e9 samples (over its hit.replicates hits)",
             ));
         }
         let p = &self.probe;
@@ -1163,4 +1189,23 @@ mod tests {
             .get("method")
             .is_none());
     }
+
+    #[test]
+    fn one_hit_per_verdict_is_not_written_so_stored_scenes_read_as_before() {
+        // A stored scene from before `hit.replicates` reads as one hit, and
+        // one hit is not written back: the scene's JSON (and so every
+        // stored spec and its hash) is unchanged unless a scene asks for more.
+        let one = serde_json::to_value(HitSpec::default()).unwrap();
+        assert!(one.get("replicates").is_none(), "{one}");
+        let three = HitSpec {
+            replicates: 3,
+            ..HitSpec::default()
+        };
+        let v = serde_json::to_value(&three).unwrap();
+        assert_eq!(v["replicates"], 3);
+        assert_eq!(serde_json::from_value::<HitSpec>(v).unwrap(), three);
+        let old: HitSpec = serde_json::from_str(r#"{"home_distance":0.07}"#).unwrap();
+        assert_eq!(old.replicates, 1);
+    }
+
 }

@@ -18,7 +18,7 @@ use std::time::Instant;
 use super::analytic::{ImpedanceCurve, LinearModel};
 use super::bisect::{bisect_k, Bracket};
 use super::cost::Cost;
-use super::hit::{wall_hit, NoTrace};
+use super::hit::{replicated_hits, wall_hit, NoTrace};
 pub use super::observer::{Observer, StoredEvaluation, StoredTrial};
 use super::probe::{probe_with, ProbeSetup};
 use super::scene::{validate_wall, ProbeMethod, Scene};
@@ -272,7 +272,12 @@ impl Evaluator {
                 parts.push(format!("encoder {} Hz, render {} Hz, delay {}", s.control.sample_hz, s.control.render_hz, s.control.delay_samples));
                 parts.push(format!("estimator {est}"));
                 let noisy = self.noisy();
-                let kind = if self.method == Method::Time {
+                let kind = if self.method == Method::Time && noisy {
+                    format!(
+                        "time-domain wall-hit simulation ({} replicate hits per verdict, each started a further 1/{} encoder step from the wall; the majority decides, decided only when all agree)",
+                        s.hit.replicates, s.hit.replicates
+                    )
+                } else if self.method == Method::Time {
                     "time-domain wall-hit simulation".to_string()
                 } else if noisy {
                     format!(
@@ -339,6 +344,13 @@ impl Evaluator {
         let (k, b) = (p.k, p.b);
         match (self.criterion, &self.model) {
             (Criterion::Stability, Some(m)) => p.stable = Some(m.spectral_radius(k, b) < 1.0),
+            (Criterion::Stability, None) if self.scene.spec.hit.replicates > 1 => {
+                let r = replicated_hits(&self.scene, k, b, self.res.hit);
+                p.stable = Some(r.stable());
+                p.decided = Some(r.decided());
+                p.realizations = Some(r.hits);
+                p.saturated = r.saturated.then_some(true);
+            }
             (Criterion::Stability, None) => {
                 let o = wall_hit(&self.scene, k, b, self.res.hit, &mut NoTrace);
                 p.stable = Some(o.stable);
@@ -376,8 +388,11 @@ impl Evaluator {
     /// Whether verdicts carry uncertainty: a simulation with friction or
     /// quantization, judged by the BLA verdict (`bla.rs`). The
     /// `tfestimate` baseline takes its verdicts as certain.
+    /// Verdicts with a confidence, so boundaries with intervals: the BLA
+    /// probe of a nonlinear scene, or replicated wall hits.
     pub fn noisy(&self) -> bool {
-        self.nonlinear_probe() && self.scene.spec.probe.method == ProbeMethod::Bla
+        (self.nonlinear_probe() && self.scene.spec.probe.method == ProbeMethod::Bla)
+            || (self.method == Method::Time && self.scene.spec.hit.replicates > 1)
     }
 
     /// A frequency-domain probe of a scene with friction or quantization.
@@ -1013,9 +1028,68 @@ mod tests {
         assert!(noisy(&spec(r#"{"coulomb":0,"quantization":1e-6}"#, f)).unwrap());
         assert!(noisy(&spec(r#"{"coulomb":0.19,"quantization":0}"#, f)).unwrap());
         assert!(!noisy(&spec(r#"{"coulomb":0,"quantization":0}"#, f)).unwrap());
-        // The time engine's verdict is a threshold on one run: no intervals.
+        // The time engine's verdict is a threshold on one run: no intervals,
+        // unless the scene asks for replicate hits.
         let t = Method::Time;
         assert!(!noisy(&spec(r#"{"coulomb":0.19,"quantization":1e-6}"#, t)).unwrap());
+        let mut replicated = spec(r#"{"coulomb":0.19,"quantization":1e-6}"#, t);
+        replicated.scene.hit.replicates = 2;
+        assert!(noisy(&replicated).unwrap());
+    }
+
+    #[test]
+    fn replicate_hits_give_majority_verdicts_and_intervals() {
+        // The seed device at 1 kHz with three hits per verdict, short hits:
+        // every point took three hits, is decided exactly when the three
+        // hits' verdicts (`replicate_hit`, run here again) agree, stable by
+        // majority, and the boundary carries an interval around K_max.
+        let mut scene = SceneSpec::from_json(
+            r#"{"loop":{"sample_hz":1000,"render_hz":1000},"hit":{"home_distance":0.001,"settle_s":0.3,"measure_s":0.2,"replicates":3}}"#,
+        )
+        .unwrap();
+        let spec = MapSpec {
+            criterion: Criterion::Stability,
+            scene: scene.clone(),
+            method: Method::Time,
+            search: SearchKind::Bisect,
+            accuracy: Default::default(),
+            b: Some(vec![20.0]),
+            b_max: 1000.0,
+            k_max: 1e7,
+        };
+        let r = map(&spec).unwrap();
+        assert!(
+            r.model.contains("3 replicate hits per verdict"),
+            "{}",
+            r.model
+        );
+        let sc = scene.validate().unwrap();
+        let knobs = spec.accuracy.resolve(&sc).unwrap().hit;
+        for p in r.points.iter().take(6) {
+            let stable: Vec<bool> = (0..3)
+                .map(|i| {
+                    super::super::hit::replicate_hit(&sc, p.k, p.b, knobs, i, &mut NoTrace).stable
+                })
+                .collect();
+            let n = stable.iter().filter(|s| **s).count();
+            assert_eq!(p.realizations, Some(3), "{p:?}");
+            assert_eq!(p.stable, Some(n >= 2), "{p:?} {stable:?}");
+            assert_eq!(p.decided, Some(n == 0 || n == 3), "{p:?} {stable:?}");
+        }
+        let bp = r.boundary[0];
+        let (lo, hi) = (bp.k_lo.unwrap(), bp.k_hi.unwrap());
+        assert!(lo <= bp.k_max && bp.k_max <= hi && bp.k_max > 0.0, "{bp:?}");
+        // One hit per verdict: the same map has no intervals and none of
+        // the replicate fields.
+        scene.hit.replicates = 1;
+        let one = map(&MapSpec { scene, ..spec }).unwrap();
+        assert!(
+            one.boundary[0].k_lo.is_none()
+                && one
+                    .points
+                    .iter()
+                    .all(|p| p.decided.is_none() && p.realizations.is_none())
+        );
     }
 
     #[test]
