@@ -11,8 +11,8 @@ use crate::zwidth::compare;
 use crate::zwidth::cost::Cost;
 use crate::zwidth::scene::SceneSpec;
 use crate::zwidth::search::{self, map_observed, Observer};
-use crate::zwidth::settings::Accuracy;
 use crate::zwidth::settings::MapSpec;
+use crate::zwidth::settings::{Accuracy, Criterion};
 use crate::zwidth::sweep::{sweep_observed, SweepSpec};
 
 /// An experiment as submitted: `{"kind":"map", …MapSpec}`,
@@ -43,6 +43,15 @@ pub struct CompareSpec {
     /// paper did in simulation); absent: the paper's fixed parameters.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tuned: Option<crate::tune::fair::TunedCompare>,
+    /// What renders: `impedance` (the 2018 paper's test, the default:
+    /// the frequency engine on a nonlinear scene) or `stability` (the 2011
+    /// paper's wall hit: the time engine on a nonlinear scene).
+    #[serde(default, skip_serializing_if = "is_impedance")]
+    pub criterion: Criterion,
+}
+
+fn is_impedance(c: &Criterion) -> bool {
+    *c == Criterion::Impedance
 }
 
 impl ExperimentSpec {
@@ -108,9 +117,9 @@ impl ExperimentSpec {
                             "tunes the paper's four estimators: leave `estimators` out, or tune a list with one `tune` experiment each",
                         ));
                     }
-                    return t.cost(&scene, &c.accuracy)?.check("tuned");
+                    return t.cost(&scene, &c.accuracy, c.criterion)?.check("tuned");
                 }
-                let one = search::validate(&compare::map_spec(scene, &c.accuracy))?;
+                let one = search::validate(&compare::map_spec(scene, &c.accuracy, c.criterion))?;
                 let n = c.estimators.as_ref().map_or(4, Vec::len) as u64;
                 one.times(n).check("estimators")
             }
@@ -128,12 +137,17 @@ impl ExperimentSpec {
             ExperimentSpec::Compare(c) => {
                 let scene = c.scene.clone().unwrap_or_else(compare::seed_2018_scene);
                 match &c.tuned {
-                    Some(t) => {
-                        crate::tune::fair::compare_tuned(&scene, &c.accuracy, t, Some(observer))
-                    }
+                    Some(t) => crate::tune::fair::compare_tuned(
+                        &scene,
+                        &c.accuracy,
+                        c.criterion,
+                        t,
+                        Some(observer),
+                    ),
                     None => compare::compare_observed(
                         &scene,
                         &c.accuracy,
+                        c.criterion,
                         c.estimators.as_deref(),
                         Some(observer),
                     ),

@@ -728,4 +728,9 @@ fn compare_tuned_rejects_bad_input() {
         "",
         "--max-evaluations = 0",
     );
+    rejects(
+        &["compare", scene, "--criterion", "passivity"],
+        "",
+        "--criterion = \"passivity\"",
+    );
 }

@@ -242,7 +242,9 @@ pub(super) fn run(
             tuned,
             max_evaluations,
             seed,
+            criterion,
         } => {
+            let criterion: Criterion = parse_choice("criterion", &criterion)?;
             let spec = match &scene {
                 Some(p) => read_scene(p)?,
                 None => compare::seed_2018_scene(),
@@ -268,8 +270,16 @@ pub(super) fn run(
             spec.validate()?;
             let observer = std::sync::Arc::new(Observer::default());
             let r = with_progress(&observer, || match &tuned {
-                Some(t) => crate::tune::fair::compare_tuned(&spec, &acc, t, Some(observer.clone())),
-                None => compare::compare_observed(&spec, &acc, None, Some(observer.clone())),
+                Some(t) => crate::tune::fair::compare_tuned(
+                    &spec,
+                    &acc,
+                    criterion,
+                    t,
+                    Some(observer.clone()),
+                ),
+                None => {
+                    compare::compare_observed(&spec, &acc, criterion, None, Some(observer.clone()))
+                }
             })?;
             if let Some(dir) = svg_dir {
                 std::fs::create_dir_all(&dir).map_err(|e| {

@@ -211,6 +211,11 @@ pub enum Command {
         /// With --tuned: seeds the searches.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// impedance (the 2018 paper's test) | stability (the 2011 paper's
+        /// wall hit: the time engine on a nonlinear scene) |
+        /// strict_passivity (linear scenes)
+        #[arg(long, default_value = "impedance")]
+        criterion: String,
     },
     /// Record an open-loop identification trace from the scene's simulated
     /// device: a Schroeder multisine force, CSV t_s,force_n,position_m.

@@ -104,9 +104,10 @@ impl TunedCompare {
         scene: &SceneSpec,
         estimator: &EstimatorSpec,
         accuracy: &Accuracy,
+        criterion: Criterion,
     ) -> Option<TuneSpec> {
         let params = tunable(estimator, scene.control.sample_hz)?;
-        let m = compare::map_spec(scene.clone(), accuracy);
+        let m = compare::map_spec(scene.clone(), accuracy, criterion);
         Some(TuneSpec {
             scene: SceneSpec {
                 estimator: estimator.clone(),
@@ -115,7 +116,7 @@ impl TunedCompare {
             params,
             objective: self.objective.clone(),
             method: Method::Auto,
-            criterion: Criterion::Impedance,
+            criterion,
             search: SearchKind::RobustBisect,
             accuracy: Accuracy::Preset(Preset::Draft),
             final_accuracy: accuracy.clone(),
@@ -134,13 +135,22 @@ impl TunedCompare {
     /// What the whole tuned comparison may cost: every tune, then the
     /// comparison's maps. (Validates the tunes with a stand-in C; the
     /// comparison estimates C from a wall hit when it runs.)
-    pub fn cost(&self, scene: &SceneSpec, accuracy: &Accuracy) -> Result<Cost, SpecError> {
+    pub fn cost(
+        &self,
+        scene: &SceneSpec,
+        accuracy: &Accuracy,
+        criterion: Criterion,
+    ) -> Result<Cost, SpecError> {
         self.validate()?;
         let list = compare::paper_estimators(scene, 12.0);
-        let one = crate::zwidth::search::validate(&compare::map_spec(scene.clone(), accuracy))?;
+        let one = crate::zwidth::search::validate(&compare::map_spec(
+            scene.clone(),
+            accuracy,
+            criterion,
+        ))?;
         let mut total = one.times(list.len() as u64);
         for (_, _, e) in &list {
-            if let Some(spec) = self.spec(scene, e, accuracy) {
+            if let Some(spec) = self.spec(scene, e, accuracy, criterion) {
                 total = total.plus(spec.validate()?.cost);
             }
         }
@@ -221,6 +231,7 @@ fn scopes(list: &[(String, String, EstimatorSpec)], sample_hz: f64) -> usize {
 pub fn compare_tuned(
     scene: &SceneSpec,
     accuracy: &Accuracy,
+    criterion: Criterion,
     tuned: &TunedCompare,
     observer: Option<Arc<Observer>>,
 ) -> Result<CompareResult, SpecError> {
@@ -234,7 +245,7 @@ pub fn compare_tuned(
     let mut rows = Vec::with_capacity(list.len());
     let mut tunings = Vec::with_capacity(list.len());
     for (i, (name, parameters, estimator)) in list.into_iter().enumerate() {
-        match tuned.spec(scene, &estimator, accuracy) {
+        match tuned.spec(scene, &estimator, accuracy, criterion) {
             Some(spec) => {
                 let t = Instant::now();
                 let r = run_tune(&spec, observer.as_ref(), 1000 + i as u32)?;
@@ -262,7 +273,7 @@ pub fn compare_tuned(
             }
         }
     }
-    let mut result = compare::compare_rows(scene, accuracy, c, rows, observer)?;
+    let mut result = compare::compare_rows(scene, accuracy, criterion, c, rows, observer)?;
     for (row, tuning) in result.rows.iter_mut().zip(tunings) {
         row.tuning = tuning;
     }
@@ -357,12 +368,23 @@ mod tests {
         scene.device.quantization = 0.0;
         let t: TunedCompare =
             serde_json::from_str(r#"{"objective":"k_width","max_evaluations":5}"#).unwrap();
-        let c = t.cost(&scene, &Accuracy::Preset(Preset::Draft)).unwrap();
+        let c = t
+            .cost(
+                &scene,
+                &Accuracy::Preset(Preset::Draft),
+                Criterion::Impedance,
+            )
+            .unwrap();
         assert_eq!(c.maps, 4 + 3 * (5 + 3));
         // Each tune is of its own estimator, bounded below Nyquist.
         let bw = compare::paper_estimators(&scene, 1.0).remove(0).2;
         let s = t
-            .spec(&scene, &bw, &Accuracy::Preset(Preset::Draft))
+            .spec(
+                &scene,
+                &bw,
+                &Accuracy::Preset(Preset::Draft),
+                Criterion::Impedance,
+            )
             .unwrap();
         assert_eq!(s.scene.estimator, bw);
         assert_eq!(s.params["cutoff_hz"].max, 0.499 * 1000.0);

@@ -1207,5 +1207,4 @@ mod tests {
         let old: HitSpec = serde_json::from_str(r#"{"home_distance":0.07}"#).unwrap();
         assert_eq!(old.replicates, 1);
     }
-
 }
