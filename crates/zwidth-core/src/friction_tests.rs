@@ -257,3 +257,34 @@ fn a_step_below_static_friction_breaks_loose_when_its_rate_is_high() {
     }
     assert!((s.v / ((0.3572 - 0.19) / 13.2) - 1.0).abs() < 1e-9, "{s:?}");
 }
+
+#[test]
+fn friction_holds_the_side_it_acts_on() {
+    // A 0.01 N motor force, far below F_c, on the two-mass device. With the
+    // friction on the motor side the bristles there take it all (z = F/σ0
+    // = 1e-7 m) and the cable carries nothing: the handle rests where the
+    // motor side does. With it on the handle the cable carries F and
+    // stretches by F/k = 1e-6 m (statics of the model in plant.rs).
+    let t = Transmission {
+        motor_mass: 0.1,
+        motor_damping: 2.0,
+        stiffness: 1e4,
+        damping: 10.0,
+        encoder_on_motor: true,
+    };
+    for on_motor in [true, false] {
+        let lg = LuGre {
+            on_motor,
+            ..model()
+        };
+        let p = Plant::new(0.4, 3.0, 1.0, 1e-3)
+            .with_drive(None, Some(t))
+            .with_lugre(Some(lg));
+        let mut s = p.at_rest(0.0);
+        run(&p, &mut s, |_| 0.01, 5000);
+        let stretch = s.xm - s.x;
+        let want = if on_motor { 0.0 } else { 0.01 / 1e4 };
+        assert!((stretch - want).abs() < 1e-9, "on_motor {on_motor}: {s:?}");
+        assert!((s.z * 1e5 / 0.01 - 1.0).abs() < 1e-6, "on_motor {on_motor}: {s:?}");
+    }
+}
