@@ -49,9 +49,10 @@ pub(super) fn run_record(
 
 /// The scene `identify` writes: the base (or the default scene at the
 /// trace's rate) with the identified device, which is rigid and driven
-/// without lag (the fitted model): a base scene's transmission and
-/// amplifier lag are dropped, not combined with it (its mass is the whole
-/// moving mass).
+/// without lag, with ideal Coulomb friction (the fitted model): a base
+/// scene's transmission, amplifier lag and LuGre friction are dropped, not
+/// combined with it (its mass is the whole moving mass, its f_c the
+/// kinetic level).
 fn identified_scene(id: &Identified, base: Option<SceneSpec>) -> SceneSpec {
     let mut spec = base.unwrap_or_else(|| {
         let mut s = SceneSpec::default();
@@ -65,6 +66,7 @@ fn identified_scene(id: &Identified, base: Option<SceneSpec>) -> SceneSpec {
     spec.device.quantization = id.quantization;
     spec.device.transmission = None;
     spec.device.amplifier_hz = None;
+    spec.device.friction = None;
     spec
 }
 
@@ -143,10 +145,12 @@ mod tests {
 
     #[test]
     fn the_written_scene_is_the_identified_rigid_device() {
-        // A base scene with a transmission and a lag: the identified mass
-        // is the whole moving mass of a rigid model driven without lag, so
-        // both are dropped (keeping the transmission would count the motor
-        // side twice); the rest of the base (its loop, its estimator) stays.
+        // A base scene with a transmission, a lag and LuGre friction on the
+        // motor side: the identified mass is the whole moving mass of a
+        // rigid model driven without lag, with ideal Coulomb friction, so
+        // all three are dropped (keeping the transmission would count the
+        // motor side twice; the friction's side would not exist); the rest
+        // of the base (its loop, its estimator) stays.
         let e = |value: f64| Estimate {
             value,
             std_error: 0.0,
@@ -167,13 +171,13 @@ mod tests {
             residual_rms_n: 0.0,
         };
         let base = SceneSpec::from_json(
-            r#"{"device":{"coulomb":0,"amplifier_hz":300,"transmission":{"motor_mass":0.2,"stiffness":5e4}},"loop":{"sample_hz":2000,"render_hz":1000}}"#,
+            r#"{"device":{"amplifier_hz":300,"transmission":{"motor_mass":0.2,"stiffness":5e4},"friction":{"on":"motor","static":0.3}},"loop":{"sample_hz":2000,"render_hz":1000}}"#,
         )
         .unwrap();
         let s = identified_scene(&id, Some(base));
         assert_eq!(
-            (&s.device.transmission, s.device.amplifier_hz),
-            (&None, None)
+            (&s.device.transmission, s.device.amplifier_hz, &s.device.friction),
+            (&None, None, &None)
         );
         assert_eq!((s.device.mass, s.device.coulomb), (0.52, 0.19));
         assert_eq!((s.control.sample_hz, s.control.render_hz), (2000.0, 1000.0));
