@@ -176,7 +176,11 @@ mod tests {
         .unwrap();
         let s = identified_scene(&id, Some(base));
         assert_eq!(
-            (&s.device.transmission, s.device.amplifier_hz, &s.device.friction),
+            (
+                &s.device.transmission,
+                s.device.amplifier_hz,
+                &s.device.friction
+            ),
             (&None, None, &None)
         );
         assert_eq!((s.device.mass, s.device.coulomb), (0.52, 0.19));

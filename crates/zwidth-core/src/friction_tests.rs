@@ -285,6 +285,9 @@ fn friction_holds_the_side_it_acts_on() {
         let stretch = s.xm - s.x;
         let want = if on_motor { 0.0 } else { 0.01 / 1e4 };
         assert!((stretch - want).abs() < 1e-9, "on_motor {on_motor}: {s:?}");
-        assert!((s.z * 1e5 / 0.01 - 1.0).abs() < 1e-6, "on_motor {on_motor}: {s:?}");
+        assert!(
+            (s.z * 1e5 / 0.01 - 1.0).abs() < 1e-6,
+            "on_motor {on_motor}: {s:?}"
+        );
     }
 }
