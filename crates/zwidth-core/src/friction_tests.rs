@@ -55,6 +55,13 @@ fn steady_sliding_settles_on_the_stribeck_curve() {
     run(&p, &mut s, |_| f, 20_000);
     assert!((s.v - 0.1).abs() < 1e-9, "{s:?}");
     assert!((s.z - model().level(0.1) / 1e5).abs() < 1e-15, "{s:?}");
+    // The same force from the hand (an external force on the handle, as
+    // the probe's excitation) instead of the motor.
+    let mut s = PlantState::default();
+    for _ in 0..20_000 {
+        p.step_driven(&mut s, 0.0, f, true);
+    }
+    assert!((s.v - 0.1).abs() < 1e-9, "{s:?}");
     // The same on the motor side of a transmission: b = 3 + 2 on the two
     // masses, the motor pulls the handle through the cable.
     let t = Transmission {
