@@ -46,7 +46,9 @@ pub struct Point {
     pub margin: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub margin_se: Option<f64>,
-    /// Noisy scenes: random-phase realizations the verdict took.
+    /// Noisy scenes: random-phase realizations the verdict took (the
+    /// frequency engine's BLA), or hits (the time engine's
+    /// `hit.replicates`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub realizations: Option<u32>,
     /// Simulations: true when the device's force limit clipped the wall
