@@ -197,9 +197,10 @@ pub(super) fn interval(
     // Never below the smallest K searched: with nothing kept below `hi`
     // (every K decided not passive, an empty column) the edge would halve
     // towards 0 until f64 runs out (a thousand trials).
+    let searched = min_k(points, &|_| true).min(hi);
     let hi_bottom = max_k(points, &|p| !p.surely_not_ok() && p.k < hi)
         .max(lo)
-        .max(bounds.k0.min(hi));
+        .max(searched);
     let keep = |p: &Point| !p.surely_not_ok();
     let hi = bisect_edge(&mut classify, hi_bottom, hi, rel_tol, points, keep).1;
     (lo, Some(hi))
@@ -459,6 +460,31 @@ mod tests {
         let (lo, hi) = interval(none, 0.0, b, &mut pts);
         assert_eq!((lo, hi), (0.0, Some(floor)));
         assert_eq!(pts.len(), 11, "no trial added");
+    }
+
+    #[test]
+    fn a_boundary_below_the_first_step_still_gets_a_refined_upper_edge() {
+        // k0 = 1000: decided passive below 100, undecided (failing) on
+        // [100, 200), decided not passive from 200. Bisection walks down
+        // 1000, 500, 250, 125, 62.5; the upper edge is refined from the
+        // undecided 125 up to the refutation at 250, to 200 (within 1 %),
+        // not left at 250 (a second review found the floor at k0 did).
+        let v = |k: f64| Point {
+            k,
+            passive: Some(k < 100.0),
+            decided: Some(!(100.0..200.0).contains(&k)),
+            ..Point::default()
+        };
+        let b = Bracket {
+            k0: 1000.0,
+            k_cap: 1e6,
+            rel_tol: 0.01,
+        };
+        let mut pts = Vec::new();
+        let est = bisect_k(v, b, false, &mut pts).unwrap();
+        let (_, hi) = interval(v, est, b, &mut pts);
+        let hi = hi.unwrap();
+        assert!((200.0..=202.0).contains(&hi), "{hi}");
     }
 
     #[test]

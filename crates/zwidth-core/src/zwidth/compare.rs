@@ -323,7 +323,9 @@ impl CompareResult {
         if let Some(r) = self.rows.first() {
             let criterion = match r.map.criterion {
                 Criterion::Impedance => "impedance (Re Z ≥ 0 over the probe band)",
-                Criterion::Stability => "stability (the wall hit's RMS below its threshold)",
+                Criterion::Stability => {
+                    "stability (the wall hit's RMS below its threshold; eigenvalues on a linear scene)"
+                }
                 Criterion::StrictPassivity => "strict passivity (Colgate & Schenkel)",
             };
             s.push_str(&format!(
@@ -369,7 +371,7 @@ mod tests {
         assert!(map.k_width > 0.0);
         assert!(r
             .table()
-            .contains("criterion: stability (the wall hit's RMS below its threshold)"));
+            .contains("criterion: stability (the wall hit's RMS below its threshold"));
         let spec = map_spec(scene, &Accuracy::default(), Criterion::Impedance);
         assert_eq!(spec.criterion, Criterion::Impedance);
     }
