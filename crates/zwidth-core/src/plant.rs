@@ -10,7 +10,7 @@
 //! An amplifier (current loop) with bandwidth f_a, when the scene names one,
 //! lags the motor force behind its command: `τ Ḟ_a = F_cmd − F_a`,
 //! `τ = 1/(2π f_a)`: a current loop closed to bandwidth f_a, as the 2011
-//! paper's device drives its motor (a PWM amplifier in current mode, §3),
+//! paper's device drives its motor (a PWM amplifier in current mode, §2.3),
 //! modelled by its dominant pole. External forces act on the handle
 //! directly. Without friction the three states (x, v, F_a) step exactly
 //! (`linalg::zoh`); with friction the step uses the lagged force's mean over
