@@ -13,6 +13,18 @@ fn model() -> LuGre {
     }
 }
 
+/// A 0.1 kg motor side (2 N·s/m) on a 1e4 N/m, 10 N·s/m cable, encoder on
+/// the motor.
+fn cable() -> Transmission {
+    Transmission {
+        motor_mass: 0.1,
+        motor_damping: 2.0,
+        stiffness: 1e4,
+        damping: 10.0,
+        encoder_on_motor: true,
+    }
+}
+
 fn run(p: &Plant, s: &mut PlantState, force: impl Fn(usize) -> f64, steps: usize) {
     for i in 0..steps {
         p.step_driven(s, force(i), 0.0, true);
@@ -64,13 +76,7 @@ fn steady_sliding_settles_on_the_stribeck_curve() {
     assert!((s.v - 0.1).abs() < 1e-9, "{s:?}");
     // The same on the motor side of a transmission: b = 3 + 2 on the two
     // masses, the motor pulls the handle through the cable.
-    let t = Transmission {
-        motor_mass: 0.1,
-        motor_damping: 2.0,
-        stiffness: 1e4,
-        damping: 10.0,
-        encoder_on_motor: true,
-    };
+    let t = cable();
     let on_motor = LuGre {
         on_motor: true,
         ..model()
@@ -272,13 +278,7 @@ fn friction_holds_the_side_it_acts_on() {
     // = 1e-7 m) and the cable carries nothing: the handle rests where the
     // motor side does. With it on the handle the cable carries F and
     // stretches by F/k = 1e-6 m (statics of the model in plant.rs).
-    let t = Transmission {
-        motor_mass: 0.1,
-        motor_damping: 2.0,
-        stiffness: 1e4,
-        damping: 10.0,
-        encoder_on_motor: true,
-    };
+    let t = cable();
     for on_motor in [true, false] {
         let lg = LuGre {
             on_motor,

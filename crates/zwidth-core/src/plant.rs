@@ -45,6 +45,16 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
+/// One exact step `z ← Φ z + Γ u` of a state of order `Φ.len()` (≤ 5).
+#[inline]
+fn zoh_step(phi: &Mat, gamma: &Mat, z: &[f64; 5], u: &[f64]) -> [f64; 5] {
+    let mut next = [0.0; 5];
+    for (i, zi) in next.iter_mut().enumerate().take(phi.len()) {
+        *zi = dot(&phi[i], z) + dot(&gamma[i], u);
+    }
+    next
+}
+
 /// φ(a) = (1 − e^{−a})/a.
 #[inline]
 pub fn phi(a: f64) -> f64 {
@@ -326,11 +336,7 @@ impl Plant {
                 s.f = motor + (s.f - motor) * l.decay;
             }
             Some(l) => {
-                let z = self.pack(s);
-                let mut next = [0.0; 5];
-                for (i, zi) in next.iter_mut().enumerate().take(l.phi.len()) {
-                    *zi = dot(&l.phi[i], &z) + l.gamma[i][0] * motor + l.gamma[i][1] * ext;
-                }
+                let next = zoh_step(&l.phi, &l.gamma, &self.pack(s), &[motor, ext]);
                 self.unpack(&next, motor, s);
             }
         }
@@ -375,18 +381,9 @@ impl Plant {
     #[inline]
     fn step_lugre(&self, l: &LuGreStep, s: &mut PlantState, motor: f64, ext: f64) {
         let mut z = self.pack(s);
-        let n = l.phi.len();
         let (k0, k1) = (l.model.stiffness, l.model.damping);
-        let advance = |z: &[f64; 5], friction: f64| {
-            let mut next = [0.0; 5];
-            for (i, zi) in next.iter_mut().enumerate().take(n) {
-                *zi = dot(&l.phi[i], z)
-                    + l.gamma[i][0] * motor
-                    + l.gamma[i][1] * ext
-                    + l.gamma[i][2] * friction;
-            }
-            next
-        };
+        let advance =
+            |z: &[f64; 5], friction: f64| zoh_step(&l.phi, &l.gamma, z, &[motor, ext, friction]);
         for _ in 0..l.n {
             // Predict with the velocity at the start, then correct with the
             // bristle stepped at the mean velocity and its spring force's
