@@ -623,9 +623,158 @@ fn record_and_identify_reject_bad_input() {
     std::fs::write(t, rows.replace("t_s,force_n,position_m", "time,force")).unwrap();
     rejects(&["identify", t], "", "trace line 1 (header)");
     rejects(
-        &["identify", t, "--model", "two_mass"],
+        &["identify", t, "--model", "three_mass"],
         "",
-        "--model = \"two_mass\"",
+        "--model = \"three_mass\"",
+    );
+    rejects(
+        &["identify", t, "--mode-trace", t],
+        "",
+        "read by --model two_mass only",
+    );
+    rejects(
+        &[
+            "record",
+            "--scene",
+            seed,
+            "--out",
+            t,
+            "--band-min",
+            "300",
+            "--band-max",
+            "100",
+            "--band-force",
+            "0.1",
+        ],
+        "",
+        "--band-min = 300",
+    );
+    // A band needs all three of its flags (clap's usage error: exit 2,
+    // the missing ones listed).
+    let o = zwidth(
+        &["record", "--scene", seed, "--out", t, "--band-min", "50"],
+        "",
+    );
+    assert_eq!(o.code, 2, "{}", o.stderr);
+    assert!(
+        o.stderr.contains("--band-max") && o.stderr.contains("--band-force"),
+        "{}",
+        o.stderr
+    );
+}
+
+#[test]
+fn two_mass_identify_writes_the_transmission() {
+    // examples/two_mass_motor_encoder.json: 0.4 kg handle, 0.12 kg motor
+    // side, 2e5 N/m cable, encoder on the motor, LuGre friction on the
+    // handle, 1 µm steps. A slow trace and a band trace (50–600 Hz around
+    // the 234 Hz mode); identify gives the masses and k within 5 %
+    // (issue 12's target with a mode) and writes a two-mass scene.
+    let s = Scratch::new("identify-two-mass");
+    let scene = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/examples/two_mass_motor_encoder.json"
+    );
+    let (slow, band, out) = (s.path("slow.csv"), s.path("band.csv"), s.path("id.json"));
+    let (slow, band) = (slow.to_str().unwrap(), band.to_str().unwrap());
+    let o = zwidth(
+        &[
+            "record",
+            "--scene",
+            scene,
+            "--out",
+            slow,
+            "--duration",
+            "10",
+        ],
+        "",
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let o = zwidth(
+        &[
+            "record",
+            "--scene",
+            scene,
+            "--out",
+            band,
+            "--duration",
+            "10",
+            "--peak-force",
+            "1.5",
+            "--band-min",
+            "50",
+            "--band-max",
+            "600",
+            "--band-force",
+            "1.5",
+        ],
+        "",
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    assert!(o.stdout.contains("band 50–600 Hz"), "{}", o.stdout);
+    let id = json_ok(
+        &[
+            "identify",
+            slow,
+            "--model",
+            "two_mass",
+            "--mode-trace",
+            band,
+            "--json",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        "",
+    );
+    let mode = &id["mode"];
+    for (got, want) in [
+        (&id["mass"], 0.52),
+        (&mode["handle_mass"], 0.4),
+        (&mode["motor_mass"], 0.12),
+        (&mode["stiffness"], 2e5),
+    ] {
+        let v = got["value"].as_f64().unwrap();
+        assert!((v / want - 1.0).abs() < 0.05, "{v} vs {want}");
+    }
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let d = &written["device"];
+    assert_eq!(d["mass"], mode["handle_mass"]["value"]);
+    assert_eq!(d["transmission"]["motor_mass"], mode["motor_mass"]["value"]);
+    assert_eq!(d["transmission"]["stiffness"], mode["stiffness"]["value"]);
+    assert_eq!(d["transmission"]["encoder"], "motor");
+    assert_eq!(d["coulomb"], id["coulomb"]["value"]);
+    assert_eq!(d["friction"]["on"], "motor");
+    // The written scene runs.
+    let o = zwidth(
+        &[
+            "trial",
+            "--scene",
+            out.to_str().unwrap(),
+            "--k",
+            "1000",
+            "--b",
+            "0",
+        ],
+        "",
+    );
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    // The text report names the mode.
+    let o = zwidth(
+        &[
+            "identify",
+            slow,
+            "--model",
+            "two_mass",
+            "--mode-trace",
+            band,
+        ],
+        "",
+    );
+    assert!(
+        o.stdout.contains("resonance") && o.stdout.contains("k_cable"),
+        "{}",
+        o.stdout
     );
 }
 

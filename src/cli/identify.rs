@@ -6,8 +6,8 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::identify::record::{record, Excitation};
-use crate::identify::{identify, Estimate, Identified, Model, Trace};
-use crate::zwidth::scene::SceneSpec;
+use crate::identify::{identify, with_mode, Estimate, Identified, Model, Trace};
+use crate::zwidth::scene::{EncoderSide, FrictionSide, FrictionSpec, SceneSpec, TransmissionSpec};
 
 use super::common::*;
 use super::CliError;
@@ -26,6 +26,9 @@ pub(super) fn run_record(
             "f_max_hz" => "--f-max",
             "peak_force" => "--peak-force",
             "duration_s" => "--duration",
+            "band.f_min_hz" => "--band-min",
+            "band.f_max_hz" => "--band-max",
+            "band.peak_force" => "--band-force",
             other => other,
         }
         .to_string();
@@ -35,13 +38,17 @@ pub(super) fn run_record(
     write_file(out, &trace.to_csv())?;
     writeln!(
         stdout,
-        "wrote {} samples ({} s at {} Hz; multisine {}–{} Hz, peak {} N) to {}",
+        "wrote {} samples ({} s at {} Hz; multisine {}–{} Hz, peak {} N{}) to {}",
         trace.t.len(),
         excitation.duration_s,
         trace.sample_hz(),
         1.0 / excitation.period_s,
         excitation.f_max_hz,
         excitation.peak_force,
+        excitation.band.as_ref().map_or(String::new(), |b| format!(
+            "; band {}–{} Hz, peak {} N",
+            b.f_min_hz, b.f_max_hz, b.peak_force
+        )),
         out.display()
     )
     .map_err(io)
@@ -53,7 +60,14 @@ pub(super) fn run_record(
 /// scene's transmission, amplifier lag and LuGre friction are dropped, not
 /// combined with it (its mass is the whole moving mass, its f_c the
 /// kinetic level).
+///
+/// With `two_mass`, the device is the identified two-mass one: the handle's
+/// mass and damping, a transmission with the encoder on the motor side,
+/// and the friction as LuGre at the identified kinetic level (static =
+/// kinetic unless the base's friction says more), on the base friction's
+/// side or else the motor side, where the fit measured it.
 fn identified_scene(id: &Identified, base: Option<SceneSpec>) -> SceneSpec {
+    let base_friction = base.as_ref().and_then(|b| b.device.friction.clone());
     let mut spec = base.unwrap_or_else(|| {
         let mut s = SceneSpec::default();
         s.control.sample_hz = id.sample_hz;
@@ -62,12 +76,45 @@ fn identified_scene(id: &Identified, base: Option<SceneSpec>) -> SceneSpec {
     });
     spec.device.mass = id.mass.value;
     spec.device.damping = id.damping.value;
-    spec.device.coulomb = id.coulomb.value;
+    // A kinetic friction whose interval reaches 0 is 0 (a frictionless
+    // device's fit lands a little either side of it).
+    spec.device.coulomb = if id.coulomb.lo <= 0.0 && id.coulomb.value < 0.0 {
+        0.0
+    } else {
+        id.coulomb.value
+    };
     spec.device.quantization = id.quantization;
     spec.device.transmission = None;
     spec.device.amplifier_hz = None;
     spec.device.friction = None;
+    if let Some(mode) = &id.mode {
+        spec.device.mass = mode.handle_mass.value;
+        spec.device.damping = mode.handle_damping.value;
+        spec.device.transmission = Some(TransmissionSpec {
+            motor_mass: mode.motor_mass.value,
+            motor_damping: mode.motor_damping.value,
+            stiffness: mode.stiffness.value,
+            damping: mode.cable_damping.value,
+            encoder: EncoderSide::Motor,
+        });
+        if spec.device.coulomb > 0.0 {
+            let mut friction = base_friction.unwrap_or(FrictionSpec {
+                on: FrictionSide::Motor,
+                ..FrictionSpec::default()
+            });
+            friction.static_force = friction.static_force.map(|s| s.max(spec.device.coulomb));
+            spec.device.friction = Some(friction);
+        }
+    }
     spec
+}
+
+fn model_name(m: Model) -> &'static str {
+    match m {
+        Model::MassDamperCoulomb => "mass_damper_coulomb",
+        Model::MassDamper => "mass_damper",
+        Model::TwoMass => "two_mass",
+    }
 }
 
 fn row(name: &str, e: &Estimate, unit: &str) -> String {
@@ -87,6 +134,7 @@ fn row(name: &str, e: &Estimate, unit: &str) -> String {
 pub(super) fn run_identify(
     trace: &Path,
     model: &str,
+    mode_trace: Option<&Path>,
     base: Option<&Path>,
     out: Option<&Path>,
     json: bool,
@@ -94,12 +142,30 @@ pub(super) fn run_identify(
 ) -> Result<(), CliError> {
     let model: Model = parse_choice("model", model)?;
     let base = base.map(read_scene).transpose()?;
-    let text = std::fs::read_to_string(trace)
-        .map_err(|e| CliError::Input(format!("{} cannot be read: {e}", trace.display())))?;
-    let tr = Trace::parse_csv(&text)
-        .map_err(|e| CliError::Input(format!("{}: {e}", trace.display())))?;
-    let id =
-        identify(&tr, model).map_err(|e| CliError::Input(format!("{}: {e}", trace.display())))?;
+    let read = |path: &Path| -> Result<Trace, CliError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| CliError::Input(format!("{} cannot be read: {e}", path.display())))?;
+        Trace::parse_csv(&text).map_err(|e| CliError::Input(format!("{}: {e}", path.display())))
+    };
+    if let (false, Some(band)) = (model == Model::TwoMass, mode_trace) {
+        return Err(CliError::Input(format!(
+            "--mode-trace = {} is not allowed: it is read by --model two_mass only, not {}",
+            band.display(),
+            model_name(model)
+        )));
+    }
+    let tr = read(trace)?;
+    fn in_file(path: &Path) -> impl Fn(crate::error::SpecError) -> CliError + '_ {
+        move |e| CliError::Input(format!("{}: {e}", path.display()))
+    }
+    // (A mode trace comes with two_mass only: checked above.)
+    let id = match mode_trace {
+        Some(band) => {
+            let rigid = identify(&tr, Model::MassDamperCoulomb).map_err(in_file(trace))?;
+            with_mode(rigid, &read(band)?).map_err(in_file(band))?
+        }
+        None => identify(&tr, model).map_err(in_file(trace))?,
+    };
     let spec = identified_scene(&id, base);
     // The identified device must make a valid scene before anything is written.
     spec.validate().map_err(|e| {
@@ -117,16 +183,25 @@ pub(super) fn run_identify(
         let mut s =
             format!(
             "{} from {} s at {} Hz ({} of {} windows moving one way; interval from {} blocks):\n",
-            match id.model {
-                Model::MassDamperCoulomb => "mass_damper_coulomb",
-                Model::MassDamper => "mass_damper",
-            },
+            model_name(id.model),
             id.duration_s, id.sample_hz, id.windows_used, id.windows_tried, id.blocks
         );
         s += &row("mass", &id.mass, "kg");
         s += &row("damping", &id.damping, "N·s/m");
-        if id.model == Model::MassDamperCoulomb {
+        if id.model != Model::MassDamper {
             s += &row("coulomb", &id.coulomb, "N");
+        }
+        if let Some(m) = &id.mode {
+            s += &format!(
+                "  mode: resonance {:.1} Hz, antiresonance {:.1} Hz, from {} lines {:.1}–{:.1} Hz over {} periods (misfit {:.2} %):\n",
+                m.resonance_hz, m.antiresonance_hz, m.lines, m.band_hz[0], m.band_hz[1], m.periods, 100.0 * m.misfit
+            );
+            s += &row("m_handle", &m.handle_mass, "kg");
+            s += &row("m_motor", &m.motor_mass, "kg");
+            s += &row("k_cable", &m.stiffness, "N/m");
+            s += &row("c_cable", &m.cable_damping, "N·s/m");
+            s += &row("b_handle", &m.handle_damping, "N·s/m");
+            s += &row("b_motor", &m.motor_damping, "N·s/m");
         }
         s += &format!(
             "  encoder step {:e} m; fit residual {:.2e} N RMS\n",
@@ -169,6 +244,7 @@ mod tests {
             windows_tried: 1,
             blocks: 10,
             residual_rms_n: 0.0,
+            mode: None,
         };
         let base = SceneSpec::from_json(
             r#"{"device":{"amplifier_hz":300,"transmission":{"motor_mass":0.2,"stiffness":5e4},"friction":{"on":"motor","static":0.3}},"loop":{"sample_hz":2000,"render_hz":1000}}"#,

@@ -482,24 +482,39 @@ pub(super) fn run(
             period,
             f_max,
             peak_force,
+            band_min,
+            band_max,
+            band_force,
         } => {
             let ex = crate::identify::record::Excitation {
                 period_s: period,
                 f_max_hz: f_max,
                 peak_force,
                 duration_s: duration,
+                band: match (band_min, band_max, band_force) {
+                    (Some(f_min_hz), Some(f_max_hz), Some(peak_force)) => {
+                        Some(crate::identify::record::Band {
+                            f_min_hz,
+                            f_max_hz,
+                            peak_force,
+                        })
+                    }
+                    _ => None,
+                },
             };
             super::identify::run_record(&scene, ex, &out, stdout)
         }
         Command::Identify {
             trace,
             model,
+            mode_trace,
             scene,
             out,
             json,
         } => super::identify::run_identify(
             &trace,
             &model,
+            mode_trace.as_deref(),
             scene.as_deref(),
             out.as_deref(),
             json,

@@ -237,15 +237,33 @@ pub enum Command {
         /// Peak force command (N).
         #[arg(long, default_value_t = 1.0)]
         peak_force: f64,
+        /// A second band of lines added on the same period, from this
+        /// frequency (Hz): around a transmission mode, for `identify
+        /// --model two_mass`.
+        #[arg(long, requires_all = ["band_max", "band_force"])]
+        band_min: Option<f64>,
+        /// The band's highest line (Hz).
+        #[arg(long, requires_all = ["band_min", "band_force"])]
+        band_max: Option<f64>,
+        /// The band's own peak force (N); the summed command must stay
+        /// within the device's force_limit.
+        #[arg(long, requires_all = ["band_min", "band_max"])]
+        band_force: Option<f64>,
     },
     /// Identify the device (mass, damping, Coulomb friction, with 95 %
     /// intervals) from an open-loop trace (CSV t_s,force_n,position_m).
     Identify {
         /// The trace CSV (as `zwidth record` writes, or from a rig).
         trace: PathBuf,
-        /// mass_damper_coulomb | mass_damper
+        /// mass_damper_coulomb | mass_damper | two_mass (a transmission
+        /// mode, the encoder on the motor side; record with a band around
+        /// the mode)
         #[arg(long, default_value = "mass_damper_coulomb")]
         model: String,
+        /// two_mass: fit the mode on this second trace (recorded with a
+        /// band around the mode) and the whole device on the first.
+        #[arg(long)]
+        mode_trace: Option<PathBuf>,
         /// Scene to take everything but the device from (default: the
         /// default scene at the trace's sample rate).
         #[arg(long)]

@@ -22,6 +22,42 @@ pub fn mul(a: &Mat, b: &Mat) -> Mat {
         .collect()
 }
 
+/// X with `A·X = B` (A square, B with any number of columns) by Gaussian
+/// elimination with partial pivoting; None when a pivot falls below
+/// 1e-12 of A's largest entry (singular to working precision).
+pub fn solve(a: &Mat, b: &Mat) -> Option<Mat> {
+    let n = a.len();
+    let m = b.first().map_or(0, Vec::len);
+    let big = a.iter().flatten().fold(0.0f64, |x, v| x.max(v.abs()));
+    let mut w: Mat = a
+        .iter()
+        .zip(b)
+        .map(|(ra, rb)| ra.iter().chain(rb).copied().collect())
+        .collect();
+    for col in 0..n {
+        let piv = (col..n).max_by(|&i, &j| w[i][col].abs().total_cmp(&w[j][col].abs()))?;
+        if !(w[piv][col].abs() > 1e-12 * big) {
+            return None;
+        }
+        w.swap(col, piv);
+        let pivot = w[col].clone();
+        for (r, row) in w.iter_mut().enumerate() {
+            if r != col {
+                let f = row[col] / pivot[col];
+                for (v, p) in row.iter_mut().zip(&pivot).skip(col) {
+                    *v -= f * p;
+                }
+            }
+        }
+    }
+    let x: Mat = w
+        .iter()
+        .enumerate()
+        .map(|(i, row)| row[n..n + m].iter().map(|v| v / row[i]).collect())
+        .collect();
+    x.iter().flatten().all(|v| v.is_finite()).then_some(x)
+}
+
 /// `A·x`.
 pub fn apply(a: &Mat, x: &[f64]) -> Vec<f64> {
     a.iter()
@@ -212,6 +248,37 @@ pub fn frequency_response(a: &Mat, b: &[f64], c: &[f64], w: f64) -> num_complex:
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn solve_inverts_and_refuses_singular() {
+        // A = [[0, 2, 1], [1, 1, 0], [3, 0, 1]] (a zero first pivot: needs a
+        // row swap), det = 0·1 − 2·(1 − 0) + 1·(0 − 3) = −5; A·x = (5, 3, 7)
+        // for x = (1, 2, 1) by hand.
+        let a = vec![
+            vec![0.0, 2.0, 1.0],
+            vec![1.0, 1.0, 0.0],
+            vec![3.0, 0.0, 1.0],
+        ];
+        let x = solve(&a, &vec![vec![5.0], vec![3.0], vec![7.0]]).unwrap();
+        for (xi, want) in x.iter().zip([1.0, 2.0, 1.0]) {
+            assert!((xi[0] - want).abs() < 1e-14, "{x:?}");
+        }
+        // A·A⁻¹ = I.
+        let inv = solve(&a, &identity(3)).unwrap();
+        let eye = mul(&a, &inv);
+        for (i, row) in eye.iter().enumerate() {
+            for (j, v) in row.iter().enumerate() {
+                assert!((v - if i == j { 1.0 } else { 0.0 }).abs() < 1e-14);
+            }
+        }
+        // Rank 2 (row 3 = row 1 + row 2): no solution.
+        let singular = vec![
+            vec![1.0, 2.0, 3.0],
+            vec![0.0, 1.0, 1.0],
+            vec![1.0, 3.0, 4.0],
+        ];
+        assert!(solve(&singular, &identity(3)).is_none());
+    }
 
     #[test]
     fn exponential_of_a_rotation_and_of_a_jordan_block() {

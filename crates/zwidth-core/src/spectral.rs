@@ -24,11 +24,19 @@ impl Multisine {
     /// Lines f0, 2f0, …, ⌊f_max/f0⌋·f0 with Schroeder phases, scaled so the
     /// largest |f(t)| over a period is `peak`.
     pub fn schroeder(f0: f64, f_max: f64, peak: f64) -> Self {
-        let l = ((f_max / f0) + 1e-9).floor().max(1.0) as usize;
-        let lines: Vec<usize> = (1..=l).collect();
-        let phases: Vec<f64> = lines
-            .iter()
-            .map(|&k| -std::f64::consts::PI * (k * (k - 1)) as f64 / l as f64)
+        Self::schroeder_band(f0, f0, f_max, peak)
+    }
+
+    /// Lines k·f0 from the first at or above `f_min` to ⌊f_max/f0⌋·f0 (at
+    /// least one), Schroeder phases over the band's own lines, scaled so the
+    /// largest |f(t)| over a period is `peak`.
+    pub fn schroeder_band(f0: f64, f_min: f64, f_max: f64, peak: f64) -> Self {
+        let top = ((f_max / f0) + 1e-9).floor().max(1.0) as usize;
+        let first = ((f_min / f0) - 1e-9).ceil().clamp(1.0, top as f64) as usize;
+        let lines: Vec<usize> = (first..=top).collect();
+        let l = lines.len();
+        let phases: Vec<f64> = (1..=l)
+            .map(|i| -std::f64::consts::PI * (i * (i - 1)) as f64 / l as f64)
             .collect();
         let unit = Self {
             f0,
@@ -36,7 +44,7 @@ impl Multisine {
             amplitudes: phases.iter().map(|&p| C::from_polar(1.0, p)).collect(),
         };
         // Peak on a grid 64 points per period of the highest line.
-        let n = 64 * l;
+        let n = 64 * top;
         let unit_peak = (0..n)
             .map(|i| unit.value(i as f64 / (n as f64 * f0)).abs())
             .fold(0.0, f64::max);

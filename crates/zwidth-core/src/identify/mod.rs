@@ -17,6 +17,7 @@
 //! and the blocks' spread gives a Student-t interval (batch means), honest
 //! about the windows' overlap that a residual-based covariance ignores.
 
+pub mod mode;
 pub mod record;
 pub mod trace;
 
@@ -64,6 +65,11 @@ pub enum Model {
     MassDamperCoulomb,
     /// m and b (f_c = 0).
     MassDamper,
+    /// m, b, f_c of the whole device, then its transmission mode (motor
+    /// and handle masses, cable stiffness and damping, the damping split)
+    /// from the response around the mode; the encoder on the motor side
+    /// ([`mode`]).
+    TwoMass,
 }
 
 /// One identified parameter with its 95 % interval (SI units).
@@ -97,6 +103,10 @@ pub struct Identified {
     pub blocks: usize,
     /// RMS of the fit's residual force (N), per window.
     pub residual_rms_n: f64,
+    /// The transmission mode (`two_mass` only); `mass`, `damping` and
+    /// `coulomb` are then the whole device's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mode: Option<mode::ModeFit>,
 }
 
 /// Window lengths (s): the shortest sees the mass, the longest the
@@ -259,7 +269,7 @@ fn fit(rows: &[&Row], p: usize) -> Option<[f64; 3]> {
 /// Identify `model` from `trace` (already checked by [`Trace::parse_csv`]).
 pub fn identify(trace: &Trace, model: Model) -> Result<Identified, SpecError> {
     let p = match model {
-        Model::MassDamperCoulomb => 3,
+        Model::MassDamperCoulomb | Model::TwoMass => 3,
         Model::MassDamper => 2,
     };
     // One scan for the encoder step: the stop test and the result share it.
@@ -328,11 +338,12 @@ pub fn identify(trace: &Trace, model: Model) -> Result<Identified, SpecError> {
         .sum::<f64>()
         / all.len() as f64)
         .sqrt();
-    Ok(Identified {
+    let rigid = Identified {
         model,
         mass: est(0),
         damping: est(1),
         coulomb: est(2),
+        mode: None,
         quantization,
         sample_hz: trace.sample_hz(),
         duration_s: n as f64 * trace.dt,
@@ -340,6 +351,22 @@ pub fn identify(trace: &Trace, model: Model) -> Result<Identified, SpecError> {
         windows_tried: tried,
         blocks: per_block.len(),
         residual_rms_n: residual,
+    };
+    match model {
+        Model::TwoMass => with_mode(rigid, trace),
+        _ => Ok(rigid),
+    }
+}
+
+/// The rigid fit `rigid` (m, b, f_c of the whole device) completed with the
+/// transmission mode fitted on `mode_trace` (which may be the same trace,
+/// or a second one recorded with a band around the mode).
+pub fn with_mode(rigid: Identified, mode_trace: &Trace) -> Result<Identified, SpecError> {
+    let mode = mode::fit_mode(mode_trace, &rigid.mass, &rigid.damping)?;
+    Ok(Identified {
+        model: Model::TwoMass,
+        mode: Some(mode),
+        ..rigid
     })
 }
 
@@ -618,6 +645,7 @@ mod tests {
                     period_s,
                     f_max_hz,
                     duration_s: 20.0,
+                    band: None,
                 };
                 let id = identify(&record(&sc, &ex), Model::MassDamperCoulomb).unwrap();
                 for (e, want) in [(id.mass, 0.52), (id.damping, 13.2), (id.coulomb, 0.19)] {

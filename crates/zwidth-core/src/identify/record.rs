@@ -25,6 +25,21 @@ pub struct Excitation {
     pub peak_force: f64,
     /// Record length (s).
     pub duration_s: f64,
+    /// A second multisine on the same period, added to the first: a band of
+    /// lines around a transmission mode for `identify --model two_mass`,
+    /// riding on the slow motion above so friction keeps sliding.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub band: Option<Band>,
+}
+
+/// The mode band: lines every `1/period_s` Hz from `f_min_hz` to `f_max_hz`
+/// peaking at `peak_force` (N) on their own.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Band {
+    pub f_min_hz: f64,
+    pub f_max_hz: f64,
+    pub peak_force: f64,
 }
 
 impl Default for Excitation {
@@ -36,6 +51,7 @@ impl Default for Excitation {
             f_max_hz: 20.0,
             peak_force: 1.0,
             duration_s: 20.0,
+            band: None,
         }
     }
 }
@@ -64,16 +80,60 @@ impl Excitation {
                 ),
             ));
         }
+        if let Some(band) = &self.band {
+            require_positive("band.peak_force", band.peak_force, "N")?;
+            require_range(
+                "band.f_max_hz",
+                band.f_max_hz,
+                1.0 / self.period_s,
+                nyquist,
+                "Hz; from the lowest line 1/period_s to the Nyquist frequency",
+            )?;
+            require_range(
+                "band.f_min_hz",
+                band.f_min_hz,
+                1.0 / self.period_s,
+                band.f_max_hz,
+                "Hz; from the lowest line 1/period_s to band.f_max_hz",
+            )?;
+        }
         if let Some(limit) = scene.spec.device.force_limit {
-            if self.peak_force > limit {
+            let (field, value) = match &self.band {
+                None => ("peak_force", self.peak_force),
+                // The command's own peak over a period, as the rig would send it.
+                Some(_) => {
+                    let per_period = (self.period_s / scene.dt).round().max(1.0) as usize;
+                    let peak = self
+                        .command_period(per_period, scene.dt)
+                        .iter()
+                        .fold(0.0f64, |m, f| m.max(f.abs()));
+                    ("band.peak_force", peak)
+                }
+            };
+            if value > limit {
                 return Err(SpecError::new(
-                    "peak_force",
-                    self.peak_force,
-                    format!("must not exceed the device's force_limit {limit} N (a clipped command cannot be identified from)"),
+                    field,
+                    value,
+                    format!("must not exceed the device's force_limit {limit} N (a clipped command cannot be identified from; with a band, the value is the summed command's peak)"),
                 ));
             }
         }
         Ok(())
+    }
+
+    /// One period of the command, `per_period` samples of `dt` (a whole
+    /// number of samples, so the lines fall on DFT bins).
+    pub fn command_period(&self, per_period: usize, dt: f64) -> Vec<f64> {
+        let f0 = 1.0 / (per_period as f64 * dt);
+        let mut one = Multisine::schroeder(f0, self.f_max_hz, self.peak_force).period(per_period);
+        if let Some(b) = &self.band {
+            let band = Multisine::schroeder_band(f0, b.f_min_hz, b.f_max_hz, b.peak_force)
+                .period(per_period);
+            for (a, b) in one.iter_mut().zip(band) {
+                *a += b;
+            }
+        }
+        one
     }
 }
 
@@ -87,9 +147,7 @@ pub fn record(scene: &Scene, ex: &Excitation) -> Trace {
     let dt = scene.dt;
     let n = (ex.duration_s / dt).round() as usize;
     let per_period = (ex.period_s / dt).round().max(1.0) as usize;
-    let period_s = per_period as f64 * dt; // a whole number of samples
-    let ms = Multisine::schroeder(1.0 / period_s, ex.f_max_hz, ex.peak_force);
-    let one = ms.period(per_period);
+    let one = ex.command_period(per_period, dt);
     let plant = d.plant(dt);
     let mut s = plant.at_rest(0.0);
     let (mut t, mut force, mut position) = (
@@ -192,6 +250,52 @@ mod tests {
             ),
             Err("peak_force".into())
         );
+    }
+
+    #[test]
+    fn a_band_is_checked_and_adds_its_lines() {
+        let sc = scene(
+            r#"{"device":{"force_limit":2.5},"loop":{"sample_hz":1000,"render_hz":1000},"probe":{"amplitude":0.4}}"#,
+        );
+        let with = |f_min_hz: f64, f_max_hz: f64, peak_force: f64| Excitation {
+            band: Some(Band {
+                f_min_hz,
+                f_max_hz,
+                peak_force,
+            }),
+            ..Excitation::default()
+        };
+        let field = |ex: Excitation| ex.validate(&sc).map_err(|e| e.field);
+        assert_eq!(field(with(50.0, 300.0, 1.0)), Ok(()));
+        // Above Nyquist (500 Hz), below the lowest line (0.5 Hz), upside
+        // down, no force.
+        assert_eq!(field(with(50.0, 600.0, 1.0)), Err("band.f_max_hz".into()));
+        assert_eq!(field(with(0.2, 300.0, 1.0)), Err("band.f_min_hz".into()));
+        assert_eq!(field(with(300.0, 50.0, 1.0)), Err("band.f_min_hz".into()));
+        assert_eq!(field(with(50.0, 300.0, 0.0)), Err("band.peak_force".into()));
+        // The summed command's peak against the 2.5 N limit: 1 N + 1 N
+        // peaks at most 2 N; 1 N + 2 N at least 2 N (the band alone) and
+        // here more than 2.5 N.
+        assert_eq!(field(with(50.0, 300.0, 1.0)), Ok(()));
+        let e = with(50.0, 300.0, 2.0).validate(&sc).unwrap_err();
+        assert_eq!(e.field, "band.peak_force");
+        assert!(e.to_string().contains("summed"), "{e}");
+        // The command is the two multisines' sum: its lines are the slow
+        // band's 0.5–20 Hz and the band's 50–300 Hz at 0.5 Hz spacing,
+        // nothing between (DFT of one 2 s period).
+        let one = with(50.0, 300.0, 1.0).command_period(2000, 1e-3);
+        let mut a = crate::spectral::LineAnalyzer::new(2000);
+        let bins: Vec<usize> = (1..1000).collect();
+        let mut out = vec![num_complex::Complex64::new(0.0, 0.0); bins.len()];
+        a.lines(&one, &bins, &mut out);
+        let excited: Vec<usize> = bins
+            .iter()
+            .zip(&out)
+            .filter(|(_, c)| c.norm() > 1e-9)
+            .map(|(&k, _)| k)
+            .collect();
+        let want: Vec<usize> = (1..=40).chain(100..=600).collect();
+        assert_eq!(excited, want);
     }
 
     #[test]

@@ -100,6 +100,19 @@ pub struct FrictionSpec {
     pub on: FrictionSide,
 }
 
+impl Default for FrictionSpec {
+    /// The defaults above, static = kinetic, on the handle.
+    fn default() -> Self {
+        Self {
+            static_force: None,
+            stribeck_velocity: d_stribeck_velocity(),
+            bristle_stiffness: d_bristle_stiffness(),
+            bristle_damping: d_bristle_damping(),
+            on: FrictionSide::Handle,
+        }
+    }
+}
+
 /// The body friction acts on.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
