@@ -36,7 +36,8 @@ pub fn solve(a: &Mat, b: &Mat) -> Option<Mat> {
         .collect();
     for col in 0..n {
         let piv = (col..n).max_by(|&i, &j| w[i][col].abs().total_cmp(&w[j][col].abs()))?;
-        if !(w[piv][col].abs() > 1e-12 * big) {
+        let pivot = w[piv][col].abs();
+        if pivot.is_nan() || pivot <= 1e-12 * big {
             return None;
         }
         w.swap(col, piv);

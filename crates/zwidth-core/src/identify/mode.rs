@@ -261,7 +261,7 @@ pub fn fit_mode(trace: &Trace, mass: &Estimate, damping: &Estimate) -> Result<Mo
         .map(|&k| 2.0 * std::f64::consts::PI * k as f64 / period_s)
         .collect();
     let scale = x.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
-    if !(scale > 0.0) {
+    if scale.is_nan() || scale <= 0.0 {
         return Err(SpecError::new(
             "trace column 3 (position_m)",
             "(no motion at the lines)",
@@ -321,7 +321,7 @@ pub fn fit_mode(trace: &Trace, mass: &Estimate, damping: &Estimate) -> Result<Mo
     let r0 = data.residuals(&theta, m, b, dt);
     let rss = cost(&r0);
     let misfit = rss.sqrt();
-    if !(misfit <= MAX_MISFIT) {
+    if misfit.is_nan() || misfit > MAX_MISFIT {
         return Err(SpecError::new(
             "trace",
             format!("misfit {:.0} %", 100.0 * misfit),
