@@ -63,6 +63,7 @@ pub(super) fn run_record(
 ///
 /// With `two_mass`, the device is the identified two-mass one: the handle's
 /// mass and damping, a transmission with the encoder on the motor side,
+/// the amplifier bandwidth where the fit resolved a lag,
 /// and the friction as LuGre at the identified kinetic level (static =
 /// kinetic unless the base's friction says more), on the base friction's
 /// side or else the motor side, where the fit measured it.
@@ -90,6 +91,7 @@ fn identified_scene(id: &Identified, base: Option<SceneSpec>) -> SceneSpec {
     if let Some(mode) = &id.mode {
         spec.device.mass = mode.handle_mass.value;
         spec.device.damping = mode.handle_damping.value;
+        spec.device.amplifier_hz = mode.amplifier_hz;
         spec.device.transmission = Some(TransmissionSpec {
             motor_mass: mode.motor_mass.value,
             motor_damping: mode.motor_damping.value,
@@ -202,6 +204,18 @@ pub(super) fn run_identify(
             s += &row("c_cable", &m.cable_damping, "N·s/m");
             s += &row("b_handle", &m.handle_damping, "N·s/m");
             s += &row("b_motor", &m.motor_damping, "N·s/m");
+            let us = |v: f64| v * 1e6;
+            let lag = Estimate {
+                value: us(m.amplifier_lag_s.value),
+                std_error: us(m.amplifier_lag_s.std_error),
+                lo: us(m.amplifier_lag_s.lo),
+                hi: us(m.amplifier_lag_s.hi),
+            };
+            s += &row("amp_lag", &lag, "µs");
+            s += &match m.amplifier_hz {
+                Some(f) => format!("  amplifier bandwidth {f:.0} Hz (1/(2π·τ))\n"),
+                None => "  no amplifier lag resolved in the band\n".to_string(),
+            };
         }
         s += &format!(
             "  encoder step {:e} m; fit residual {:.2e} N RMS\n",
