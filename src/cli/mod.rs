@@ -250,7 +250,8 @@ pub enum Command {
         #[arg(long, requires_all = ["band_min", "band_max"])]
         band_force: Option<f64>,
     },
-    /// Identify the device (mass, damping, Coulomb friction, with 95 %
+    /// Identify the device (mass, damping, Coulomb friction; with `--model
+    /// two_mass` also its transmission mode and amplifier lag; with 95 %
     /// intervals) from an open-loop trace (CSV t_s,force_n,position_m).
     Identify {
         /// The trace CSV (as `zwidth record` writes, or from a rig).

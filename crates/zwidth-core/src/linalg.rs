@@ -279,6 +279,12 @@ mod tests {
             vec![1.0, 3.0, 4.0],
         ];
         assert!(solve(&singular, &identity(3)).is_none());
+        // Singular but for rounding: [[0.1, 0.3], [0.3, 0.9]] (row 1 = row
+        // 2 / 3) leaves a second pivot of −5.6e-17 (0.3 − (0.1/0.3)·0.9 in
+        // f64), below 1e-12 of the largest entry: refused, not a solution
+        // of size 1e16.
+        let nearly = vec![vec![0.1, 0.3], vec![0.3, 0.9]];
+        assert!(solve(&nearly, &identity(2)).is_none());
     }
 
     #[test]

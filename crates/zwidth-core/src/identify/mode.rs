@@ -679,11 +679,12 @@ mod tests {
                 .map(|_| ())
                 .map_err(|e| e.field)
         };
-        // The slow trace alone: no lines above ten times the corner (40 Hz).
-        assert_eq!(
-            field(&record(&sc, &Excitation::default())),
-            Err("trace".into())
-        );
+        // The slow trace alone: no lines above ten times the corner (40 Hz),
+        // through `with_mode` and through `identify` with the two-mass model.
+        let slow = record(&sc, &Excitation::default());
+        assert_eq!(field(&slow), Err("trace".into()));
+        let e = identify(&slow, Model::TwoMass).unwrap_err();
+        assert!(e.to_string().contains("lines above"), "{e}");
         // A band below the mode (50–150 Hz): the resonance is outside it.
         let below = Excitation {
             band: Some(Band {
