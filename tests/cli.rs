@@ -743,8 +743,20 @@ fn two_mass_identify_writes_the_transmission() {
     assert_eq!(d["transmission"]["motor_mass"], mode["motor_mass"]["value"]);
     assert_eq!(d["transmission"]["stiffness"], mode["stiffness"]["value"]);
     assert_eq!(d["transmission"]["encoder"], "motor");
+    assert_eq!(d["damping"], mode["handle_damping"]["value"]);
+    assert_eq!(
+        d["transmission"]["motor_damping"],
+        mode["motor_damping"]["value"]
+    );
+    assert_eq!(d["transmission"]["damping"], mode["cable_damping"]["value"]);
     assert_eq!(d["coulomb"], id["coulomb"]["value"]);
-    assert_eq!(d["friction"]["on"], "motor");
+    // Friction on the handle: the side a successful mode fit implies.
+    assert_eq!(d["friction"]["on"], "handle");
+    // No amplifier in the example, none resolved, none written.
+    assert!(
+        mode.get("amplifier_hz").is_none() && d.get("amplifier_hz").is_none(),
+        "{d}"
+    );
     // The written scene runs.
     let o = zwidth(
         &[

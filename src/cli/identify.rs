@@ -7,7 +7,7 @@ use std::path::Path;
 
 use crate::identify::record::{record, Excitation};
 use crate::identify::{identify, with_mode, Estimate, Identified, Model, Trace};
-use crate::zwidth::scene::{EncoderSide, FrictionSide, FrictionSpec, SceneSpec, TransmissionSpec};
+use crate::zwidth::scene::{EncoderSide, SceneSpec, TransmissionSpec};
 
 use super::common::*;
 use super::CliError;
@@ -66,7 +66,7 @@ pub(super) fn run_record(
 /// the amplifier bandwidth where the fit resolved a lag,
 /// and the friction as LuGre at the identified kinetic level (static =
 /// kinetic unless the base's friction says more), on the base friction's
-/// side or else the motor side, where the fit measured it.
+/// side or else the handle's.
 fn identified_scene(id: &Identified, base: Option<SceneSpec>) -> SceneSpec {
     let base_friction = base.as_ref().and_then(|b| b.device.friction.clone());
     let mut spec = base.unwrap_or_else(|| {
@@ -77,13 +77,9 @@ fn identified_scene(id: &Identified, base: Option<SceneSpec>) -> SceneSpec {
     });
     spec.device.mass = id.mass.value;
     spec.device.damping = id.damping.value;
-    // A kinetic friction whose interval reaches 0 is 0 (a frictionless
-    // device's fit lands a little either side of it).
-    spec.device.coulomb = if id.coulomb.lo <= 0.0 && id.coulomb.value < 0.0 {
-        0.0
-    } else {
-        id.coulomb.value
-    };
+    // A negative kinetic friction is written as 0 (a frictionless device's
+    // fit lands a little either side of it; friction cannot push).
+    spec.device.coulomb = id.coulomb.value.max(0.0);
     spec.device.quantization = id.quantization;
     spec.device.transmission = None;
     spec.device.amplifier_hz = None;
@@ -91,7 +87,11 @@ fn identified_scene(id: &Identified, base: Option<SceneSpec>) -> SceneSpec {
     if let Some(mode) = &id.mode {
         spec.device.mass = mode.handle_mass.value;
         spec.device.damping = mode.handle_damping.value;
-        spec.device.amplifier_hz = mode.amplifier_hz;
+        // A lag the written scene's loop can hold (at most its Nyquist
+        // frequency; a base scene may sample slower than the trace).
+        spec.device.amplifier_hz = mode
+            .amplifier_hz
+            .filter(|f| *f <= 0.5 * spec.control.sample_hz);
         spec.device.transmission = Some(TransmissionSpec {
             motor_mass: mode.motor_mass.value,
             motor_damping: mode.motor_damping.value,
@@ -100,10 +100,11 @@ fn identified_scene(id: &Identified, base: Option<SceneSpec>) -> SceneSpec {
             encoder: EncoderSide::Motor,
         });
         if spec.device.coulomb > 0.0 {
-            let mut friction = base_friction.unwrap_or(FrictionSpec {
-                on: FrictionSide::Motor,
-                ..FrictionSpec::default()
-            });
+            // On the handle unless the base says otherwise: the mode fit
+            // refuses a trace with friction on the motor side (it holds the
+            // motor in pre-sliding), so a fit that succeeded had it on the
+            // handle side or too small to matter.
+            let mut friction = base_friction.unwrap_or_default();
             friction.static_force = friction.static_force.map(|s| s.max(spec.device.coulomb));
             spec.device.friction = Some(friction);
         }

@@ -285,6 +285,13 @@ mod tests {
         // of size 1e16.
         let nearly = vec![vec![0.1, 0.3], vec![0.3, 0.9]];
         assert!(solve(&nearly, &identity(2)).is_none());
+        // The test is relative to the largest entry: diag(1e6, 1e-9) has a
+        // pivot 1e-15 of it (condition 1e15): refused; diag(1e6, 1e-5) is
+        // solved (1e-6, 1e5).
+        let ill = vec![vec![1e6, 0.0], vec![0.0, 1e-9]];
+        assert!(solve(&ill, &identity(2)).is_none());
+        let fine = solve(&vec![vec![1e6, 0.0], vec![0.0, 1e-5]], &identity(2)).unwrap();
+        assert!((fine[0][0] - 1e-6).abs() < 1e-20 && (fine[1][1] - 1e5).abs() < 1e-9);
     }
 
     #[test]
