@@ -494,6 +494,12 @@ fn compare_default_path_pins_c_and_the_ranking() {
     }
 }
 
+/// A scene file `zwidth trial` accepts and runs (K = 1000 N/m, B = 0).
+fn runs_a_trial(scene: &str) {
+    let o = zwidth(&["trial", "--scene", scene, "--k", "1000", "--b", "0"], "");
+    assert_eq!(o.code, 0, "{}", o.stderr);
+}
+
 #[test]
 fn record_then_identify_round_trips_the_seed_device() {
     // Reference: examples/seed_2018.json's device (the 2018 paper §V: 0.52 kg,
@@ -536,20 +542,7 @@ fn record_then_identify_round_trips_the_seed_device() {
     assert_eq!(scene["device"]["coulomb"], id["coulomb"]["value"]);
     // Everything else comes from the base scene.
     assert_eq!(scene["estimator"]["cutoff_hz"], 499.0);
-    // The written scene runs.
-    let o = zwidth(
-        &[
-            "trial",
-            "--scene",
-            out.to_str().unwrap(),
-            "--k",
-            "1000",
-            "--b",
-            "0",
-        ],
-        "",
-    );
-    assert_eq!(o.code, 0, "{}", o.stderr);
+    runs_a_trial(out.to_str().unwrap());
     // The text report names the parameters and units.
     let o = zwidth(&["identify", trace], "");
     assert!(
@@ -757,20 +750,7 @@ fn two_mass_identify_writes_the_transmission() {
         mode.get("amplifier_hz").is_none() && d.get("amplifier_hz").is_none(),
         "{d}"
     );
-    // The written scene runs.
-    let o = zwidth(
-        &[
-            "trial",
-            "--scene",
-            out.to_str().unwrap(),
-            "--k",
-            "1000",
-            "--b",
-            "0",
-        ],
-        "",
-    );
-    assert_eq!(o.code, 0, "{}", o.stderr);
+    runs_a_trial(out.to_str().unwrap());
     // The text report names the mode.
     let o = zwidth(
         &[

@@ -376,11 +376,12 @@ mod tests {
     use super::*;
     use crate::zwidth::scene::{Scene, SceneSpec};
 
-    fn scene(json: &str) -> Scene {
+    pub(super) fn scene(json: &str) -> Scene {
         SceneSpec::from_json(json).unwrap().validate().unwrap()
     }
 
-    fn within(got: &Estimate, want: f64, rel: f64, what: &str) {
+    /// `got` within `rel` of `want`.
+    pub(super) fn within(got: &Estimate, want: f64, rel: f64, what: &str) {
         assert!(
             (got.value - want).abs() <= rel * want.abs(),
             "{what}: {} vs {want} (±{} %)",

@@ -454,14 +454,11 @@ fn estimate(value: f64, std_error: f64) -> Estimate {
 #[cfg(test)]
 mod tests {
     use super::super::record::{record, Band, Excitation};
+    use super::super::tests::{scene, within};
     use super::super::{identify, with_mode, Model};
     use super::*;
     use crate::linalg::frequency_response;
-    use crate::zwidth::scene::{Scene, SceneSpec};
-
-    fn scene(json: &str) -> Scene {
-        SceneSpec::from_json(json).unwrap().validate().unwrap()
-    }
+    use crate::zwidth::scene::Scene;
 
     /// A 2011-like device at 10 kHz (docs/paper.md, scene (b)): 0.4 kg
     /// handle, 0.12 kg motor side, 2e5 N/m cable (resonance
@@ -488,15 +485,6 @@ mod tests {
             }),
             ..Excitation::default()
         }
-    }
-
-    fn within(got: &Estimate, want: f64, rel: f64, what: &str) {
-        assert!(
-            (got.value - want).abs() <= rel * want.abs(),
-            "{what}: {} vs {want} (±{} %)",
-            got.value,
-            rel * 100.0
-        );
     }
 
     #[test]
