@@ -503,6 +503,11 @@ mod tests {
         let mut h = f.clone();
         h[22] += 1e-12;
         assert_eq!(command_period(&h), Some(7));
+        // Relative to the peak: ×100 (peak 90), a change of 1e-8 is below
+        // 1e-9 × 90 and still the same value.
+        let mut big: Vec<f64> = f.iter().map(|v| v * 100.0).collect();
+        big[22] += 1e-8;
+        assert_eq!(command_period(&big), Some(7));
         assert_eq!(command_period(&[0.0; 30]), None);
     }
 
