@@ -30,7 +30,7 @@ use serde::Serialize;
 
 use super::{Estimate, Trace};
 use crate::error::SpecError;
-use crate::linalg::{identity, solve, Mat};
+use crate::linalg::{identity, solve_scaled, Mat};
 use crate::spectral::LineAnalyzer;
 
 /// The fitted mode and the split of the device into two masses (SI units).
@@ -183,31 +183,6 @@ fn normal(j: &[Vec<f64>], r: &[f64]) -> (Mat, Vec<f64>) {
     (a, g)
 }
 
-/// `A·X = B` for a symmetric positive (semi)definite A whose diagonal spans
-/// many decades (k ~ 1e5 N/m beside τ ~ 1e-4 s): solved as
-/// `(D A D)(D⁻¹ X) = D B` with D = diag(1/√A_ii), so the pivot test sees
-/// the problem's conditioning, not its units.
-fn solve_scaled(a: &Mat, b: &Mat) -> Option<Mat> {
-    let d: Vec<f64> = (0..a.len())
-        .map(|i| 1.0 / a[i][i].abs().sqrt().max(1e-300))
-        .collect();
-    let scaled: Mat = (0..a.len())
-        .map(|i| (0..a.len()).map(|j| d[i] * a[i][j] * d[j]).collect())
-        .collect();
-    let rhs: Mat = b
-        .iter()
-        .zip(&d)
-        .map(|(row, di)| row.iter().map(|v| v * di).collect())
-        .collect();
-    let y = solve(&scaled, &rhs)?;
-    Some(
-        y.iter()
-            .zip(&d)
-            .map(|(row, di)| row.iter().map(|v| v * di).collect())
-            .collect(),
-    )
-}
-
 /// Levenberg–Marquardt from `t` (Marquardt 1963: the damped normal
 /// equations `(JᵀJ + λ·diag JᵀJ) δ = −Jᵀr`).
 fn levenberg_marquardt(lines: &Lines, mut t: Theta, m: f64, b: f64, dt: f64) -> Theta {
@@ -311,14 +286,6 @@ pub fn fit_mode(trace: &Trace, mass: &Estimate, damping: &Estimate) -> Result<Mo
         .iter()
         .map(|&k| 2.0 * std::f64::consts::PI * k as f64 / period_s)
         .collect();
-    let scale = x.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
-    if scale.is_nan() || scale <= 0.0 {
-        return Err(SpecError::new(
-            "trace column 3 (position_m)",
-            "(no motion at the lines)",
-            "must respond to the command's lines",
-        ));
-    }
     // The resonance: where |X/F·s(Ms + b)| (1 for a rigid device) peaks.
     let peak = (0..lines.len())
         .max_by(|&i, &j| {
@@ -347,7 +314,15 @@ pub fn fit_mode(trace: &Trace, mass: &Estimate, damping: &Estimate) -> Result<Mo
     let pick = |v: &[C]| keep.iter().map(|&i| v[i]).collect::<Vec<C>>();
     let (f, x) = (pick(&f), pick(&x));
     let w: Vec<f64> = keep.iter().map(|&i| w[i]).collect();
+    // Residuals are divided by it: the fitted lines must carry motion.
     let scale = x.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
+    if scale.is_nan() || scale <= 0.0 {
+        return Err(SpecError::new(
+            "trace column 3 (position_m)",
+            "(no motion at the lines)",
+            "must respond to the command's lines",
+        ));
+    }
     let data = Lines { w, f, x, scale };
     // Start: k = r(1 − r)M·ω_r² for each split r on a grid and c from a
     // loss-factor grid; the best three starts are refined.
@@ -455,7 +430,7 @@ fn estimate(value: f64, std_error: f64) -> Estimate {
 mod tests {
     use super::super::record::{record, Band, Excitation};
     use super::super::tests::{scene, within};
-    use super::super::{identify, with_mode, Model};
+    use super::super::{identify, with_mode, Identified, Model};
     use super::*;
     use crate::linalg::frequency_response;
     use crate::zwidth::scene::Scene;
@@ -485,6 +460,16 @@ mod tests {
             }),
             ..Excitation::default()
         }
+    }
+
+    /// The rigid fit on the default slow trace, then the mode on a trace
+    /// recorded with `band`, both from `sc`.
+    fn slow_then_band(sc: &Scene, band: &Excitation) -> Result<Identified, SpecError> {
+        let rigid = identify(
+            &record(sc, &Excitation::default()),
+            Model::MassDamperCoulomb,
+        )?;
+        with_mode(rigid, &record(sc, band))
     }
 
     #[test]
@@ -547,12 +532,7 @@ mod tests {
     fn a_frictionless_two_mass_device_comes_back() {
         // Slow trace for m, b; band trace for the mode; 1 µm encoder.
         let sc = two_mass("0");
-        let rigid = identify(
-            &record(&sc, &Excitation::default()),
-            Model::MassDamperCoulomb,
-        )
-        .unwrap();
-        let id = with_mode(rigid, &record(&sc, &band_excitation())).unwrap();
+        let id = slow_then_band(&sc, &band_excitation()).unwrap();
         assert_eq!(id.model, Model::TwoMass);
         let m = id.mode.as_ref().unwrap();
         // Within 1 % of the scene's own parameters (the rigid fit reads the
@@ -604,12 +584,7 @@ mod tests {
                 "friction":{"on":"handle","static":0.25}},
               "loop":{"sample_hz":10000,"render_hz":1000}}"#,
         );
-        let rigid = identify(
-            &record(&sc, &Excitation::default()),
-            Model::MassDamperCoulomb,
-        )
-        .unwrap();
-        let id = with_mode(rigid, &record(&sc, &band_excitation())).unwrap();
+        let id = slow_then_band(&sc, &band_excitation()).unwrap();
         let m = id.mode.as_ref().unwrap();
         within(&id.mass, 0.52, 0.02, "M");
         within(&id.damping, 13.2, 0.02, "b");
@@ -627,11 +602,6 @@ mod tests {
         // frictionless device; the band reaches 2 kHz, twice the lag's
         // corner. Measured: f_a +1.5 %, the masses and k within 1.5 %.
         let sc = two_mass(r#"0,"amplifier_hz":1000"#);
-        let rigid = identify(
-            &record(&sc, &Excitation::default()),
-            Model::MassDamperCoulomb,
-        )
-        .unwrap();
         let wide = Excitation {
             band: Some(Band {
                 f_min_hz: 50.0,
@@ -640,7 +610,7 @@ mod tests {
             }),
             ..band_excitation()
         };
-        let id = with_mode(rigid, &record(&sc, &wide)).unwrap();
+        let id = slow_then_band(&sc, &wide).unwrap();
         let m = id.mode.as_ref().unwrap();
         let f_a = m.amplifier_hz.expect("a lag resolved");
         assert!((f_a / 1000.0 - 1.0).abs() < 0.05, "{f_a}");
