@@ -17,6 +17,7 @@ pub mod settings;
 pub mod stats;
 pub mod sweep;
 pub mod tradeoff;
+pub mod trial;
 pub mod trust;
 
 pub use scene::{Scene, SceneSpec};

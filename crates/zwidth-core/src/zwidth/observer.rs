@@ -40,6 +40,14 @@ pub struct Observer {
     /// Set while finished trials cannot be stored: the searches wait
     /// between trials, and the reason is shown with the progress.
     held: std::sync::Mutex<Option<String>>,
+    /// Where trials run when not in this process (an attached rig).
+    backend: Option<std::sync::Arc<dyn super::trial::TrialBackend>>,
+}
+
+impl std::fmt::Debug for dyn super::trial::TrialBackend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("TrialBackend")
+    }
 }
 
 /// A finished evaluation of a tune (the record is the tune's own JSON).
@@ -66,6 +74,17 @@ impl Observer {
     pub fn with_evaluations(mut self, evals: Vec<StoredEvaluation>) -> Self {
         self.evals_done = evals.into_iter().map(|e| (e.key, e.record)).collect();
         self
+    }
+
+    /// Run new trials on `backend` instead of in this process (replayed
+    /// trials are still replayed, new ones still recorded here).
+    pub fn with_backend(mut self, backend: std::sync::Arc<dyn super::trial::TrialBackend>) -> Self {
+        self.backend = Some(backend);
+        self
+    }
+
+    pub(super) fn backend(&self) -> Option<&std::sync::Arc<dyn super::trial::TrialBackend>> {
+        self.backend.as_ref()
     }
 
     /// Stop the run once it has done more than `limit` trials (a runaway:

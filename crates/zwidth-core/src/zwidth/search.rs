@@ -155,6 +155,9 @@ pub struct Evaluator {
     probe_setup: Option<ProbeSetup>,
     observer: Option<std::sync::Arc<Observer>>,
     scope: u32,
+    /// The accuracy as specified (a remote trial resolves it again, on the
+    /// same scene, to the same `res`); set by the map.
+    accuracy: Option<super::settings::Accuracy>,
 }
 
 impl Evaluator {
@@ -226,6 +229,7 @@ impl Evaluator {
             probe_setup,
             observer: None,
             scope: 0,
+            accuracy: None,
         })
     }
 
@@ -335,11 +339,42 @@ impl Evaluator {
             if let Some(done) = o.replay(self.scope, k, b) {
                 return done;
             }
-            let p = self.evaluate(p);
+            let p = match (o.backend(), &self.accuracy) {
+                (Some(backend), Some(accuracy)) => {
+                    let request = super::trial::TrialRequest {
+                        scope: self.scope,
+                        k,
+                        b,
+                        scene: self.scene.spec.clone(),
+                        method: self.method,
+                        criterion: self.criterion,
+                        accuracy: accuracy.clone(),
+                    };
+                    match backend.trial(&request, o) {
+                        Some(p) => p,
+                        // Cancelled while the trial was out: end as a cancel does.
+                        None => {
+                            p.passive = Some(false);
+                            return p;
+                        }
+                    }
+                }
+                _ => self.evaluate(p),
+            };
             o.record(self.scope, &p);
             return p;
         }
         self.evaluate(p)
+    }
+
+    /// The verdict at (K, B) from this process's engines (what a remote
+    /// trial computes too: `trial::run`).
+    pub(super) fn evaluate_point(&self, k: f64, b: f64) -> Point {
+        self.evaluate(Point {
+            k,
+            b,
+            ..Point::default()
+        })
     }
 
     fn evaluate(&self, mut p: Point) -> Point {
@@ -566,6 +601,7 @@ pub fn map_observed(
 ) -> Result<MapResult, SpecError> {
     let start = Instant::now();
     let (mut ev, _) = prepare(spec)?;
+    ev.accuracy = Some(spec.accuracy.clone());
     ev.observer = observer;
     ev.scope = scope;
     let res = ev.res;

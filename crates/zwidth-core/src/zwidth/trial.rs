@@ -1,0 +1,170 @@
+//! One trial, as something a backend other than this process can run: the
+//! searches ask for a verdict at (K, B) and whoever answers — the engines in
+//! this process (the default), or an attached rig over the agent protocol —
+//! returns a [`Point`]. A request carries everything the trial needs (the
+//! scene, the engine, the criterion and the accuracy spec), so the answer
+//! does not depend on where it was computed: [`run`] is what the simulated
+//! agent runs, and it gives the bits the in-process search gives.
+
+use serde::{Deserialize, Serialize};
+
+use super::observer::Observer;
+use super::scene::SceneSpec;
+use super::search::{Evaluator, Point};
+use super::settings::{Accuracy, Criterion, Method};
+use crate::error::SpecError;
+
+/// One trial of map `scope`: the wall (K, B) on `scene`, judged by
+/// `criterion` with engine `method` (never `auto`: resolved by the map).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct TrialRequest {
+    pub scope: u32,
+    /// Wall stiffness (N/m).
+    pub k: f64,
+    /// Wall damping (N·s/m).
+    pub b: f64,
+    pub scene: SceneSpec,
+    pub method: Method,
+    pub criterion: Criterion,
+    pub accuracy: Accuracy,
+}
+
+/// Runs trials somewhere else. `trial` blocks until the verdict is in; None
+/// when the run was cancelled meanwhile (see `observer.cancelled()`): the
+/// search then ends as it does on a cancel.
+pub trait TrialBackend: Send + Sync {
+    fn trial(&self, request: &TrialRequest, observer: &Observer) -> Option<Point>;
+}
+
+/// Run a trial in this process, as the map's own search would.
+pub fn run(request: &TrialRequest) -> Result<Point, SpecError> {
+    let scene = request.scene.validate().map_err(|e| e.within("scene"))?;
+    let res = request.accuracy.resolve(&scene)?;
+    if request.method == Method::Auto {
+        return Err(SpecError::new(
+            "method",
+            "auto",
+            "a trial names its engine: time, frequency or analytic",
+        ));
+    }
+    super::scene::validate_wall(request.k, request.b)?;
+    let ev = Evaluator::new(scene, request.method, request.criterion, res)?;
+    Ok(ev.evaluate_point(request.k, request.b))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::zwidth::search::{map, map_observed};
+    use crate::zwidth::settings::MapSpec;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Arc;
+
+    /// A backend that sends each request through JSON (as the agent
+    /// protocol does) and runs it with [`run`], counting the trials.
+    #[derive(Default)]
+    struct OverTheWire(AtomicUsize);
+    impl TrialBackend for OverTheWire {
+        fn trial(&self, request: &TrialRequest, _: &Observer) -> Option<Point> {
+            self.0.fetch_add(1, Ordering::Relaxed);
+            let wire = serde_json::to_string(request).unwrap();
+            let back: TrialRequest = serde_json::from_str(&wire).unwrap();
+            let p = run(&back).unwrap();
+            Some(serde_json::from_str(&serde_json::to_string(&p).unwrap()).unwrap())
+        }
+    }
+
+    /// Friction and quantization, wall hits at draft (nonlinear: the
+    /// verdicts are the simulation's, not a closed form).
+    const HITS: &str = r#"{"scene":{"device":{"coulomb":0.05,"quantization":1e-6},"loop":{"sample_hz":2000,"render_hz":1000}},
+        "method":"time","criterion":"stability","b":[0,2],"accuracy":"draft"}"#;
+
+    #[test]
+    fn a_map_whose_trials_run_elsewhere_is_the_same_map_to_the_bit() {
+        // The independent computation is the in-process map itself: every
+        // trial computed from its request alone, after a JSON round trip,
+        // gives the same boundary and the same points, bit for bit.
+        let spec: MapSpec = serde_json::from_str(HITS).unwrap();
+        let here = map(&spec).unwrap();
+        let backend = Arc::new(OverTheWire::default());
+        let o = Arc::new(Observer::default().with_backend(backend.clone()));
+        let there = map_observed(&spec, Some(o.clone()), 0).unwrap();
+        assert_eq!(backend.0.load(Ordering::Relaxed), here.trials);
+        assert!(here.trials > 4, "{} trials", here.trials);
+        let bits = |r: &crate::zwidth::search::MapResult| {
+            r.boundary
+                .iter()
+                .map(|p| (p.b.to_bits(), p.k_max.to_bits()))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&here), bits(&there));
+        assert_eq!(here.points, there.points);
+        assert!(here.k_width > 0.0);
+        // Every remote trial was recorded for the store, as local ones are.
+        assert_eq!(o.take_new().len(), here.trials);
+    }
+
+    #[test]
+    fn a_cancelled_remote_trial_ends_the_map_as_a_cancel_does() {
+        struct Gone;
+        impl TrialBackend for Gone {
+            fn trial(&self, _: &TrialRequest, o: &Observer) -> Option<Point> {
+                o.cancel.store(true, Ordering::Relaxed);
+                None
+            }
+        }
+        let spec: MapSpec = serde_json::from_str(HITS).unwrap();
+        let o = Arc::new(Observer::default().with_backend(Arc::new(Gone)));
+        let r = map_observed(&spec, Some(o.clone()), 0).unwrap();
+        assert_eq!(r.k_width, 0.0);
+        assert!(
+            o.take_new().is_empty(),
+            "nothing recorded for a trial never run"
+        );
+    }
+
+    #[test]
+    fn a_request_is_checked_before_it_runs() {
+        let spec: MapSpec = serde_json::from_str(HITS).unwrap();
+        let ok = TrialRequest {
+            scope: 0,
+            k: 1000.0,
+            b: 1.0,
+            scene: spec.scene.clone(),
+            method: Method::Time,
+            criterion: Criterion::Stability,
+            accuracy: spec.accuracy.clone(),
+        };
+        assert!(run(&ok).unwrap().stable.is_some());
+        let field = |r: TrialRequest| run(&r).unwrap_err().field;
+        assert_eq!(
+            field(TrialRequest {
+                k: -1.0,
+                ..ok.clone()
+            }),
+            "k"
+        );
+        assert_eq!(
+            field(TrialRequest {
+                b: f64::NAN,
+                ..ok.clone()
+            }),
+            "b"
+        );
+        assert_eq!(
+            field(TrialRequest {
+                method: Method::Auto,
+                ..ok.clone()
+            }),
+            "method"
+        );
+        assert_eq!(
+            field(TrialRequest {
+                method: Method::Time,
+                criterion: Criterion::Impedance,
+                ..ok
+            }),
+            "criterion"
+        );
+    }
+}
