@@ -4,6 +4,7 @@
 //! Pure numerics live in the `zwidth-core` crate (re-exported here: [`estimators`],
 //! [`zwidth`], [`tune`], …); the CLI in `cli` only reads, calls them and prints.
 
+pub mod agent;
 pub mod cli;
 pub mod client;
 pub mod experiment;

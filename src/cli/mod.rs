@@ -3,6 +3,7 @@
 //! Local engines are in `local`, the service and its client in `service`,
 //! shared helpers in `common`.
 
+mod agent;
 mod common;
 mod identify;
 mod local;
@@ -303,12 +304,76 @@ pub enum Command {
             value_delimiter = ','
         )]
         allow_origins: Vec<String>,
-        /// Simulated rigs, NAME[:THREADS] comma-separated (0 threads: one per core); the first is the default.
+        /// Rigs, comma-separated: NAME[:THREADS] a simulator (0 threads: one
+        /// per core), NAME:attached hardware behind a `zwidth agent`; the
+        /// first is the default.
         #[arg(long, env = "ZWIDTH_RIGS", default_value = "sim:0")]
         rigs: String,
+        /// A file with the agents' tokens, one per line (default
+        /// `<db>.agent-token`, made owner-only on first start).
+        #[arg(long, env = "ZWIDTH_AGENT_TOKEN_FILE")]
+        agent_token_file: Option<PathBuf>,
+        /// Attached rigs: the agents' heartbeat interval (ms) …
+        #[arg(long, default_value_t = 2000)]
+        agent_heartbeat_ms: u64,
+        /// … the silence after which a rig is `lost_contact` (ms) …
+        #[arg(long, default_value_t = 10_000)]
+        agent_ttl_ms: u64,
+        /// … and the further silence after which its session is fenced off
+        /// and its trial sent again (ms).
+        #[arg(long, default_value_t = 20_000)]
+        agent_grace_ms: u64,
         /// Longest a request may take before a 503 (s).
         #[arg(long, env = "ZWIDTH_REQUEST_TIMEOUT_S", default_value_t = 30.0)]
         request_timeout_s: f64,
+    },
+    /// Connect a rig to a server: run its trials (on the simulated plant
+    /// with --sim, or on a driver process) and send the results back.
+    Agent {
+        /// Run the simulated plant of each trial's scene (the reference agent).
+        #[arg(long, conflicts_with = "driver")]
+        sim: bool,
+        /// A driver process for real hardware, run by `sh -c`, speaking the
+        /// line-oriented JSON driver protocol (docs/rigs.md).
+        #[arg(long)]
+        driver: Option<String>,
+        #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
+        server: String,
+        /// The rig's id on the server (`serve --rigs NAME:attached`).
+        #[arg(long)]
+        rig: String,
+        /// This agent's name (default: host name and process id).
+        #[arg(long)]
+        name: Option<String>,
+        /// The agent token file (default `zwidth.db.agent-token`, made by
+        /// `serve` next to its database); or ZWIDTH_AGENT_TOKEN.
+        #[arg(long)]
+        token_file: Option<PathBuf>,
+        /// Where unacknowledged results wait (default `<rig>.outbox`).
+        #[arg(long)]
+        outbox: Option<PathBuf>,
+        /// --sim: `realtime` paces each trial like hardware (10 s), `fast` runs at once.
+        #[arg(long, default_value = "fast", value_parser = ["fast", "realtime"])]
+        pace: String,
+        /// --sim: each trial takes at least this long (ms); overrides --pace.
+        #[arg(long)]
+        trial_ms: Option<u64>,
+        /// --sim: the capabilities to advertise (JSON; default a 10 N bench device).
+        #[arg(long)]
+        capabilities: Option<PathBuf>,
+        /// --sim: faults to inject (JSON, docs/rigs.md), for tests.
+        #[arg(long)]
+        faults: Option<PathBuf>,
+        /// The operator's limits: trials beyond them are refused whatever
+        /// the server asks. Force (N) …
+        #[arg(long, default_value_t = f64::INFINITY)]
+        max_force_n: f64,
+        /// … stiffness (N/m) …
+        #[arg(long, default_value_t = f64::INFINITY)]
+        max_k: f64,
+        /// … and damping (N·s/m).
+        #[arg(long, default_value_t = f64::INFINITY)]
+        max_b: f64,
     },
     /// Submit an experiment JSON file to a running service; prints its id.
     Submit {
@@ -425,6 +490,7 @@ impl Command {
         matches!(
             self,
             Command::Serve { .. }
+                | Command::Agent { .. }
                 | Command::Submit { .. }
                 | Command::Openapi
                 | Command::Backup { .. }

@@ -15,8 +15,40 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             token_file,
             allow_origins,
             rigs,
+            agent_token_file,
+            agent_heartbeat_ms,
+            agent_ttl_ms,
+            agent_grace_ms,
             request_timeout_s,
         } => {
+            let agent_tokens = match &agent_token_file {
+                Some(f) => std::fs::read_to_string(f)
+                    .map_err(|e| {
+                        CliError::Input(format!(
+                            "--agent-token-file {} cannot be read: {e}",
+                            f.display()
+                        ))
+                    })?
+                    .lines()
+                    .map(|t| t.trim().to_string())
+                    .filter(|t| !t.is_empty())
+                    .collect(),
+                None => Vec::new(),
+            };
+            let lease = crate::rig::lease::Timing {
+                heartbeat_ms: agent_heartbeat_ms,
+                ttl_ms: agent_ttl_ms,
+                grace_ms: agent_grace_ms,
+            };
+            if !(10..=60_000).contains(&agent_heartbeat_ms)
+                || agent_ttl_ms < 2 * agent_heartbeat_ms
+                || agent_ttl_ms > 600_000
+                || agent_grace_ms > 3_600_000
+            {
+                return Err(CliError::Input(format!(
+                    "--agent-heartbeat-ms = {agent_heartbeat_ms}, --agent-ttl-ms = {agent_ttl_ms}, --agent-grace-ms = {agent_grace_ms}: the heartbeat must be 10 to 60000 ms, the TTL at least two heartbeats and at most 600000 ms, the grace at most 3600000 ms"
+                )));
+            }
             let mut tokens = tokens;
             if let Some(f) = &token_file {
                 let text = std::fs::read_to_string(f).map_err(|e| {
@@ -24,12 +56,8 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
                 })?;
                 tokens.extend(text.lines().map(str::to_owned));
             }
-            let rigs: Vec<std::sync::Arc<dyn crate::rig::Rig>> =
-                crate::rig::SimulatedRig::parse_list(&rigs)
-                    .map_err(|e| CliError::Input(format!("--rigs: {e}")))?
-                    .into_iter()
-                    .map(|r| std::sync::Arc::new(r) as std::sync::Arc<dyn crate::rig::Rig>)
-                    .collect();
+            let rigs = crate::rig::parse_list(&rigs)
+                .map_err(|e| CliError::Input(format!("--rigs: {e}")))?;
             use std::io::IsTerminal;
             let _ = tracing_subscriber::fmt()
                 .with_writer(std::io::stderr)
@@ -52,8 +80,10 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
                 db,
                 bind,
                 tokens,
+                agent_tokens,
                 allow_origins,
                 rigs,
+                lease,
                 request_timeout_s,
             }))
             .map_err(|e| {
@@ -64,6 +94,7 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
                 }
             })
         }
+        command @ Command::Agent { .. } => super::agent::run(command),
         Command::Submit {
             file,
             server,

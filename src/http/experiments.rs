@@ -103,15 +103,18 @@ impl From<ExperimentRow> for ExperimentView {
 impl AppState {
     /// The view of a row, with `held` when its running trials cannot be stored.
     fn view(&self, row: ExperimentRow) -> ExperimentView {
-        let held = self
+        let (held, waiting) = self
             .running
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .get(&row.id)
-            .and_then(|o| o.held());
+            .map_or((None, None), |o| (o.held(), o.waiting()));
         let mut v = ExperimentView::from(row);
         if let Some(why) = held {
             v.progress["held"] = json!(why);
+        }
+        if let Some(why) = waiting {
+            v.progress["waiting_for_rig"] = json!(why);
         }
         v
     }
@@ -186,7 +189,8 @@ pub async fn submit(
             ))
         })?,
     };
-    rig.check(&spec)?;
+    rig.check(&spec.scenes())?;
+    let rig_id = rig.info().id;
     let priority = q.int("priority", -1000..=1000)?.unwrap_or(0);
     let not_before_ms = q.int("not_before_ms", 0..=i64::MAX / 2)?;
     let key = match headers.get("idempotency-key") {
@@ -214,7 +218,7 @@ pub async fn submit(
             priority,
             key: key.as_deref(),
             not_before_ms,
-            rig: &rig.info().id,
+            rig: &rig_id,
         })
         .await
         .map_err(|e| st.fail(e))?;

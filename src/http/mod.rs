@@ -3,6 +3,7 @@
 //! and from where is `guard`. Bodies are parsed with the engines' own spec
 //! types and validated with the engines' own validation.
 
+pub mod agent;
 pub mod compare;
 pub mod experiments;
 pub mod guard;
@@ -35,6 +36,8 @@ pub struct AppState {
     /// Bearer tokens accepted on mutating endpoints; empty: none required
     /// (only allowed when bound to loopback).
     pub tokens: Arc<Vec<String>>,
+    /// Tokens that open agent sessions (`GET /v1/agent`), never a user's.
+    pub agent_tokens: Arc<Vec<String>>,
     /// Origins besides the server's own that may write (`--allow-origin`).
     pub allow_origins: Arc<Vec<String>>,
     /// The rigs experiments run on; the first is the default.
@@ -69,8 +72,12 @@ pub struct ServeConfig {
     pub db: std::path::PathBuf,
     pub bind: String,
     pub tokens: Vec<String>,
+    /// Agent tokens; empty: the one in `<db>.agent-token` (made on first start).
+    pub agent_tokens: Vec<String>,
     pub allow_origins: Vec<String>,
     pub rigs: Vec<Arc<dyn Rig>>,
+    /// Heartbeat, TTL and grace of attached rigs' sessions.
+    pub lease: crate::rig::lease::Timing,
     /// Longest a request may take before a 503 (s).
     pub request_timeout_s: f64,
 }
@@ -139,6 +146,11 @@ pub fn router(state: AppState, timeout: Duration) -> Router {
     Router::new()
         .route("/healthz", get(queue::healthz))
         .route("/v1/rigs", get(rigs::rigs))
+        .route("/v1/agent", get(agent::agent))
+        .route(
+            "/v1/rigs/{id}/quarantine",
+            axum::routing::delete(rigs::release),
+        )
         .route(
             "/v1/rigs/{id}/window",
             put(rigs::set_window).delete(rigs::clear_window),
@@ -187,8 +199,10 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         db,
         bind,
         tokens,
+        agent_tokens,
         allow_origins,
         rigs,
+        lease,
         request_timeout_s,
     } = cfg;
     let db = db.as_path();
@@ -241,6 +255,24 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
             );
         }
     }
+    let agent_tokens = if agent_tokens.is_empty() {
+        vec![secret_file(db, "agent-token")?]
+    } else {
+        agent_tokens
+    };
+    for r in agent::attached_rigs(&rigs) {
+        r.set_timing(lease);
+        if let Ok(rows) = store.attached_rigs().await {
+            if let Some(q) = rows
+                .iter()
+                .find(|a| a.id == r.id())
+                .and_then(|a| a.quarantine.clone())
+            {
+                tracing::warn!(rig = %r.id(), reason = %q, "rig quarantined (DELETE /v1/rigs/{{id}}/quarantine releases it)");
+                r.set_quarantine(Some(q));
+            }
+        }
+    }
     if tokens.is_empty() {
         tracing::warn!("no token set: anyone on this machine may submit; set ZWIDTH_TOKENS=<secret> to require Authorization: Bearer <secret>");
     }
@@ -264,6 +296,7 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     let state = AppState {
         store: store.clone(),
         tokens: Arc::new(tokens),
+        agent_tokens: Arc::new(agent_tokens),
         allow_origins: Arc::new(allow_origins),
         rigs: Arc::new(rigs),
         running,
@@ -294,6 +327,40 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         Err(e) => tracing::error!(error = %e, "checkpoint at shutdown failed"),
     }
     served
+}
+
+/// The secret in `<db>.<name>`, made (random, owner-only) if missing.
+/// Its path is logged, never its content.
+pub fn secret_file(db: &std::path::Path, name: &str) -> Result<String, String> {
+    let mut p = db.as_os_str().to_owned();
+    p.push(format!(".{name}"));
+    let path = std::path::PathBuf::from(p);
+    if let Ok(text) = std::fs::read_to_string(&path) {
+        let t = text.trim().to_string();
+        if !t.is_empty() {
+            tracing::info!(path = %path.display(), "{name} read");
+            return Ok(t);
+        }
+    }
+    use rand::Rng;
+    let bytes: [u8; 24] = rand::rng().random();
+    let token: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+    let mut opts = std::fs::OpenOptions::new();
+    opts.write(true).create(true).truncate(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        opts.mode(0o600);
+    }
+    use std::io::Write;
+    opts.open(&path)
+        .and_then(|mut f| {
+            f.write_all(format!("{token}\n").as_bytes())
+                .and_then(|_| f.sync_all())
+        })
+        .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+    tracing::info!(path = %path.display(), "{name} made (owner-only): pass it to the agents");
+    Ok(token)
 }
 
 /// Hold an exclusive lock on `<db>.lock` while serving: a second server

@@ -28,10 +28,14 @@ pub struct RigView {
     pub waiting: i64,
     /// The experiment it is running, if any.
     pub running: Option<String>,
+    /// An attached rig: its agent's session, state and capabilities.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub attached: Option<crate::rig::attached::AttachedView>,
 }
 
 pub async fn rig_view(st: &AppState, rig: &Arc<dyn Rig>) -> Result<RigView, Problem> {
-    let id = &rig.info().id;
+    let info = rig.info();
+    let id = &info.id;
     let window = st.store.rig_window(id).await.map_err(|e| st.fail(e))?;
     let now = jiff::Timestamp::now();
     let next = match window.as_ref().and_then(|w| w.validate().ok()) {
@@ -40,7 +44,8 @@ pub async fn rig_view(st: &AppState, rig: &Arc<dyn Rig>) -> Result<RigView, Prob
     };
     let (waiting, running) = st.store.rig_load(id).await.map_err(|e| st.fail(e))?;
     Ok(RigView {
-        info: rig.info().clone(),
+        attached: rig.attached().map(|a| a.view()),
+        info,
         open_now: next == now,
         next_start_ms: next.as_millisecond(),
         window,
@@ -109,5 +114,32 @@ pub async fn clear_window(
         .set_rig_window(&id, None)
         .await
         .map_err(|e| st.fail(e))?;
+    Ok(Json(rig_view(&st, &rig).await?))
+}
+
+#[utoipa::path(delete, path = "/v1/rigs/{id}/quarantine", params(("id" = String, Path, description = "rig id")),
+    description = "Release a quarantined attached rig (after an operator has checked it): its queue goes on.",
+    responses((status = 200, body = RigView),
+              (status = 401, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 403, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json")),
+    security((), ("bearer" = [])))]
+pub async fn release(
+    State(st): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> Result<Json<RigView>, Problem> {
+    authorize(&st, &headers)?;
+    let rig = st
+        .rig(&id)
+        .cloned()
+        .ok_or_else(|| Problem::not_found("rig", &id))?;
+    if let Some(a) = rig.attached() {
+        st.store
+            .set_quarantine(&id, None)
+            .await
+            .map_err(|e| st.fail(e))?;
+        a.set_quarantine(None);
+    }
     Ok(Json(rig_view(&st, &rig).await?))
 }

@@ -111,8 +111,8 @@ impl Unstored {
             Ok(()) => {
                 if self.failing_since.take().is_some() {
                     tracing::info!("storing works again: the run goes on");
+                    observer.hold(None);
                 }
-                observer.hold(None);
                 Ok(())
             }
             Err(e) => {
@@ -241,14 +241,18 @@ async fn run_one(
         stored_evaluations = evals.len(),
         "starting (stored work is replayed, not redone)"
     );
-    let observer = Arc::new(Observer::resuming(done).with_evaluations(evals));
+    let mut observer = Observer::resuming(done).with_evaluations(evals);
+    if let Some(backend) = rig.backend(&id) {
+        observer = observer.with_backend(backend);
+    }
+    let observer = Arc::new(observer);
     observer.limit_trials(usize::try_from(cost.trial_limit()).unwrap_or(usize::MAX));
     running
         .lock()
         .unwrap_or_else(|e| e.into_inner())
         .insert(id.clone(), observer.clone());
     let obs = observer.clone();
-    let mut task = tokio::task::spawn_blocking(move || rig.run(&parsed, obs));
+    let mut task = tokio::task::spawn_blocking(move || rig.pool().install(|| parsed.run(obs)));
     // Every 100 ms: store the trials finished since (one transaction), write
     // progress, and look for a cancel request or shutdown.
     let mut rate_mark = (std::time::Instant::now(), 0usize);

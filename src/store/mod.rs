@@ -8,6 +8,7 @@
 //! (disk full) and leaves its transaction open ("database is locked" for
 //! everyone after). Hence `fetch_all`, never `fetch_one`, on writes.
 
+pub mod agents;
 pub mod fault;
 pub use fault::{Fault, Health};
 

@@ -40,6 +40,8 @@ pub struct Observer {
     /// Set while finished trials cannot be stored: the searches wait
     /// between trials, and the reason is shown with the progress.
     held: std::sync::Mutex<Option<String>>,
+    /// Set while an attached rig cannot take the next trial: why.
+    waiting: std::sync::Mutex<Option<String>>,
     /// Where trials run when not in this process (an attached rig).
     backend: Option<std::sync::Arc<dyn super::trial::TrialBackend>>,
 }
@@ -97,6 +99,30 @@ impl Observer {
     /// Why the run was stopped as a runaway, if it was.
     pub fn runaway(&self) -> Option<String> {
         self.runaway
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
+    }
+
+    /// Stop the run as failed, saying why (a check that can only be made
+    /// while it runs, e.g. an attached rig's capabilities at dispatch).
+    pub fn fail(&self, why: String) {
+        let mut r = self.runaway.lock().unwrap_or_else(|e| e.into_inner());
+        if r.is_none() {
+            *r = Some(why);
+        }
+        self.cancel
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// The trial backend is waiting for its rig (Some(why)) or not (None).
+    pub fn set_waiting(&self, why: Option<String>) {
+        *self.waiting.lock().unwrap_or_else(|e| e.into_inner()) = why;
+    }
+
+    /// Why the run waits for its rig, if it does.
+    pub fn waiting(&self) -> Option<String> {
+        self.waiting
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .clone()

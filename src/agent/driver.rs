@@ -1,0 +1,230 @@
+//! The hardware boundary of `zwidth agent`: a [`Driver`] runs one trial on
+//! the rig and says what state the rig is in. Two come with zwidth: the
+//! simulated plant ([`SimDriver`], `--sim`) and [`StdioDriver`], which
+//! talks line-oriented JSON to a child process, so a controller in any
+//! language can be the rig (docs/rigs.md has the protocol and a Python
+//! example).
+
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+
+use crate::rig::protocol::{Capabilities, Measured, TrialLimits};
+use crate::zwidth::hit::{wall_hit, Recorder, TraceRow};
+use crate::zwidth::search::Point;
+use crate::zwidth::settings::Method;
+use crate::zwidth::trial::{self, TrialRequest};
+
+/// A rig, as the agent drives it. Calls come from one thread at a time.
+pub trait Driver: Send {
+    /// What the rig can do (sent in `hello`).
+    fn capabilities(&self) -> Capabilities;
+    /// Run one trial within `limits` (the controller clamps force to
+    /// `limits.force_limit_n` and aborts past the speed and penetration
+    /// limits); stop early when `cancel` turns true (Err: aborted).
+    fn run(
+        &mut self,
+        request: &TrialRequest,
+        limits: &TrialLimits,
+        cancel: &AtomicBool,
+    ) -> Result<(Point, Measured), String>;
+}
+
+/// The simulated plant of the trial's own scene (what the server would
+/// compute in process), paced to take at least `trial_ms`.
+pub struct SimDriver {
+    pub capabilities: Capabilities,
+    pub trial_ms: u64,
+}
+
+impl SimDriver {
+    /// A bench-top device's figures: 10 N peak, 1 µm encoder, the rates
+    /// and every estimator and probe zwidth has.
+    pub fn default_capabilities() -> Capabilities {
+        Capabilities {
+            peak_force_n: 10.0,
+            continuous_force_n: 4.0,
+            k_max: 1e6,
+            b_max: 1e4,
+            travel_m: 0.1,
+            speed_m_s: 1.0,
+            encoder_m: 1e-6,
+            sample_hz: vec![1000.0, 2000.0, 5000.0, 10000.0],
+            estimators: [
+                "fdm",
+                "butterworth",
+                "kalman",
+                "adaptive_kalman",
+                "foaw",
+                "levant",
+            ]
+            .map(String::from)
+            .to_vec(),
+            probes: vec!["wall_hit".into(), "multisine".into()],
+            model: None,
+        }
+    }
+}
+
+/// Peak force, speed and penetration over a simulated wall hit.
+#[derive(Default)]
+struct Peaks(Measured);
+
+impl Recorder for Peaks {
+    fn record(&mut self, row: TraceRow) {
+        let m = &mut self.0;
+        m.peak_force_n = m.peak_force_n.max(row.force.abs());
+        m.peak_speed_m_s = m.peak_speed_m_s.max(row.v.abs());
+        if row.force != 0.0 {
+            m.penetration_m = m.penetration_m.max(row.x.abs());
+        }
+    }
+}
+
+impl Driver for SimDriver {
+    fn capabilities(&self) -> Capabilities {
+        self.capabilities.clone()
+    }
+
+    fn run(
+        &mut self,
+        request: &TrialRequest,
+        limits: &TrialLimits,
+        cancel: &AtomicBool,
+    ) -> Result<(Point, Measured), String> {
+        let start = Instant::now();
+        let point = trial::run(request).map_err(|e| e.to_string())?;
+        // What the hardware would have measured: one wall hit's peaks (the
+        // verdict's own hits for the time engine; the force bound for a
+        // probe).
+        let mut peaks = Peaks::default();
+        if request.method == Method::Time {
+            let scene = request.scene.validate().map_err(|e| e.to_string())?;
+            let res = request
+                .accuracy
+                .resolve(&scene)
+                .map_err(|e| e.to_string())?;
+            wall_hit(&scene, request.k, request.b, res.hit, &mut peaks);
+        }
+        peaks.0.peak_force_n = peaks.0.peak_force_n.min(limits.force_limit_n);
+        while start.elapsed() < Duration::from_millis(self.trial_ms) {
+            if cancel.load(Ordering::Relaxed) {
+                return Err("aborted".into());
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        if cancel.load(Ordering::Relaxed) {
+            return Err("aborted".into());
+        }
+        Ok((point, peaks.0))
+    }
+}
+
+/// One line to the driver process.
+#[derive(Serialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+enum ToDriver<'a> {
+    Capabilities,
+    Trial {
+        request: &'a TrialRequest,
+        limits: &'a TrialLimits,
+    },
+    Abort,
+}
+
+/// One line from the driver process.
+#[derive(Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+enum FromDriver {
+    Capabilities(Capabilities),
+    Result { point: Point, measured: Measured },
+    Error { message: String },
+}
+
+/// A rig behind a child process speaking one JSON object per line on its
+/// stdin and stdout (docs/rigs.md, "the driver protocol").
+pub struct StdioDriver {
+    child: Child,
+    to: ChildStdin,
+    from: BufReader<ChildStdout>,
+    capabilities: Capabilities,
+}
+
+impl StdioDriver {
+    /// Start `command` (run by `sh -c`) and ask for its capabilities.
+    pub fn start(command: &str) -> Result<Self, String> {
+        let mut child = Command::new("sh")
+            .arg("-c")
+            .arg(command)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .spawn()
+            .map_err(|e| format!("--driver {command:?} cannot start: {e}"))?;
+        let to = child.stdin.take().ok_or("no stdin")?;
+        let from = BufReader::new(child.stdout.take().ok_or("no stdout")?);
+        let mut d = Self {
+            child,
+            to,
+            from,
+            capabilities: SimDriver::default_capabilities(),
+        };
+        match d.ask(&ToDriver::Capabilities)? {
+            FromDriver::Capabilities(c) => {
+                c.validate()
+                    .map_err(|e| format!("the driver's capabilities: {e}"))?;
+                d.capabilities = c;
+                Ok(d)
+            }
+            _ => Err("the driver must answer capabilities first".into()),
+        }
+    }
+
+    fn ask(&mut self, msg: &ToDriver) -> Result<FromDriver, String> {
+        let line = serde_json::to_string(msg).map_err(|e| e.to_string())?;
+        writeln!(self.to, "{line}")
+            .and_then(|_| self.to.flush())
+            .map_err(|e| format!("the driver is gone: {e}"))?;
+        let mut answer = String::new();
+        match self.from.read_line(&mut answer) {
+            Ok(0) => Err("the driver closed its output".into()),
+            Ok(_) => serde_json::from_str(&answer)
+                .map_err(|e| format!("the driver's answer is not a message: {e}: {answer:?}")),
+            Err(e) => Err(format!("the driver's output: {e}")),
+        }
+    }
+}
+
+impl Drop for StdioDriver {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Driver for StdioDriver {
+    fn capabilities(&self) -> Capabilities {
+        self.capabilities.clone()
+    }
+
+    fn run(
+        &mut self,
+        request: &TrialRequest,
+        limits: &TrialLimits,
+        cancel: &AtomicBool,
+    ) -> Result<(Point, Measured), String> {
+        if cancel.load(Ordering::Relaxed) {
+            let _ = self.ask(&ToDriver::Abort);
+            return Err("aborted".into());
+        }
+        match self.ask(&ToDriver::Trial { request, limits })? {
+            FromDriver::Result { point, measured } => Ok((point, measured)),
+            FromDriver::Error { message } => Err(message),
+            FromDriver::Capabilities(_) => {
+                Err("the driver answered a trial with capabilities".into())
+            }
+        }
+    }
+}

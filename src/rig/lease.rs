@@ -1,0 +1,297 @@
+//! The server's lease on an attached rig, as a pure state machine (no I/O,
+//! time passed in): one live session per rig, each under its own epoch;
+//! one trial out at a time, remembered with the epoch it was sent under; a
+//! result counts only under that epoch. `attached.rs` drives it from the
+//! WebSocket and the searches; the property test below checks it.
+
+use super::protocol::RigState;
+
+/// Timings of a lease (ms).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Timing {
+    /// Heartbeat interval asked of the agent.
+    pub heartbeat_ms: u64,
+    /// Silence after which the rig is `lost_contact` (nothing new is sent).
+    pub ttl_ms: u64,
+    /// Further silence after which the session is fenced off: its epoch
+    /// ends and the trial it held is sent again to the next session.
+    pub grace_ms: u64,
+}
+
+impl Default for Timing {
+    fn default() -> Self {
+        Self {
+            heartbeat_ms: 2_000,
+            ttl_ms: 10_000,
+            grace_ms: 20_000,
+        }
+    }
+}
+
+/// The live session.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Session {
+    pub epoch: u64,
+    pub agent: String,
+    pub boot: String,
+    pub last_heard_ms: i64,
+    pub state: RigState,
+}
+
+/// The trial out on the rig (or waiting to go out).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outstanding {
+    pub trial_id: String,
+    /// The epoch it was sent under; None: not sent (or to be sent again).
+    pub sent_epoch: Option<u64>,
+    pub sent_ms: i64,
+}
+
+/// Why the server will not take a result (it goes to the audit).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Refusal {
+    /// No trial with this id is out.
+    NotSent,
+    /// The trial is out under another epoch (it was sent again, or the
+    /// result comes from a session since fenced off).
+    StaleEpoch { sent: Option<u64> },
+}
+
+impl Refusal {
+    pub fn describe(&self, epoch: u64) -> String {
+        match self {
+            Refusal::NotSent => "a result for a trial that is not out".into(),
+            Refusal::StaleEpoch { sent: Some(s) } => {
+                format!("stale epoch {epoch}: the trial is out under epoch {s}")
+            }
+            Refusal::StaleEpoch { sent: None } => {
+                format!("stale epoch {epoch}: the trial was fenced off and waits to be sent again")
+            }
+        }
+    }
+}
+
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Lease {
+    pub timing: Timing,
+    pub session: Option<Session>,
+    pub outstanding: Option<Outstanding>,
+    /// Why the rig takes no trials until an operator lifts it.
+    pub quarantine: Option<String>,
+    /// Since when the live session has been silent past the TTL.
+    pub lost_since_ms: Option<i64>,
+    /// The highest epoch handed out (sessions with lower ones are fenced).
+    pub highest_epoch: u64,
+}
+
+impl Lease {
+    pub fn new(timing: Timing) -> Self {
+        Self {
+            timing,
+            ..Self::default()
+        }
+    }
+
+    /// Whether a session is live and heard from within the TTL.
+    pub fn connected(&self, now_ms: i64) -> bool {
+        self.session
+            .as_ref()
+            .is_some_and(|s| now_ms - s.last_heard_ms <= self.timing.ttl_ms as i64)
+    }
+
+    /// A new session under `epoch` (from the database's counter, so larger
+    /// than any before). Refused (Err: why) while another session is live
+    /// and heard within the TTL; a silent one is replaced (fenced).
+    /// Then the results the agent lists as unacknowledged are checked
+    /// (they may be for the trial out, under its epoch), and then
+    /// [`Lease::resume`].
+    pub fn open(
+        &mut self,
+        epoch: u64,
+        agent: &str,
+        boot: &str,
+        state: RigState,
+        now_ms: i64,
+    ) -> Result<(), String> {
+        if epoch <= self.highest_epoch {
+            return Err(format!(
+                "epoch {epoch} is not above {}: refused",
+                self.highest_epoch
+            ));
+        }
+        if let Some(s) = &self.session {
+            if self.connected(now_ms) {
+                return Err(format!(
+                    "the rig already has a live session (agent {}, epoch {}); one session per rig",
+                    s.agent, s.epoch
+                ));
+            }
+        }
+        self.highest_epoch = epoch;
+        self.session = Some(Session {
+            epoch,
+            agent: agent.to_string(),
+            boot: boot.to_string(),
+            last_heard_ms: now_ms,
+            state,
+        });
+        self.lost_since_ms = None;
+        Ok(())
+    }
+
+    /// After `hello`'s results: a trial still out that the agent is not
+    /// `running` was lost with the agent (killed before it finished): it
+    /// is sent again, under the new epoch.
+    pub fn resume(&mut self, running: Option<&str>) {
+        if let Some(o) = &mut self.outstanding {
+            if running != Some(o.trial_id.as_str()) {
+                o.sent_epoch = None;
+            }
+        }
+    }
+
+    /// A message under `epoch` arrived: the session is alive. False when
+    /// the epoch is not the live session's (the message is stale).
+    pub fn heard(&mut self, epoch: u64, state: Option<RigState>, now_ms: i64) -> bool {
+        match &mut self.session {
+            Some(s) if s.epoch == epoch => {
+                s.last_heard_ms = now_ms;
+                if let Some(st) = state {
+                    s.state = st;
+                }
+                self.lost_since_ms = None;
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Time passes: past the TTL the rig is lost (nothing new is sent);
+    /// past TTL + grace the session is fenced off (Some(epoch) to close)
+    /// and its trial waits to be sent again.
+    pub fn tick(&mut self, now_ms: i64) -> Option<u64> {
+        let s = self.session.as_ref()?;
+        let silent = now_ms - s.last_heard_ms;
+        if silent <= self.timing.ttl_ms as i64 {
+            return None;
+        }
+        self.lost_since_ms
+            .get_or_insert(s.last_heard_ms + self.timing.ttl_ms as i64);
+        if silent <= (self.timing.ttl_ms + self.timing.grace_ms) as i64 {
+            return None;
+        }
+        let epoch = s.epoch;
+        self.fence(epoch);
+        Some(epoch)
+    }
+
+    /// End the session under `epoch` and fence it off: a trial it held
+    /// is sent again, and its late result is refused.
+    pub fn fence(&mut self, epoch: u64) {
+        if self.session.as_ref().is_some_and(|s| s.epoch == epoch) {
+            self.session = None;
+            self.lost_since_ms = None;
+        }
+        if let Some(o) = &mut self.outstanding {
+            if o.sent_epoch == Some(epoch) {
+                o.sent_epoch = None;
+            }
+        }
+    }
+
+    /// The link of the session under `epoch` closed: no session, but the
+    /// trial it held stays out under its epoch (the agent finishes it and
+    /// lists the result in its next `hello`), until the grace runs out.
+    pub fn closed(&mut self, epoch: u64) {
+        if self.session.as_ref().is_some_and(|s| s.epoch == epoch) {
+            self.session = None;
+            self.lost_since_ms = None;
+        }
+    }
+
+    /// Why nothing may be sent now, or None when a trial may go out.
+    pub fn blocked(&self, now_ms: i64) -> Option<String> {
+        if let Some(q) = &self.quarantine {
+            return Some(format!("quarantined: {q}"));
+        }
+        let Some(s) = &self.session else {
+            return Some("waiting for the rig: no agent connected".into());
+        };
+        if !self.connected(now_ms) {
+            return Some(format!(
+                "waiting for the rig: lost contact (silent {} ms)",
+                now_ms - s.last_heard_ms
+            ));
+        }
+        if !s.state.armed() {
+            return Some(format!("waiting for the rig: {}", s.state.describe()));
+        }
+        None
+    }
+
+    /// Put `trial_id` out (or keep it out): Some(epoch) when it is to be
+    /// sent now under that epoch; None when it is out already, or when
+    /// nothing may be sent.
+    pub fn send(&mut self, trial_id: &str, now_ms: i64) -> Option<u64> {
+        if let Some(o) = &self.outstanding {
+            if o.trial_id != trial_id {
+                // One trial at a time: the other one must end first.
+                return None;
+            }
+            if o.sent_epoch.is_some() {
+                return None;
+            }
+        }
+        if self.blocked(now_ms).is_some() {
+            self.outstanding.get_or_insert(Outstanding {
+                trial_id: trial_id.to_string(),
+                sent_epoch: None,
+                sent_ms: now_ms,
+            });
+            return None;
+        }
+        let epoch = self.session.as_ref()?.epoch;
+        self.outstanding = Some(Outstanding {
+            trial_id: trial_id.to_string(),
+            sent_epoch: Some(epoch),
+            sent_ms: now_ms,
+        });
+        Some(epoch)
+    }
+
+    /// A result arrived: Ok when it is for the trial out and carries the
+    /// epoch it was sent under (store it, then [`Lease::done`]).
+    pub fn check_result(&self, epoch: u64, trial_id: &str) -> Result<(), Refusal> {
+        match &self.outstanding {
+            Some(o) if o.trial_id == trial_id => {
+                if o.sent_epoch == Some(epoch) {
+                    Ok(())
+                } else {
+                    Err(Refusal::StaleEpoch { sent: o.sent_epoch })
+                }
+            }
+            _ => Err(Refusal::NotSent),
+        }
+    }
+
+    /// The trial's result is committed (or the trial is withdrawn).
+    pub fn done(&mut self, trial_id: &str) {
+        if self
+            .outstanding
+            .as_ref()
+            .is_some_and(|o| o.trial_id == trial_id)
+        {
+            self.outstanding = None;
+        }
+    }
+
+    /// The agent refused the trial under `epoch`: it waits to be sent
+    /// again (to a session that can run it).
+    pub fn refused(&mut self, epoch: u64, trial_id: &str) {
+        if let Some(o) = &mut self.outstanding {
+            if o.trial_id == trial_id && o.sent_epoch == Some(epoch) {
+                o.sent_epoch = None;
+            }
+        }
+    }
+}
