@@ -50,6 +50,9 @@ pub struct Faults {
     pub delay_result_ms: u64,
     /// Exit (as if killed) halfway through the Nth trial (1-based).
     pub exit_mid_trial: Option<u32>,
+    /// Exit (as if killed) after the Nth result is in the outbox, before
+    /// it is sent.
+    pub exit_before_send: Option<u32>,
 }
 
 pub struct AgentConfig {
@@ -72,6 +75,9 @@ enum Done {
     },
 }
 
+/// Set by the operator's local reset (SIGUSR1), taken at the next beat.
+static RESET: AtomicBool = AtomicBool::new(false);
+
 /// What survives a reconnect.
 struct Agent {
     cfg: AgentConfig,
@@ -86,6 +92,7 @@ struct Agent {
     /// Stop after the running trial (a deferred stop).
     disarm_after: bool,
     trials_started: u32,
+    results_kept: u32,
     done_tx: tokio::sync::mpsc::UnboundedSender<Done>,
 }
 
@@ -108,8 +115,19 @@ pub async fn run(cfg: AgentConfig, driver: Box<dyn Driver>) -> Result<(), String
         running: None,
         disarm_after: false,
         trials_started: 0,
+        results_kept: 0,
         done_tx,
     };
+    // The operator's local reset (SIGUSR1): re-arm after a stop or halt.
+    #[cfg(unix)]
+    tokio::spawn(async {
+        use tokio::signal::unix::{signal, SignalKind};
+        if let Ok(mut s) = signal(SignalKind::user_defined1()) {
+            while s.recv().await.is_some() {
+                RESET.store(true, Ordering::Relaxed);
+            }
+        }
+    });
     let mut wait = Duration::from_millis(100);
     loop {
         let started = Instant::now();
@@ -147,6 +165,10 @@ impl Agent {
         if let Done::Result(r) = &d {
             if let Err(e) = self.outbox.put(r) {
                 eprintln!("zwidth agent: the outbox cannot be written: {e}");
+            }
+            self.results_kept += 1;
+            if self.cfg.faults.exit_before_send == Some(self.results_kept) {
+                std::process::exit(137);
             }
         }
         self.running = None;
@@ -224,6 +246,10 @@ impl Agent {
                 _ = beat.tick() => {
                     if last_heard.elapsed() > Duration::from_millis(ttl_ms) {
                         return Err(format!("nothing heard from the server for {ttl_ms} ms"));
+                    }
+                    if RESET.swap(false, Ordering::Relaxed) && self.running.is_none() {
+                        eprintln!("zwidth agent: reset by the operator: armed");
+                        self.state = RigState::Armed;
                     }
                     let hb = AgentMessage::Heartbeat { epoch, state: self.state.clone() };
                     ws.send(send(&hb)).await.map_err(|e| e.to_string())?;

@@ -151,6 +151,8 @@ pub fn router(state: AppState, timeout: Duration) -> Router {
             "/v1/rigs/{id}/quarantine",
             axum::routing::delete(rigs::release),
         )
+        .route("/v1/rigs/{id}/audit", get(rigs::audit))
+        .route("/v1/rigs/{id}/stop", post(rigs::stop))
         .route(
             "/v1/rigs/{id}/window",
             put(rigs::set_window).delete(rigs::clear_window),

@@ -143,3 +143,81 @@ pub async fn release(
     }
     Ok(Json(rig_view(&st, &rig).await?))
 }
+
+#[utoipa::path(get, path = "/v1/rigs/{id}/audit", params(("id" = String, Path, description = "rig id")),
+    description = "Agent messages refused for this rig (stale epochs, results for trials never sent, malformed messages), newest first (at most 500).",
+    responses((status = 200, body = Vec<crate::store::agents::AuditRow>),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json")))]
+pub async fn audit(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<Vec<crate::store::agents::AuditRow>>, Problem> {
+    st.rig(&id).ok_or_else(|| Problem::not_found("rig", &id))?;
+    Ok(Json(
+        st.store.audit_log(&id, 500).await.map_err(|e| st.fail(e))?,
+    ))
+}
+
+/// `?mode=` of a stop.
+#[derive(Debug, serde::Deserialize, utoipa::IntoParams)]
+pub struct StopQuery {
+    /// deferred (finish the trial), abort (end it now) or halt (abort and
+    /// latch: the rig needs a local reset).
+    pub mode: crate::rig::protocol::StopMode,
+}
+
+#[utoipa::path(post, path = "/v1/rigs/{id}/stop", params(("id" = String, Path, description = "rig id"), StopQuery),
+    description = "Stop an attached rig: the agent ends or finishes its trial and takes no more until re-armed on the rig (halt: until reset locally). The experiment waits; it does not fail.",
+    responses((status = 202, body = RigView),
+              (status = 400, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 401, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 403, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 409, description = "no agent connected", body = ProblemBody, content_type = "application/problem+json")),
+    security((), ("bearer" = [])))]
+pub async fn stop(
+    State(st): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+    axum::extract::RawQuery(query): axum::extract::RawQuery,
+) -> Result<(axum::http::StatusCode, Json<RigView>), Problem> {
+    authorize(&st, &headers)?;
+    let rig = st
+        .rig(&id)
+        .cloned()
+        .ok_or_else(|| Problem::not_found("rig", &id))?;
+    let q = super::problem::QueryArgs::parse(query.as_deref(), &["mode"])?;
+    let mode = match q.str("mode") {
+        Some("deferred") => crate::rig::protocol::StopMode::Deferred,
+        Some("abort") => crate::rig::protocol::StopMode::Abort,
+        Some("halt") => crate::rig::protocol::StopMode::Halt,
+        other => {
+            return Err(crate::error::SpecError::new(
+                "mode",
+                format!("{other:?}"),
+                "must be one of deferred, abort, halt",
+            )
+            .into())
+        }
+    };
+    let Some(a) = rig.attached() else {
+        return Err(crate::error::SpecError::new(
+            "id",
+            &id,
+            "only an attached rig can be stopped (a simulator's experiments are cancelled instead)",
+        )
+        .into());
+    };
+    if !a.stop(mode) {
+        return Err(Problem::new(
+            axum::http::StatusCode::CONFLICT,
+            "Conflict",
+            format!("rig {id} has no agent connected: nothing is moving"),
+        )
+        .with_field("id"));
+    }
+    Ok((
+        axum::http::StatusCode::ACCEPTED,
+        Json(rig_view(&st, &rig).await?),
+    ))
+}

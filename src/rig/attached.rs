@@ -511,12 +511,7 @@ impl TrialBackend for AttachedRun {
                     g.lease.refused(epoch, &id);
                 }
             }
-            let out = g
-                .lease
-                .outstanding
-                .as_ref()
-                .is_some_and(|o| o.sent_epoch.is_some());
-            observer.set_waiting(if out { None } else { g.lease.blocked(now) });
+            observer.set_waiting(g.lease.blocked(now));
             g = self
                 .shared
                 .changed

@@ -295,3 +295,157 @@ impl Lease {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[derive(Debug, Clone)]
+    enum Op {
+        /// A new session (the next epoch) with this state.
+        Open(u8),
+        /// A message under the n-th epoch handed out (from the end).
+        Heard(u8, Option<u8>),
+        Advance(u16),
+        Tick,
+        Close(u8),
+        Send(u8),
+        Result(u8, u8),
+        Refused(u8, u8),
+        Quarantine(bool),
+    }
+
+    fn state(s: u8) -> RigState {
+        match s % 5 {
+            0 | 1 => RigState::Armed,
+            2 => RigState::Disarmed,
+            3 => RigState::EStop,
+            _ => RigState::OperatorLocked {
+                user: "op".into(),
+                note: "n".into(),
+                until_ms: None,
+            },
+        }
+    }
+
+    fn op() -> impl Strategy<Value = Op> {
+        prop_oneof![
+            any::<u8>().prop_map(Op::Open),
+            (any::<u8>(), proptest::option::of(any::<u8>())).prop_map(|(e, s)| Op::Heard(e, s)),
+            (0u16..800).prop_map(Op::Advance),
+            Just(Op::Tick),
+            any::<u8>().prop_map(Op::Close),
+            (0u8..3).prop_map(Op::Send),
+            (0u8..3, any::<u8>()).prop_map(|(t, e)| Op::Result(t, e)),
+            (0u8..3, any::<u8>()).prop_map(|(t, e)| Op::Refused(t, e)),
+            any::<bool>().prop_map(Op::Quarantine),
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(400))]
+        /// Whatever the agents, links and clocks do: a result is taken only
+        /// under the epoch its trial was last sent with (so no trial is out
+        /// under two live epochs), none is taken twice, and nothing is sent
+        /// while the rig is disarmed, locked, e-stopped, quarantined, lost
+        /// or without a session.
+        #[test]
+        fn the_lease_never_takes_a_stale_or_second_result(ops in proptest::collection::vec(op(), 1..120)) {
+            let timing = Timing { heartbeat_ms: 100, ttl_ms: 500, grace_ms: 500 };
+            let mut l = Lease::new(timing);
+            let mut now = 0i64;
+            let mut epochs: Vec<u64> = vec![0];
+            let mut last_sent: [Option<u64>; 3] = [None; 3];
+            let mut stored = [false; 3];
+            let pick = |epochs: &Vec<u64>, n: u8| epochs[epochs.len() - 1 - (n as usize % epochs.len())];
+            for op in ops {
+                match op {
+                    Op::Open(s) => {
+                        let e = epochs.last().unwrap() + 1;
+                        epochs.push(e);
+                        let _ = l.open(e, "a", "b", state(s), now);
+                        // `hello` says which trial it runs: none here.
+                        if l.session.as_ref().is_some_and(|x| x.epoch == e) {
+                            l.resume(None);
+                        }
+                    }
+                    Op::Heard(n, s) => { l.heard(pick(&epochs, n), s.map(state), now); }
+                    Op::Advance(ms) => now += ms as i64,
+                    Op::Tick => { l.tick(now); }
+                    Op::Close(n) => l.closed(pick(&epochs, n)),
+                    Op::Send(t) => {
+                        let t = t as usize;
+                        if stored[t] { continue; }
+                        let id = format!("t{t}");
+                        let blocked = l.blocked(now);
+                        if let Some(e) = l.send(&id, now) {
+                            prop_assert!(blocked.is_none(), "sent while {blocked:?}");
+                            let s = l.session.as_ref().unwrap();
+                            prop_assert!(s.state.armed() && s.epoch == e);
+                            prop_assert!(l.quarantine.is_none());
+                            last_sent[t] = Some(e);
+                        }
+                    }
+                    Op::Result(t, n) => {
+                        let t = t as usize;
+                        let e = pick(&epochs, n);
+                        let id = format!("t{t}");
+                        if l.check_result(e, &id).is_ok() {
+                            prop_assert!(!stored[t], "t{t} taken twice");
+                            prop_assert_eq!(last_sent[t], Some(e), "taken under an epoch it was not last sent with");
+                            stored[t] = true;
+                            l.done(&id);
+                        }
+                    }
+                    Op::Refused(t, n) => l.refused(pick(&epochs, n), &format!("t{t}")),
+                    Op::Quarantine(q) => l.quarantine = q.then(|| "q".to_string()),
+                }
+                // One trial out at a time, under the epoch it was last sent with.
+                if let Some(o) = &l.outstanding {
+                    if let Some(e) = o.sent_epoch {
+                        let t: usize = o.trial_id[1..].parse().unwrap();
+                        prop_assert_eq!(last_sent[t], Some(e));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn silence_loses_contact_after_the_ttl_and_fences_after_the_grace() {
+        // TTL 500 ms, grace 500 ms (the figures given): heard at 0, lost
+        // from 501, fenced (epoch ended, trial to be sent again) from 1001.
+        let mut l = Lease::new(Timing {
+            heartbeat_ms: 100,
+            ttl_ms: 500,
+            grace_ms: 500,
+        });
+        l.open(1, "a", "b", RigState::Armed, 0).unwrap();
+        assert_eq!(l.send("t", 0), Some(1));
+        assert_eq!(l.tick(500), None);
+        assert!(l.connected(500) && !l.connected(501));
+        assert_eq!(l.tick(501), None);
+        assert_eq!(l.lost_since_ms, Some(500));
+        assert!(l.blocked(501).unwrap().contains("lost contact"));
+        assert_eq!(l.tick(1000), None, "still within the grace");
+        assert_eq!(l.check_result(1, "t"), Ok(()), "its result still counts");
+        assert_eq!(l.tick(1001), Some(1));
+        assert!(l.session.is_none());
+        assert_eq!(
+            l.check_result(1, "t"),
+            Err(Refusal::StaleEpoch { sent: None })
+        );
+        // A second agent is refused while the first is heard …
+        l.open(2, "a", "b", RigState::Armed, 2000).unwrap();
+        assert!(l.open(3, "other", "c", RigState::Armed, 2400).is_err());
+        // … and takes over once it is silent past the TTL; an old epoch never.
+        assert!(l.open(2, "x", "y", RigState::Armed, 9000).is_err());
+        l.open(4, "other", "c", RigState::Armed, 2501).unwrap();
+        assert_eq!(l.send("t", 2501), Some(4));
+        assert_eq!(
+            l.check_result(2, "t"),
+            Err(Refusal::StaleEpoch { sent: Some(4) })
+        );
+    }
+}

@@ -40,8 +40,13 @@ pub fn bin() -> std::ffi::OsString {
 }
 
 pub fn start_with(dir: std::path::PathBuf, extra: &[&str]) -> Server {
+    start_on(dir, "127.0.0.1:0", extra)
+}
+
+/// A server bound to `bind` (a restart on the port its agents know).
+pub fn start_on(dir: std::path::PathBuf, bind: &str, extra: &[&str]) -> Server {
     let mut child = Command::new(bin())
-        .args(["serve", "--bind", "127.0.0.1:0"])
+        .args(["serve", "--bind", bind])
         .args(extra)
         .arg("--db")
         .arg(dir.join("test.db"))

@@ -1,0 +1,355 @@
+//! Attached rigs end to end: the real `zwidth serve` and `zwidth agent
+//! --sim` processes on loopback (port 0, a fresh database each, TTLs of
+//! a fraction of a second). Every fault ends with each trial stored once
+//! and the map equal, to the bit, to the in-process simulator's.
+
+mod common;
+
+use common::*;
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+/// Heartbeat 100 ms, lost after 600 ms, fenced 600 ms later.
+const LEASE: [&str; 6] = [
+    "--agent-heartbeat-ms",
+    "100",
+    "--agent-ttl-ms",
+    "600",
+    "--agent-grace-ms",
+    "600",
+];
+
+/// Friction and quantization, wall hits at draft: 30 trials, a few ms each.
+const MAP: &str = r#"{"kind":"map","scene":{"device":{"coulomb":0.05,"quantization":1e-6,"force_limit":8},"loop":{"sample_hz":2000,"render_hz":1000}},"method":"time","criterion":"stability","b":[0,2,4],"accuracy":"draft"}"#;
+
+fn serve() -> Server {
+    let dir = std::env::temp_dir().join(format!(
+        "zwidth-agents-{}-{}",
+        std::process::id(),
+        uuid_like()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut args = vec!["--rigs", "sim:1,bench:attached"];
+    args.extend(LEASE);
+    start_with(dir, &args)
+}
+
+struct Agent(Child);
+
+impl Drop for Agent {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// `zwidth agent --sim` for rig `bench` of `s`, with `extra` flags; its
+/// outbox and log in the server's directory under `name`.
+fn agent(s: &Server, name: &str, extra: &[&str]) -> Agent {
+    let dir = &s._dir;
+    let child = Command::new(bin())
+        .args([
+            "agent", "--sim", "--rig", "bench", "--server", &s.base, "--name", name,
+        ])
+        .arg("--token-file")
+        .arg(dir.join("test.db.agent-token"))
+        .arg("--outbox")
+        .arg(dir.join(format!("{name}.outbox")))
+        .args(extra)
+        .stdout(Stdio::null())
+        .stderr(
+            std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(dir.join(format!("{name}.err")))
+                .unwrap(),
+        )
+        .spawn()
+        .unwrap();
+    Agent(child)
+}
+
+fn rig(s: &Server, id: &str) -> serde_json::Value {
+    get(&format!("{}/v1/rigs", s.base))
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["id"] == id)
+        .unwrap()
+        .clone()
+}
+
+fn connected(s: &Server) -> bool {
+    rig(s, "bench")["attached"]["connected"] == true
+}
+
+fn submit(s: &Server, rig: &str, body: &str) -> String {
+    let (code, v, _) = post(&format!("{}/v1/experiments?rig={rig}", s.base), body);
+    assert_eq!(code, 202, "{v}");
+    v["id"].as_str().unwrap().to_string()
+}
+
+/// The boundary and the stored trials (sorted: their order of insertion
+/// is not part of the result).
+fn outcome(s: &Server, id: &str) -> (serde_json::Value, Vec<String>) {
+    let v = wait_end(&s.base, id, 120);
+    assert_eq!(v["state"], "succeeded", "{v}");
+    let trials = get(&format!(
+        "{}/v1/experiments/{id}/trials?limit=10000",
+        s.base
+    ));
+    let mut t: Vec<String> = trials
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t.to_string())
+        .collect();
+    t.sort();
+    (v["result"]["boundary"].clone(), t)
+}
+
+fn audit(s: &Server) -> Vec<serde_json::Value> {
+    get(&format!("{}/v1/rigs/bench/audit", s.base))
+        .as_array()
+        .unwrap()
+        .clone()
+}
+
+/// The in-process simulator's map of MAP on the same server.
+fn reference(s: &Server) -> (serde_json::Value, Vec<String>) {
+    let id = submit(s, "sim", MAP);
+    outcome(s, &id)
+}
+
+#[test]
+fn a_map_through_the_agent_equals_the_in_process_map_to_the_bit() {
+    let s = serve();
+    let _a = agent(&s, "a1", &[]);
+    wait_for("the agent", 20, || connected(&s));
+    let here = reference(&s);
+    let id = submit(&s, "bench", MAP);
+    let there = outcome(&s, &id);
+    // serde_json writes floats that round-trip: equal text, equal bits.
+    assert_eq!(here.0, there.0);
+    assert_eq!(here.1, there.1, "the same trials, each stored once");
+    assert_eq!(there.1.len(), 30);
+    let r = rig(&s, "bench");
+    assert_eq!(r["attached"]["epoch"], 1);
+    assert_eq!(r["attached"]["capabilities"]["peak_force_n"], 10.0);
+    assert!(audit(&s).is_empty(), "{:?}", audit(&s));
+}
+
+#[test]
+fn an_agent_killed_mid_trial_or_before_sending_loses_nothing() {
+    let s = serve();
+    let here = reference(&s);
+    let faults = s._dir.join("faults.json");
+    // Killed halfway through its 5th trial: the trial is sent again to the
+    // restarted agent (its `hello` lists nothing running).
+    std::fs::write(&faults, r#"{"exit_mid_trial":5}"#).unwrap();
+    let mut first = agent(&s, "a", &["--faults", faults.to_str().unwrap()]);
+    let id = submit(&s, "bench", MAP);
+    wait_for("the agent to die", 30, || {
+        first.0.try_wait().unwrap().is_some()
+    });
+    // Killed with its 3rd result in the outbox, before sending it: the
+    // next agent (same outbox) lists it in `hello` and it is stored.
+    std::fs::write(&faults, r#"{"exit_before_send":3}"#).unwrap();
+    let mut second = agent(&s, "a", &["--faults", faults.to_str().unwrap()]);
+    wait_for("the agent to die", 30, || {
+        second.0.try_wait().unwrap().is_some()
+    });
+    let outbox: Vec<_> = std::fs::read_dir(s._dir.join("a.outbox"))
+        .unwrap()
+        .collect();
+    assert_eq!(outbox.len(), 1, "one result waits in the outbox");
+    let _third = agent(&s, "a", &[]);
+    let there = outcome(&s, &id);
+    assert_eq!(here, there);
+    assert_eq!(
+        std::fs::read_dir(s._dir.join("a.outbox")).unwrap().count(),
+        0,
+        "acknowledged results leave the outbox"
+    );
+    assert!(rig(&s, "bench")["attached"]["epoch"].as_u64().unwrap() >= 3);
+}
+
+#[cfg(unix)]
+fn signal(child: &Child, sig: &str) {
+    let ok = Command::new("kill")
+        .args([sig, &child.id().to_string()])
+        .status()
+        .unwrap()
+        .success();
+    assert!(ok, "kill {sig}");
+}
+
+#[cfg(unix)]
+#[test]
+fn a_stopped_agent_is_fenced_its_late_result_audited_and_the_trial_run_again() {
+    let s = serve();
+    let here = reference(&s);
+    // Each trial takes 400 ms: stopped during one, for 2 s (> TTL + grace).
+    let a = agent(&s, "a", &["--trial-ms", "400"]);
+    wait_for("the agent", 20, || connected(&s));
+    let id = submit(&s, "bench", MAP);
+    wait_for("a trial out", 20, || {
+        rig(&s, "bench")["attached"]["trial_out"].is_string()
+    });
+    signal(&a.0, "-STOP");
+    wait_for("lost contact", 5, || {
+        rig(&s, "bench")["attached"]["lost_contact"] == true
+    });
+    wait_for("the experiment to say it waits", 5, || {
+        get(&format!("{}/v1/experiments/{id}", s.base))["progress"]["waiting_for_rig"]
+            .as_str()
+            .is_some_and(|w| w.contains("lost contact"))
+    });
+    wait_for("fenced", 5, || {
+        rig(&s, "bench")["attached"]["agent"].is_string()
+            && rig(&s, "bench")["attached"]["connected"] == false
+            && rig(&s, "bench")["attached"]["lost_contact"] == false
+    });
+    std::thread::sleep(Duration::from_millis(300));
+    signal(&a.0, "-CONT");
+    let there = outcome(&s, &id);
+    assert_eq!(
+        here, there,
+        "the trial was run again; its late result not stored"
+    );
+    let audited = audit(&s);
+    assert!(
+        audited
+            .iter()
+            .any(|r| r["reason"].as_str().unwrap().contains("stale epoch 1")),
+        "{audited:?}"
+    );
+}
+
+#[test]
+fn a_second_agent_for_a_live_rig_is_refused() {
+    let s = serve();
+    let _a = agent(&s, "a", &[]);
+    wait_for("the agent", 20, || connected(&s));
+    let _b = agent(&s, "b", &[]);
+    wait_for("the second agent refused", 20, || {
+        audit(&s).iter().any(|r| {
+            r["reason"]
+                .as_str()
+                .unwrap()
+                .contains("already has a live session (agent a, epoch 1)")
+        })
+    });
+    assert_eq!(rig(&s, "bench")["attached"]["agent"], "a");
+    let err = std::fs::read_to_string(s._dir.join("b.err")).unwrap();
+    assert!(err.contains("one session per rig"), "{err}");
+}
+
+#[test]
+fn a_rig_reporting_more_force_than_it_advertised_is_quarantined() {
+    let s = serve();
+    let faults = s._dir.join("faults.json");
+    // Advertises 10 N (the default), reports 25 N.
+    std::fs::write(&faults, r#"{"report_peak_force_n":25}"#).unwrap();
+    let a = agent(&s, "a", &["--faults", faults.to_str().unwrap()]);
+    let id = submit(&s, "bench", MAP);
+    wait_for("quarantine", 30, || {
+        rig(&s, "bench")["attached"]["quarantine"].is_string()
+    });
+    let q = rig(&s, "bench")["attached"]["quarantine"].clone();
+    assert!(q.as_str().unwrap().contains("25 N"), "{q}");
+    std::thread::sleep(Duration::from_millis(500));
+    let v = get(&format!("{}/v1/experiments/{id}", s.base));
+    assert_eq!(v["state"], "running", "waits, does not fail: {v}");
+    assert!(v["progress"]["waiting_for_rig"]
+        .as_str()
+        .unwrap()
+        .contains("quarantined"));
+    let stored = get(&format!("{}/v1/experiments/{id}/trials", s.base));
+    assert_eq!(
+        stored,
+        serde_json::json!([]),
+        "the suspect result is not stored"
+    );
+    drop(a);
+    // The operator fixes the rig and releases it: the map completes.
+    let _b = agent(&s, "b", &[]);
+    let (code, _, _) = fetch(ureq::delete(&format!("{}/v1/rigs/bench/quarantine", s.base)).call());
+    assert_eq!(code, 200);
+    let here = reference(&s);
+    assert_eq!(outcome(&s, &id), here);
+}
+
+#[test]
+fn a_trial_beyond_the_agents_own_limits_is_refused_and_the_experiment_fails_saying_so() {
+    let s = serve();
+    let _a = agent(&s, "a", &["--max-k", "5000"]);
+    let id = submit(&s, "bench", MAP);
+    let v = wait_end(&s.base, &id, 60);
+    assert_eq!(v["state"], "failed");
+    let e = v["error"].as_str().unwrap();
+    assert!(e.contains("refused the trial") && e.contains("5000"), "{e}");
+}
+
+#[cfg(unix)]
+#[test]
+fn a_halt_mid_trial_pauses_the_experiment_until_the_rig_is_reset_locally() {
+    let s = serve();
+    let here = reference(&s);
+    let a = agent(&s, "a", &["--trial-ms", "300"]);
+    let id = submit(&s, "bench", MAP);
+    wait_for("a trial out", 20, || {
+        rig(&s, "bench")["attached"]["trial_out"].is_string()
+    });
+    let t0 = std::time::Instant::now();
+    let (code, v, _) = post(&format!("{}/v1/rigs/bench/stop?mode=halt", s.base), "");
+    assert_eq!(code, 202, "{v}");
+    wait_for("the rig idle and latched", 5, || {
+        let r = rig(&s, "bench");
+        r["attached"]["state"]["state"] == "e_stop" && r["attached"]["trial_out"].is_null()
+    });
+    let idle_ms = t0.elapsed().as_millis();
+    std::thread::sleep(Duration::from_millis(500));
+    let v = get(&format!("{}/v1/experiments/{id}", s.base));
+    assert_eq!(v["state"], "running", "{v}");
+    assert!(v["progress"]["waiting_for_rig"]
+        .as_str()
+        .unwrap()
+        .contains("e-stop"));
+    // No message from the server re-arms it: only the local reset.
+    signal(&a.0, "-USR1");
+    assert_eq!(outcome(&s, &id), here);
+    eprintln!("stop to idle: {idle_ms} ms");
+}
+
+#[test]
+fn the_server_killed_mid_trial_resumes_from_the_database_and_the_agent() {
+    let s = serve();
+    let here = reference(&s);
+    let _a = agent(&s, "a", &["--trial-ms", "50"]);
+    let id = submit(&s, "bench", MAP);
+    wait_for("some trials stored", 30, || {
+        get(&format!("{}/v1/experiments/{id}/trials", s.base))
+            .as_array()
+            .unwrap()
+            .len()
+            >= 5
+    });
+    // SIGKILL, and a new server on the same database and port.
+    let mut s = s;
+    let port = s.base.rsplit(':').next().unwrap().to_string();
+    let _ = s.child.kill();
+    let _ = s.child.wait();
+    let dir = s._dir.clone();
+    std::mem::forget(s);
+    let mut args = vec!["--rigs", "sim:1,bench:attached"];
+    args.extend(LEASE);
+    let bind = format!("127.0.0.1:{port}");
+    let s2 = start_on(dir, &bind, &args);
+    let there = outcome(&s2, &id);
+    assert_eq!(here, there);
+    assert!(
+        rig(&s2, "bench")["attached"]["epoch"].as_u64().unwrap() >= 2,
+        "the epoch grew across the restart"
+    );
+}
