@@ -169,7 +169,7 @@ pub struct StopQuery {
 #[utoipa::path(post, path = "/v1/rigs/{id}/stop", params(("id" = String, Path, description = "rig id"), StopQuery),
     description = "Stop an attached rig: the agent ends or finishes its trial and takes no more until re-armed on the rig (halt: until reset locally). The experiment waits; it does not fail.",
     responses((status = 202, body = RigView),
-              (status = 400, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 422, description = "bad mode, or not an attached rig", body = ProblemBody, content_type = "application/problem+json"),
               (status = 401, body = ProblemBody, content_type = "application/problem+json"),
               (status = 403, body = ProblemBody, content_type = "application/problem+json"),
               (status = 404, body = ProblemBody, content_type = "application/problem+json"),
