@@ -353,3 +353,167 @@ fn the_server_killed_mid_trial_resumes_from_the_database_and_the_agent() {
         "the epoch grew across the restart"
     );
 }
+
+/// A raw protocol client: the sync WebSocket of tungstenite.
+type Ws = tokio_tungstenite::tungstenite::WebSocket<
+    tokio_tungstenite::tungstenite::stream::MaybeTlsStream<std::net::TcpStream>,
+>;
+
+fn dial(s: &Server, token: &str) -> Result<Ws, String> {
+    use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+    let mut req = format!("{}/v1/agent", s.base.replacen("http", "ws", 1))
+        .into_client_request()
+        .unwrap();
+    req.headers_mut()
+        .insert("authorization", format!("Bearer {token}").parse().unwrap());
+    match tokio_tungstenite::tungstenite::connect(req) {
+        Ok((ws, _)) => {
+            if let tokio_tungstenite::tungstenite::stream::MaybeTlsStream::Plain(t) = ws.get_ref() {
+                t.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+            }
+            Ok(ws)
+        }
+        Err(tokio_tungstenite::tungstenite::Error::Http(r)) => Err(format!("HTTP {}", r.status())),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
+fn agent_token(s: &Server) -> String {
+    std::fs::read_to_string(s._dir.join("test.db.agent-token"))
+        .unwrap()
+        .trim()
+        .to_string()
+}
+
+fn say(ws: &mut Ws, text: &str) {
+    ws.send(tokio_tungstenite::tungstenite::Message::Text(text.into()))
+        .unwrap();
+}
+
+/// The next text message, or None when the server closed the link.
+fn hear(ws: &mut Ws) -> Option<serde_json::Value> {
+    loop {
+        match ws.read() {
+            Ok(tokio_tungstenite::tungstenite::Message::Text(t)) => {
+                return Some(serde_json::from_str(&t).unwrap())
+            }
+            Ok(tokio_tungstenite::tungstenite::Message::Close(_)) | Err(_) => return None,
+            Ok(_) => {}
+        }
+    }
+}
+
+/// A valid hello for rig `bench`, with `caps` edited by `edit`.
+fn hello(edit: impl FnOnce(&mut serde_json::Value)) -> String {
+    let mut caps = serde_json::to_value(zwidth::agent::SimDriver::default_capabilities()).unwrap();
+    edit(&mut caps);
+    serde_json::json!({"v":1,"seq":1,"type":"hello","rig":"bench","agent":"raw","boot":"b1",
+        "last_epoch":0,"running":null,"unacked":[],"state":"armed","capabilities":caps})
+    .to_string()
+}
+
+#[test]
+fn tokens_open_sessions_only_for_agents_and_bad_hellos_are_refused_saying_why() {
+    let dir = std::env::temp_dir().join(format!("zwidth-agents-{}-{}", std::process::id(), uuid_like()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let s = start_with(dir, &["--rigs", "sim:1,bench:attached", "--token", "user-secret"]);
+    let token = agent_token(&s);
+    // No token, a user's token: no session. An agent token cannot submit.
+    assert_eq!(dial(&s, "").err().unwrap(), "HTTP 401 Unauthorized");
+    assert_eq!(dial(&s, "user-secret").err().unwrap(), "HTTP 403 Forbidden");
+    let (code, _, _) = fetch(
+        ureq::post(&format!("{}/v1/experiments", s.base))
+            .set("content-type", "application/json")
+            .set("authorization", &format!("Bearer {token}"))
+            .send_string(MAP),
+    );
+    assert_eq!(code, 403);
+    // Impossible capabilities, an unknown version, a rig that does not
+    // exist, garbage: an error naming what is wrong, then the link closes.
+    let cases: Vec<(String, &str)> = vec![
+        (hello(|c| c["peak_force_n"] = (-1.0).into()), "capabilities.peak_force_n"),
+        (hello(|c| c["sample_hz"] = serde_json::json!([0])), "capabilities.sample_hz"),
+        (hello(|_| {}).replace(r#""v":1"#, r#""v":9"#), "v = 9"),
+        (hello(|_| {}).replace(r#""rig":"bench""#, r#""rig":"nope""#), "not one of this server's rigs"),
+        (hello(|_| {}).replace(r#""rig":"bench""#, r#""rig":"sim""#), "not an attached rig"),
+        ("{not json".to_string(), "not JSON"),
+        (r#"{"v":1,"seq":1,"type":"heartbeat","epoch":1,"state":"armed"}"#.to_string(), "first message must be hello"),
+    ];
+    for (msg, want) in cases {
+        let mut ws = dial(&s, &token).unwrap();
+        say(&mut ws, &msg);
+        let e = hear(&mut ws).expect("an error message");
+        assert_eq!(e["type"], "error", "{e}");
+        assert!(e["message"].as_str().unwrap().contains(want), "{e} lacks {want}");
+        assert!(hear(&mut ws).is_none(), "closed after the error");
+    }
+    // A message beyond the size limit closes the session.
+    let mut ws = dial(&s, &token).unwrap();
+    say(&mut ws, &hello(|_| {}));
+    assert_eq!(hear(&mut ws).unwrap()["type"], "welcome");
+    let _ = ws.send(tokio_tungstenite::tungstenite::Message::Text("x".repeat(300 * 1024).into()));
+    assert!(hear(&mut ws).map_or(true, |m| m["type"] == "error"));
+    // The server is still well and stored nothing from any of it.
+    assert_eq!(get(&format!("{}/v1/experiments", s.base))["experiments"], serde_json::json!([]));
+    assert!(!audit(&s).is_empty(), "refusals are audited");
+}
+
+#[test]
+fn results_never_sent_stale_or_repeated_are_audited_and_acked_never_stored() {
+    let s = serve();
+    let token = agent_token(&s);
+    let mut ws = dial(&s, &token).unwrap();
+    say(&mut ws, &hello(|_| {}));
+    let w = hear(&mut ws).unwrap();
+    assert_eq!(w["type"], "welcome");
+    let epoch = w["epoch"].as_u64().unwrap();
+    let id = submit(&s, "bench", MAP);
+    let t = hear(&mut ws).unwrap();
+    assert_eq!(t["type"], "trial", "{t}");
+    assert_eq!(t["epoch"], epoch);
+    let trial_id = t["trial_id"].as_str().unwrap().to_string();
+    assert!(trial_id.starts_with(&format!("{id}/0/")), "{trial_id}");
+    let point = serde_json::json!({"k": t["request"]["k"], "b": t["request"]["b"], "stable": true});
+    let result = |epoch: u64, trial: &str, seq: u64| {
+        serde_json::json!({"v":1,"seq":seq,"type":"result","epoch":epoch,"trial_id":trial,"point":point,
+            "measured":{"peak_force_n":1.0,"peak_speed_m_s":0.1,"penetration_m":0.001}})
+        .to_string()
+    };
+    // A stale-epoch replay and a result for a trial never sent: audited,
+    // acknowledged (the agent may drop them), not stored.
+    say(&mut ws, &result(epoch - 1, &trial_id, 2));
+    assert_eq!(hear(&mut ws).unwrap()["type"], "ack");
+    say(&mut ws, &result(epoch, "no/such/trial", 3));
+    assert_eq!(hear(&mut ws).unwrap()["type"], "ack");
+    assert_eq!(get(&format!("{}/v1/experiments/{id}/trials", s.base)), serde_json::json!([]));
+    // The real result, then the same again (duplicated): stored once.
+    say(&mut ws, &result(epoch, &trial_id, 4));
+    assert_eq!(hear(&mut ws).unwrap()["type"], "ack");
+    say(&mut ws, &result(epoch, &trial_id, 5));
+    // The next message is either the next trial or the ack of the repeat.
+    let mut acks = 0;
+    for _ in 0..2 {
+        if hear(&mut ws).unwrap()["type"] == "ack" {
+            acks += 1;
+        }
+    }
+    assert_eq!(acks, 1);
+    let stored = get(&format!("{}/v1/experiments/{id}/trials", s.base));
+    assert_eq!(stored.as_array().unwrap().len(), 1, "{stored}");
+    let reasons: Vec<String> = audit(&s).iter().map(|r| r["reason"].as_str().unwrap().to_string()).collect();
+    assert_eq!(reasons.len(), 3, "{reasons:?}");
+    assert!(reasons.iter().any(|r| r.contains(&format!("stale epoch {}", epoch - 1))), "{reasons:?}");
+    assert_eq!(reasons.iter().filter(|r| r.contains("not out")).count(), 2, "{reasons:?}");
+}
+
+#[test]
+fn duplicated_and_delayed_results_change_nothing() {
+    let s = serve();
+    let here = reference(&s);
+    let faults = s._dir.join("faults.json");
+    std::fs::write(&faults, r#"{"duplicate_results":true,"delay_result_ms":20}"#).unwrap();
+    let _a = agent(&s, "a", &["--faults", faults.to_str().unwrap()]);
+    let id = submit(&s, "bench", MAP);
+    assert_eq!(outcome(&s, &id), here);
+    assert!(audit(&s).len() >= 25, "each repeat audited");
+}

@@ -413,7 +413,12 @@ pub enum Command {
         svg: Option<PathBuf>,
     },
     /// Print the service's OpenAPI 3.1 description (what api/openapi.json holds).
-    Openapi,
+    Openapi {
+        /// Print the agent protocol's message schemas instead
+        /// (api/agent-protocol.json).
+        #[arg(long)]
+        agent_protocol: bool,
+    },
     /// A consistent copy of a service's database in one file (SQLite
     /// `VACUUM INTO`), safe while the service runs; restore by starting
     /// `zwidth serve --db` on the copy.
@@ -492,7 +497,7 @@ impl Command {
             Command::Serve { .. }
                 | Command::Agent { .. }
                 | Command::Submit { .. }
-                | Command::Openapi
+                | Command::Openapi { .. }
                 | Command::Backup { .. }
                 | Command::Status { .. }
                 | Command::Watch { .. }

@@ -123,7 +123,14 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
                 .map_err(io)
             }
         }
-        Command::Openapi => writeln!(stdout, "{}", crate::http::openapi_json()).map_err(io),
+        Command::Openapi { agent_protocol } => {
+            let doc = if agent_protocol {
+                crate::rig::protocol::schema_json()
+            } else {
+                crate::http::openapi_json()
+            };
+            writeln!(stdout, "{doc}").map_err(io)
+        }
         Command::Backup { db, out } => {
             if !db.is_file() {
                 return Err(CliError::Input(format!(

@@ -341,3 +341,96 @@ pub fn encode<B: Serialize>(seq: u64, body: &B) -> String {
     })
     .unwrap_or_default()
 }
+
+#[derive(utoipa::OpenApi)]
+#[openapi(components(schemas(
+    AgentMessage,
+    ServerMessage,
+    TrialResult,
+    TrialLimits,
+    Measured,
+    Capabilities,
+    RigState,
+    RefusalCode,
+    StopMode,
+    TrialRequest
+)))]
+struct ProtocolDoc;
+
+/// The message set as JSON Schemas (`zwidth openapi --agent-protocol`;
+/// committed as `api/agent-protocol.json`, kept from drifting by a test).
+pub fn schema_json() -> String {
+    use utoipa::OpenApi;
+    let doc = ProtocolDoc::openapi();
+    let v = serde_json::json!({
+        "title": "zwidth agent protocol",
+        "version": VERSION,
+        "transport": "WebSocket text messages on GET /v1/agent; the agent dials out with Authorization: Bearer <agent token>",
+        "envelope": {
+            "description": "every message is one JSON object: {\"v\": 1, \"seq\": n, \"type\": ..., ...}; seq counts the sender's messages on the connection from 1; at most 262144 bytes",
+            "required": ["v", "seq", "type"],
+        },
+        "agent_to_server": {"$ref": "#/components/schemas/AgentMessage"},
+        "server_to_agent": {"$ref": "#/components/schemas/ServerMessage"},
+        "sequence": [
+            "agent: hello (its state, capabilities, the trial it runs, its unacknowledged results)",
+            "server: welcome (epoch, heartbeat_ms, ttl_ms) or error, then close",
+            "server: ack for each unacknowledged result, once committed (stored, or audited when stale)",
+            "server: trial (under the epoch; expires_in_ms) -> agent: result (the trial's epoch) or refused (code) -> server: ack after commit",
+            "agent: heartbeat every heartbeat_ms (and on a state change); server: WebSocket pings",
+            "server: cancel_trial, stop (deferred | abort | halt); nothing the server sends can raise the agent's own limits",
+        ],
+        "components": doc.components,
+    });
+    serde_json::to_string_pretty(&v).unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_committed_protocol_document_is_the_generated_one() {
+        // Regenerate with: cargo run -- openapi --agent-protocol > api/agent-protocol.json
+        let committed = include_str!("../../api/agent-protocol.json");
+        assert_eq!(committed.trim_end(), schema_json().trim_end());
+    }
+
+    #[test]
+    fn messages_are_read_with_their_version_and_size_checked() {
+        let hb = encode(
+            7,
+            &AgentMessage::Heartbeat {
+                epoch: 3,
+                state: RigState::Armed,
+            },
+        );
+        assert_eq!(hb, r#"{"v":1,"seq":7,"type":"heartbeat","epoch":3,"state":"armed"}"#);
+        let back: Envelope<AgentMessage> = decode(&hb).unwrap();
+        assert_eq!(back.seq, 7);
+        let wrong = hb.replace(r#""v":1"#, r#""v":2"#);
+        assert!(decode::<AgentMessage>(&wrong).unwrap_err().contains("v = 2"));
+        let none = hb.replace(r#""v":1,"#, "");
+        assert!(decode::<AgentMessage>(&none).unwrap_err().contains("no protocol version"));
+        let big = format!(r#"{{"v":1,"seq":1,"type":"heartbeat","epoch":1,"state":"armed","x":"{}"}}"#, "a".repeat(MAX_MESSAGE));
+        assert!(decode::<AgentMessage>(&big).unwrap_err().contains("at most"));
+        assert!(decode::<AgentMessage>("{").unwrap_err().contains("not JSON"));
+        assert!(decode::<AgentMessage>(r#"{"v":1,"seq":1,"type":"launch"}"#)
+            .unwrap_err()
+            .contains("unreadable"));
+    }
+
+    #[test]
+    fn impossible_capabilities_are_refused_naming_the_field() {
+        let ok = crate::agent::SimDriver::default_capabilities();
+        assert!(ok.validate().is_ok());
+        let field = |c: Capabilities| c.validate().unwrap_err().field;
+        assert_eq!(field(Capabilities { peak_force_n: -1.0, ..ok.clone() }), "capabilities.peak_force_n");
+        assert_eq!(field(Capabilities { speed_m_s: f64::NAN, ..ok.clone() }), "capabilities.speed_m_s");
+        assert_eq!(field(Capabilities { sample_hz: vec![0.0], ..ok.clone() }), "capabilities.sample_hz");
+        assert_eq!(field(Capabilities { sample_hz: vec![], ..ok.clone() }), "capabilities.sample_hz");
+        assert_eq!(field(Capabilities { continuous_force_n: 20.0, ..ok.clone() }), "capabilities.continuous_force_n");
+        assert_eq!(field(Capabilities { probes: vec!["laser".into()], ..ok.clone() }), "capabilities.probes");
+        assert_eq!(field(Capabilities { estimators: vec![], ..ok }), "capabilities.estimators");
+    }
+}
