@@ -47,10 +47,14 @@ impl Drop for Agent {
 /// outbox and log in the server's directory under `name`.
 fn agent(s: &Server, name: &str, extra: &[&str]) -> Agent {
     let dir = &s._dir;
+    // `extra` may name another server (a proxy in between).
+    let server = match extra.contains(&"--server") {
+        true => vec![],
+        false => vec!["--server", s.base.as_str()],
+    };
     let child = Command::new(bin())
-        .args([
-            "agent", "--sim", "--rig", "bench", "--server", &s.base, "--name", name,
-        ])
+        .args(["agent", "--sim", "--rig", "bench", "--name", name])
+        .args(server)
         .arg("--token-file")
         .arg(dir.join("test.db.agent-token"))
         .arg("--outbox")
@@ -414,9 +418,16 @@ fn hello(edit: impl FnOnce(&mut serde_json::Value)) -> String {
 
 #[test]
 fn tokens_open_sessions_only_for_agents_and_bad_hellos_are_refused_saying_why() {
-    let dir = std::env::temp_dir().join(format!("zwidth-agents-{}-{}", std::process::id(), uuid_like()));
+    let dir = std::env::temp_dir().join(format!(
+        "zwidth-agents-{}-{}",
+        std::process::id(),
+        uuid_like()
+    ));
     std::fs::create_dir_all(&dir).unwrap();
-    let s = start_with(dir, &["--rigs", "sim:1,bench:attached", "--token", "user-secret"]);
+    let s = start_with(
+        dir,
+        &["--rigs", "sim:1,bench:attached", "--token", "user-secret"],
+    );
     let token = agent_token(&s);
     // No token, a user's token: no session. An agent token cannot submit.
     assert_eq!(dial(&s, "").err().unwrap(), "HTTP 401 Unauthorized");
@@ -431,30 +442,53 @@ fn tokens_open_sessions_only_for_agents_and_bad_hellos_are_refused_saying_why() 
     // Impossible capabilities, an unknown version, a rig that does not
     // exist, garbage: an error naming what is wrong, then the link closes.
     let cases: Vec<(String, &str)> = vec![
-        (hello(|c| c["peak_force_n"] = (-1.0).into()), "capabilities.peak_force_n"),
-        (hello(|c| c["sample_hz"] = serde_json::json!([0])), "capabilities.sample_hz"),
+        (
+            hello(|c| c["peak_force_n"] = (-1.0).into()),
+            "capabilities.peak_force_n",
+        ),
+        (
+            hello(|c| c["sample_hz"] = serde_json::json!([0])),
+            "capabilities.sample_hz",
+        ),
         (hello(|_| {}).replace(r#""v":1"#, r#""v":9"#), "v = 9"),
-        (hello(|_| {}).replace(r#""rig":"bench""#, r#""rig":"nope""#), "not one of this server's rigs"),
-        (hello(|_| {}).replace(r#""rig":"bench""#, r#""rig":"sim""#), "not an attached rig"),
+        (
+            hello(|_| {}).replace(r#""rig":"bench""#, r#""rig":"nope""#),
+            "not one of this server's rigs",
+        ),
+        (
+            hello(|_| {}).replace(r#""rig":"bench""#, r#""rig":"sim""#),
+            "not an attached rig",
+        ),
         ("{not json".to_string(), "not JSON"),
-        (r#"{"v":1,"seq":1,"type":"heartbeat","epoch":1,"state":"armed"}"#.to_string(), "first message must be hello"),
+        (
+            r#"{"v":1,"seq":1,"type":"heartbeat","epoch":1,"state":"armed"}"#.to_string(),
+            "first message must be hello",
+        ),
     ];
     for (msg, want) in cases {
         let mut ws = dial(&s, &token).unwrap();
         say(&mut ws, &msg);
         let e = hear(&mut ws).expect("an error message");
         assert_eq!(e["type"], "error", "{e}");
-        assert!(e["message"].as_str().unwrap().contains(want), "{e} lacks {want}");
+        assert!(
+            e["message"].as_str().unwrap().contains(want),
+            "{e} lacks {want}"
+        );
         assert!(hear(&mut ws).is_none(), "closed after the error");
     }
     // A message beyond the size limit closes the session.
     let mut ws = dial(&s, &token).unwrap();
     say(&mut ws, &hello(|_| {}));
     assert_eq!(hear(&mut ws).unwrap()["type"], "welcome");
-    let _ = ws.send(tokio_tungstenite::tungstenite::Message::Text("x".repeat(300 * 1024).into()));
+    let _ = ws.send(tokio_tungstenite::tungstenite::Message::Text(
+        "x".repeat(300 * 1024).into(),
+    ));
     assert!(hear(&mut ws).map_or(true, |m| m["type"] == "error"));
     // The server is still well and stored nothing from any of it.
-    assert_eq!(get(&format!("{}/v1/experiments", s.base))["experiments"], serde_json::json!([]));
+    assert_eq!(
+        get(&format!("{}/v1/experiments", s.base))["experiments"],
+        serde_json::json!([])
+    );
     assert!(!audit(&s).is_empty(), "refusals are audited");
 }
 
@@ -485,7 +519,10 @@ fn results_never_sent_stale_or_repeated_are_audited_and_acked_never_stored() {
     assert_eq!(hear(&mut ws).unwrap()["type"], "ack");
     say(&mut ws, &result(epoch, "no/such/trial", 3));
     assert_eq!(hear(&mut ws).unwrap()["type"], "ack");
-    assert_eq!(get(&format!("{}/v1/experiments/{id}/trials", s.base)), serde_json::json!([]));
+    assert_eq!(
+        get(&format!("{}/v1/experiments/{id}/trials", s.base)),
+        serde_json::json!([])
+    );
     // The real result, then the same again (duplicated): stored once.
     say(&mut ws, &result(epoch, &trial_id, 4));
     assert_eq!(hear(&mut ws).unwrap()["type"], "ack");
@@ -500,10 +537,22 @@ fn results_never_sent_stale_or_repeated_are_audited_and_acked_never_stored() {
     assert_eq!(acks, 1);
     let stored = get(&format!("{}/v1/experiments/{id}/trials", s.base));
     assert_eq!(stored.as_array().unwrap().len(), 1, "{stored}");
-    let reasons: Vec<String> = audit(&s).iter().map(|r| r["reason"].as_str().unwrap().to_string()).collect();
+    let reasons: Vec<String> = audit(&s)
+        .iter()
+        .map(|r| r["reason"].as_str().unwrap().to_string())
+        .collect();
     assert_eq!(reasons.len(), 3, "{reasons:?}");
-    assert!(reasons.iter().any(|r| r.contains(&format!("stale epoch {}", epoch - 1))), "{reasons:?}");
-    assert_eq!(reasons.iter().filter(|r| r.contains("not out")).count(), 2, "{reasons:?}");
+    assert!(
+        reasons
+            .iter()
+            .any(|r| r.contains(&format!("stale epoch {}", epoch - 1))),
+        "{reasons:?}"
+    );
+    assert_eq!(
+        reasons.iter().filter(|r| r.contains("not out")).count(),
+        2,
+        "{reasons:?}"
+    );
 }
 
 #[test]
@@ -511,9 +560,119 @@ fn duplicated_and_delayed_results_change_nothing() {
     let s = serve();
     let here = reference(&s);
     let faults = s._dir.join("faults.json");
-    std::fs::write(&faults, r#"{"duplicate_results":true,"delay_result_ms":20}"#).unwrap();
+    std::fs::write(
+        &faults,
+        r#"{"duplicate_results":true,"delay_result_ms":20}"#,
+    )
+    .unwrap();
     let _a = agent(&s, "a", &["--faults", faults.to_str().unwrap()]);
     let id = submit(&s, "bench", MAP);
     assert_eq!(outcome(&s, &id), here);
     assert!(audit(&s).len() >= 25, "each repeat audited");
+}
+
+/// A loopback TCP proxy between the agent and the server that can cut
+/// every link (close) or black-hole them (keep the sockets open, pass
+/// nothing), as a flaky lab network does.
+struct Proxy {
+    port: u16,
+    blackhole: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    links: std::sync::Arc<std::sync::Mutex<Vec<std::net::TcpStream>>>,
+}
+
+impl Proxy {
+    fn to(s: &Server) -> Proxy {
+        use std::sync::atomic::Ordering;
+        let target = s.base.trim_start_matches("http://").to_string();
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let port = l.local_addr().unwrap().port();
+        let blackhole = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let links = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let (bh, ls) = (blackhole.clone(), links.clone());
+        std::thread::spawn(move || {
+            for c in l.incoming().flatten() {
+                let Ok(up) = std::net::TcpStream::connect(&target) else {
+                    continue;
+                };
+                ls.lock()
+                    .unwrap()
+                    .extend([c.try_clone().unwrap(), up.try_clone().unwrap()]);
+                for (mut from, mut to) in
+                    [(c.try_clone().unwrap(), up.try_clone().unwrap()), (up, c)]
+                {
+                    let bh = bh.clone();
+                    std::thread::spawn(move || {
+                        use std::io::{Read, Write};
+                        let mut buf = [0u8; 16384];
+                        while let Ok(n) = from.read(&mut buf) {
+                            if n == 0 {
+                                break;
+                            }
+                            if !bh.load(Ordering::Relaxed) && to.write_all(&buf[..n]).is_err() {
+                                break;
+                            }
+                        }
+                        let _ = to.shutdown(std::net::Shutdown::Both);
+                    });
+                }
+            }
+        });
+        Proxy {
+            port,
+            blackhole,
+            links,
+        }
+    }
+
+    fn cut(&self) {
+        for s in self.links.lock().unwrap().drain(..) {
+            let _ = s.shutdown(std::net::Shutdown::Both);
+        }
+    }
+}
+
+/// An agent that reaches the server through `p`.
+fn agent_via(s: &Server, p: &Proxy, name: &str, extra: &[&str]) -> Agent {
+    let mut args = vec![
+        "--server".to_string(),
+        format!("http://127.0.0.1:{}", p.port),
+    ];
+    args.extend(extra.iter().map(|a| a.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    agent(s, name, &args)
+}
+
+#[test]
+fn a_link_closed_or_black_holed_mid_trial_loses_nothing() {
+    use std::sync::atomic::Ordering;
+    let s = serve();
+    let here = reference(&s);
+    let p = Proxy::to(&s);
+    let _a = agent_via(&s, &p, "a", &["--trial-ms", "200"]);
+    let id = submit(&s, "bench", MAP);
+    wait_for("a trial out", 20, || {
+        rig(&s, "bench")["attached"]["trial_out"].is_string()
+    });
+    // Closed: the agent reconnects at once and finishes the trial.
+    p.cut();
+    wait_for("a new session", 20, || {
+        rig(&s, "bench")["attached"]["epoch"].as_u64().unwrap() >= 2 && connected(&s)
+    });
+    // Black-holed: both ends see silence; the server marks the rig lost,
+    // then fences it; the agent gives the link up after its TTL and dials
+    // again (into the black hole, until it lifts).
+    wait_for("a trial out", 20, || {
+        rig(&s, "bench")["attached"]["trial_out"].is_string()
+    });
+    let t0 = std::time::Instant::now();
+    p.blackhole.store(true, Ordering::Relaxed);
+    wait_for("lost contact", 10, || {
+        rig(&s, "bench")["attached"]["lost_contact"] == true
+    });
+    let detect_ms = t0.elapsed().as_millis();
+    std::thread::sleep(Duration::from_millis(1500));
+    p.blackhole.store(false, Ordering::Relaxed);
+    p.cut();
+    assert_eq!(outcome(&s, &id), here);
+    eprintln!("lost link detected after {detect_ms} ms (TTL 600 ms)");
 }

@@ -405,16 +405,30 @@ mod tests {
                 state: RigState::Armed,
             },
         );
-        assert_eq!(hb, r#"{"v":1,"seq":7,"type":"heartbeat","epoch":3,"state":"armed"}"#);
+        assert_eq!(
+            hb,
+            r#"{"v":1,"seq":7,"type":"heartbeat","epoch":3,"state":"armed"}"#
+        );
         let back: Envelope<AgentMessage> = decode(&hb).unwrap();
         assert_eq!(back.seq, 7);
         let wrong = hb.replace(r#""v":1"#, r#""v":2"#);
-        assert!(decode::<AgentMessage>(&wrong).unwrap_err().contains("v = 2"));
+        assert!(decode::<AgentMessage>(&wrong)
+            .unwrap_err()
+            .contains("v = 2"));
         let none = hb.replace(r#""v":1,"#, "");
-        assert!(decode::<AgentMessage>(&none).unwrap_err().contains("no protocol version"));
-        let big = format!(r#"{{"v":1,"seq":1,"type":"heartbeat","epoch":1,"state":"armed","x":"{}"}}"#, "a".repeat(MAX_MESSAGE));
-        assert!(decode::<AgentMessage>(&big).unwrap_err().contains("at most"));
-        assert!(decode::<AgentMessage>("{").unwrap_err().contains("not JSON"));
+        assert!(decode::<AgentMessage>(&none)
+            .unwrap_err()
+            .contains("no protocol version"));
+        let big = format!(
+            r#"{{"v":1,"seq":1,"type":"heartbeat","epoch":1,"state":"armed","x":"{}"}}"#,
+            "a".repeat(MAX_MESSAGE)
+        );
+        assert!(decode::<AgentMessage>(&big)
+            .unwrap_err()
+            .contains("at most"));
+        assert!(decode::<AgentMessage>("{")
+            .unwrap_err()
+            .contains("not JSON"));
         assert!(decode::<AgentMessage>(r#"{"v":1,"seq":1,"type":"launch"}"#)
             .unwrap_err()
             .contains("unreadable"));
@@ -425,12 +439,54 @@ mod tests {
         let ok = crate::agent::SimDriver::default_capabilities();
         assert!(ok.validate().is_ok());
         let field = |c: Capabilities| c.validate().unwrap_err().field;
-        assert_eq!(field(Capabilities { peak_force_n: -1.0, ..ok.clone() }), "capabilities.peak_force_n");
-        assert_eq!(field(Capabilities { speed_m_s: f64::NAN, ..ok.clone() }), "capabilities.speed_m_s");
-        assert_eq!(field(Capabilities { sample_hz: vec![0.0], ..ok.clone() }), "capabilities.sample_hz");
-        assert_eq!(field(Capabilities { sample_hz: vec![], ..ok.clone() }), "capabilities.sample_hz");
-        assert_eq!(field(Capabilities { continuous_force_n: 20.0, ..ok.clone() }), "capabilities.continuous_force_n");
-        assert_eq!(field(Capabilities { probes: vec!["laser".into()], ..ok.clone() }), "capabilities.probes");
-        assert_eq!(field(Capabilities { estimators: vec![], ..ok }), "capabilities.estimators");
+        assert_eq!(
+            field(Capabilities {
+                peak_force_n: -1.0,
+                ..ok.clone()
+            }),
+            "capabilities.peak_force_n"
+        );
+        assert_eq!(
+            field(Capabilities {
+                speed_m_s: f64::NAN,
+                ..ok.clone()
+            }),
+            "capabilities.speed_m_s"
+        );
+        assert_eq!(
+            field(Capabilities {
+                sample_hz: vec![0.0],
+                ..ok.clone()
+            }),
+            "capabilities.sample_hz"
+        );
+        assert_eq!(
+            field(Capabilities {
+                sample_hz: vec![],
+                ..ok.clone()
+            }),
+            "capabilities.sample_hz"
+        );
+        assert_eq!(
+            field(Capabilities {
+                continuous_force_n: 20.0,
+                ..ok.clone()
+            }),
+            "capabilities.continuous_force_n"
+        );
+        assert_eq!(
+            field(Capabilities {
+                probes: vec!["laser".into()],
+                ..ok.clone()
+            }),
+            "capabilities.probes"
+        );
+        assert_eq!(
+            field(Capabilities {
+                estimators: vec![],
+                ..ok
+            }),
+            "capabilities.estimators"
+        );
     }
 }
