@@ -52,8 +52,14 @@ fn agent(s: &Server, name: &str, extra: &[&str]) -> Agent {
         true => vec![],
         false => vec!["--server", s.base.as_str()],
     };
+    // … or a driver process instead of the simulated plant.
+    let sim = match extra.contains(&"--driver") {
+        true => vec![],
+        false => vec!["--sim"],
+    };
     let child = Command::new(bin())
-        .args(["agent", "--sim", "--rig", "bench", "--name", name])
+        .args(["agent", "--rig", "bench", "--name", name])
+        .args(sim)
         .args(server)
         .arg("--token-file")
         .arg(dir.join("test.db.agent-token"))
@@ -130,9 +136,24 @@ fn a_map_through_the_agent_equals_the_in_process_map_to_the_bit() {
     let s = serve();
     let _a = agent(&s, "a1", &[]);
     wait_for("the agent", 20, || connected(&s));
-    let here = reference(&s);
+    let sim_id = submit(&s, "sim", MAP);
+    let here = outcome(&s, &sim_id);
     let id = submit(&s, "bench", MAP);
     let there = outcome(&s, &id);
+    // The round trip's cost per trial against the in-process simulator
+    // (printed for docs/rigs.md: `cargo test --release --test agents
+    // equals -- --nocapture`).
+    let wall = |id: &str| {
+        let v = get(&format!("{}/v1/experiments/{id}", s.base));
+        (v["finished_ms"].as_i64().unwrap() - v["started_ms"].as_i64().unwrap()) as f64
+    };
+    eprintln!(
+        "round trip: {:.2} ms per trial over the in-process simulator ({} trials: {} ms attached, {} ms in process)",
+        (wall(&id) - wall(&sim_id)) / 30.0,
+        30,
+        wall(&id),
+        wall(&sim_id)
+    );
     // serde_json writes floats that round-trip: equal text, equal bits.
     assert_eq!(here.0, there.0);
     assert_eq!(here.1, there.1, "the same trials, each stored once");
@@ -675,4 +696,32 @@ fn a_link_closed_or_black_holed_mid_trial_loses_nothing() {
     p.cut();
     assert_eq!(outcome(&s, &id), here);
     eprintln!("lost link detected after {detect_ms} ms (TTL 600 ms)");
+}
+
+#[test]
+fn a_driver_process_in_python_is_a_rig() {
+    // docs/rigs.md's worked example: a toy device in a few dozen lines of
+    // Python behind the line-oriented driver protocol.
+    let s = serve();
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/rig_driver.py");
+    let cmd = format!("python3 {script}");
+    let _a = agent(&s, "py", &["--driver", &cmd]);
+    wait_for("the agent", 20, || connected(&s));
+    // It advertises what the script says: 2 kHz at most, FDM only.
+    let caps = rig(&s, "bench")["attached"]["capabilities"].clone();
+    assert_eq!(caps["sample_hz"], serde_json::json!([1000.0, 2000.0]));
+    let too_fast = MAP.replace(r#""sample_hz":2000"#, r#""sample_hz":5000"#);
+    let (code, v, _) = post(&format!("{}/v1/experiments?rig=bench", s.base), &too_fast);
+    assert_eq!(
+        (code, v["field"].as_str()),
+        (422, Some("scene.loop.sample_hz")),
+        "{v}"
+    );
+    let id = submit(&s, "bench", MAP);
+    let v = wait_end(&s.base, &id, 120);
+    assert_eq!(v["state"], "succeeded", "{v}");
+    // The toy's own boundary at B = 0: between 5e4 (renders) and 1e5 N/m
+    // (does not), by running its script on those two walls by hand.
+    let k0 = v["result"]["boundary"][0]["k_max"].as_f64().unwrap();
+    assert!((5e4..1e5).contains(&k0), "{k0}");
 }

@@ -1,0 +1,69 @@
+#!/usr/bin/env python3
+"""A rig driver for `zwidth agent --driver "python3 examples/rig_driver.py"`.
+
+The agent writes one JSON object per line on our stdin and reads one per
+line from our stdout (docs/rigs.md, "the driver protocol"):
+  {"type":"capabilities"}            -> {"type":"capabilities", ...}
+  {"type":"trial","request":…,"limits":…} -> {"type":"result","point":…,"measured":…}
+                                        or {"type":"error","message":…}
+Replace `wall_hit` with your controller's (QuaRC, a microcontroller bridge…).
+Here it is a toy device: a mass with viscous and Coulomb friction, an
+encoder of 1 µm, a backward-difference velocity estimate, one sample of
+computation delay, the wall
+F = -K x - B v̂ for x > 0 (2011 paper §2.4: push into the wall, settle,
+then judge the last seconds), the force clamped to the trial's limit.
+"""
+import json
+import math
+import sys
+
+CAPS = {"peak_force_n": 10.0, "continuous_force_n": 4.0, "k_max": 1e6, "b_max": 1e4,
+        "travel_m": 0.1, "speed_m_s": 1.0, "encoder_m": 1e-6,
+        "sample_hz": [1000.0, 2000.0], "estimators": ["fdm"], "probes": ["wall_hit"]}
+
+
+def wall_hit(req, limits):
+    dev, loop = req["scene"]["device"], req["scene"]["loop"]
+    m, b, fc = dev["mass"], dev["damping"], dev.get("coulomb", 0.0)
+    T, K, B = 1.0 / loop["sample_hz"], req["k"], req["b"]
+    f_max, q = limits["force_limit_n"], 1e-6
+    push = 0.36                                   # N, toward the wall
+    x, v, y_prev = -0.002, 0.0, -0.002            # m, m/s
+    f_out = 0.0                                   # N, applied one sample late
+    peak_f = peak_v = depth = 0.0
+    settle, measure = int(4.0 / T), int(2.0 / T)
+    lo, hi = math.inf, -math.inf
+    for n in range(settle + measure):
+        y = round(x / q) * q                      # the encoder
+        v_hat = (y - y_prev) / T                  # backward difference
+        y_prev = y
+        f = -K * y - B * v_hat if y > 0 else 0.0  # the virtual wall
+        f = max(-f_max, min(f_max, f))            # the controller's clamp
+        f, f_out = f_out, f                       # one sample of computation delay
+        if abs(x) > limits["abort_penetration_m"] or abs(v) > limits["abort_speed_m_s"]:
+            return None, {"peak_force_n": peak_f, "peak_speed_m_s": peak_v, "penetration_m": depth}
+        a = (push + f - b * v - fc * math.copysign(1.0, v) * (v != 0)) / m
+        v += a * T
+        x += v * T
+        peak_f, peak_v, depth = max(peak_f, abs(f)), max(peak_v, abs(v)), max(depth, x)
+        if n >= settle:
+            lo, hi = min(lo, y), max(hi, y)
+    stable = hi - lo <= 2 * q                     # still within 2 counts
+    return stable, {"peak_force_n": peak_f, "peak_speed_m_s": peak_v, "penetration_m": depth}
+
+
+for line in sys.stdin:
+    msg = json.loads(line)
+    if msg["type"] == "capabilities":
+        out = dict(CAPS, type="capabilities")
+    elif msg["type"] == "trial":
+        req = msg["request"]
+        stable, measured = wall_hit(req, msg["limits"])
+        if stable is None:
+            out = {"type": "error", "message": "aborted: past the speed or travel limit"}
+        else:
+            out = {"type": "result", "point": {"k": req["k"], "b": req["b"], "stable": stable},
+                   "measured": measured}
+    else:
+        out = {"type": "error", "message": "aborted"}
+    print(json.dumps(out), flush=True)
