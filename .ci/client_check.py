@@ -1,7 +1,7 @@
 """Drive the service through a client generated from api/openapi.json
 (openapi-python-client): submit -> poll -> result -> compare, and a bad
 request answered as a ProblemBody naming the field. Usage:
-    PYTHONPATH=<dir with zwidth_client> python3 client_check.py URL
+    PYTHONPATH=<dir with zwidth_client> python3 client_check.py URL TOKEN
 Prints 'client: N passed, 0 failed' or raises."""
 import json
 import sys
@@ -21,7 +21,12 @@ from zwidth_client.models import (
 )
 
 url = sys.argv[1]
-client = Client(base_url=url, raise_on_unexpected_status=True)
+# Writes need the user token (serve made it next to its database).
+client = Client(
+    base_url=url,
+    raise_on_unexpected_status=True,
+    headers={"Authorization": f"Bearer {sys.argv[2]}"},
+)
 passed = 0
 
 

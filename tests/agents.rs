@@ -299,7 +299,8 @@ fn a_rig_reporting_more_force_than_it_advertised_is_quarantined() {
     drop(a);
     // The operator fixes the rig and releases it: the map completes.
     let _b = agent(&s, "b", &[]);
-    let (code, _, _) = fetch(ureq::delete(&format!("{}/v1/rigs/bench/quarantine", s.base)).call());
+    let (code, _, _) =
+        fetch(authed::delete(&format!("{}/v1/rigs/bench/quarantine", s.base)).call());
     assert_eq!(code, 200);
     let here = reference(&s);
     assert_eq!(outcome(&s, &id), here);
@@ -454,7 +455,7 @@ fn tokens_open_sessions_only_for_agents_and_bad_hellos_are_refused_saying_why() 
     assert_eq!(dial(&s, "").err().unwrap(), "HTTP 401 Unauthorized");
     assert_eq!(dial(&s, "user-secret").err().unwrap(), "HTTP 403 Forbidden");
     let (code, _, _) = fetch(
-        ureq::post(&format!("{}/v1/experiments", s.base))
+        authed::post(&format!("{}/v1/experiments", s.base))
             .set("content-type", "application/json")
             .set("authorization", &format!("Bearer {token}"))
             .send_string(MAP),
@@ -504,7 +505,7 @@ fn tokens_open_sessions_only_for_agents_and_bad_hellos_are_refused_saying_why() 
     let _ = ws.send(tokio_tungstenite::tungstenite::Message::Text(
         "x".repeat(300 * 1024).into(),
     ));
-    assert!(hear(&mut ws).map_or(true, |m| m["type"] == "error"));
+    assert!(hear(&mut ws).is_none_or(|m| m["type"] == "error"));
     // The server is still well and stored nothing from any of it.
     assert_eq!(
         get(&format!("{}/v1/experiments", s.base))["experiments"],

@@ -24,7 +24,7 @@ fn call(r: Result<ureq::Response, ureq::Error>) -> (u16, String, serde_json::Val
 }
 
 fn post_json(url: &str) -> ureq::Request {
-    ureq::post(url).set("content-type", "application/json")
+    authed::post(url).set("content-type", "application/json")
 }
 
 fn assert_problem(code: u16, ct: &str, v: &serde_json::Value, want: u16, field: Option<&str>) {
@@ -84,7 +84,7 @@ fn specs_beyond_the_cost_limits_are_refused_naming_the_field() {
     let (code, ct, v) = call(post_json(&url).send_string(&tune));
     assert_problem(code, &ct, &v, 422, Some("max_evaluations"));
     // A compare takes 1 to 20 estimators (validated before anything runs).
-    call(ureq::post(&format!("{}/v1/queue/pause", s.base)).call());
+    call(authed::post(&format!("{}/v1/queue/pause", s.base)).call());
     let est = |n: usize| {
         serde_json::json!({"kind": "compare", "accuracy": "draft",
             "estimators": vec![serde_json::json!({"kind": "fdm"}); n]})
@@ -118,7 +118,7 @@ fn every_documented_limit_answers_its_status_and_field() {
     let s = start_with(dir, &["--token", "tok"]);
     let url = format!("{}/v1/experiments", s.base);
     let authed = |u: &str| {
-        ureq::post(u)
+        authed::post(u)
             .set("content-type", "application/json")
             .set("authorization", "Bearer tok")
     };
@@ -325,7 +325,7 @@ fn concurrent_submissions_with_one_key_store_one_experiment() {
     let s = start();
     let url = format!("{}/v1/experiments", s.base);
     // Pause so nothing runs while we count.
-    call(ureq::post(&format!("{}/v1/queue/pause", s.base)).call());
+    call(authed::post(&format!("{}/v1/queue/pause", s.base)).call());
     let body = SMALL;
     let answers: Vec<(u16, serde_json::Value)> = std::thread::scope(|sc| {
         let hs: Vec<_> = (0..32)
@@ -406,7 +406,7 @@ fn a_cancelled_experiment_never_ends_succeeded() {
     for _ in 0..20 {
         let (_, _, v) = call(post_json(&url).send_string(body));
         let id = v["id"].as_str().unwrap().to_string();
-        let (code, _, _) = call(ureq::post(&format!("{url}/{id}/cancel")).call());
+        let (code, _, _) = call(authed::post(&format!("{url}/{id}/cancel")).call());
         if code == 200 {
             answered.push(id);
         }
@@ -476,7 +476,7 @@ fn a_finish_blocked_by_a_held_lock_is_retried() {
 fn the_list_is_paged_with_a_cursor() {
     let s = start();
     let url = format!("{}/v1/experiments", s.base);
-    call(ureq::post(&format!("{}/v1/queue/pause", s.base)).call());
+    call(authed::post(&format!("{}/v1/queue/pause", s.base)).call());
     let body = SMALL;
     let mut ids = Vec::new();
     for _ in 0..5 {
@@ -515,32 +515,40 @@ fn the_list_is_paged_with_a_cursor() {
 
 /// Defect 6: a page on another site cannot make the operator's browser
 /// write: form-encoded bodies are 415; a foreign Origin, a cross-site fetch
-/// and (without a token) a foreign Host are 403, for every write.
+/// are 403, for every write (a DNS-rebinding page naming its own Host
+/// has no token: 401).
 #[test]
 fn writes_from_other_sites_are_refused() {
     let s = start();
     let url = format!("{}/v1/experiments", s.base);
     let body = SMALL;
     let (code, ct, v) = call(
-        ureq::post(&url)
+        authed::post(&url)
             .set("content-type", "text/plain")
             .send_string(body),
     );
     assert_problem(code, &ct, &v, 415, Some("Content-Type"));
-    let (code, ct, v) = call(ureq::post(&url).send_string(body));
+    let (code, ct, v) = call(authed::post(&url).send_string(body));
     assert_problem(code, &ct, &v, 415, Some("Content-Type"));
     let pause = format!("{}/v1/queue/pause", s.base);
     for (header, value, field) in [
         ("origin", "http://evil.example", "Origin"),
         ("origin", "null", "Origin"),
-        ("host", "evil.example", "Host"),
         ("sec-fetch-site", "cross-site", "Sec-Fetch-Site"),
     ] {
         let (code, ct, v) = call(post_json(&url).set(header, value).send_string(body));
         assert_problem(code, &ct, &v, 403, Some(field));
-        let (code, ct, v) = call(ureq::post(&pause).set(header, value).call());
+        let (code, ct, v) = call(authed::post(&pause).set(header, value).call());
         assert_problem(code, &ct, &v, 403, Some(field));
     }
+    // A foreign Host without the token (a DNS-rebinding page): 401.
+    let (code, ct, v) = call(
+        ureq::post(&url)
+            .set("content-type", "application/json")
+            .set("host", "evil.example")
+            .send_string(body),
+    );
+    assert_problem(code, &ct, &v, 401, Some("Authorization"));
     assert_eq!(get(&format!("{}/v1/queue", s.base))["paused"], false);
     assert_eq!(get(&url)["experiments"].as_array().unwrap().len(), 0);
     // The server's own origin may write.
@@ -626,7 +634,7 @@ fn every_error_is_a_problem_naming_the_field() {
     assert_problem(code, &ct, &v, 414, Some("query"));
     let (code, ct, _) = call(ureq::get(&format!("{}/v1/nothing", s.base)).call());
     assert_eq!((code, ct.as_str()), (404, "application/problem+json"));
-    let (code, ct, _) = call(ureq::delete(&url).call());
+    let (code, ct, _) = call(authed::delete(&url).call());
     assert_eq!((code, ct.as_str()), (405, "application/problem+json"));
 }
 
@@ -823,10 +831,10 @@ fn tokens_stay_out_of_logs_and_can_come_from_a_file() {
     s.base = line.trim().rsplit(' ').next().unwrap().to_string();
     let _ = ureq::get(&format!("{}/healthz?access_token=query-secret", s.base)).call();
     let pause = format!("{}/v1/queue/pause", s.base);
-    let (code, _, _) = call(ureq::post(&pause).call());
+    let (code, _, _) = call(authed::post(&pause).call());
     assert_eq!(code, 401);
     let (code, _, v) = call(
-        ureq::post(&pause)
+        authed::post(&pause)
             .set("authorization", "Bearer file-secret")
             .call(),
     );

@@ -96,7 +96,7 @@ fn idempotency_key_and_cancel() {
     // A long time-domain map, so it is still running when cancelled.
     let body = r#"{"kind":"map","scene":{"loop":{"sample_hz":10000,"render_hz":1000}},"method":"time","criterion":"stability","search":"trace","accuracy":"reference"}"#;
     let send = || {
-        ureq::post(&url)
+        authed::post(&url)
             .set("idempotency-key", "abc-1")
             .set("content-type", "application/json")
             .send_string(body)
@@ -273,7 +273,7 @@ fn tokens_guard_mutations() {
         Err(e) => panic!("{e}"),
     };
     let post_json = |auth: Option<&str>| {
-        let r = ureq::post(&url).set("content-type", "application/json");
+        let r = authed::post(&url).set("content-type", "application/json");
         match auth {
             Some(a) => r.set("authorization", a),
             None => r,
@@ -290,17 +290,28 @@ fn tokens_guard_mutations() {
     );
     // Reading needs no token.
     assert_eq!(status(ureq::get(&url).call()), 200);
-    // Beyond loopback without a token: refused, exit 2.
-    let o = Command::new(env!("CARGO_BIN_EXE_zwidth"))
-        .args(["serve", "--bind", "0.0.0.0:0", "--db"])
-        .arg(s._dir.join("u.db"))
-        .env_remove("ZWIDTH_TOKENS")
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("ZWIDTH_TOKENS"));
-    // Refused before any side effect: no database file was made (defect 13).
-    assert!(!s._dir.join("u.db").exists());
+    // Without a token (also beyond loopback) the server makes one, owner
+    // only, next to its database: no write is ever unauthenticated.
+    std::fs::create_dir_all(s._dir.join("made")).unwrap();
+    let s2 = start_with(s._dir.join("made"), &[]);
+    let made = std::fs::read_to_string(s2._dir.join("test.db.token")).unwrap();
+    assert_eq!(made.trim().len(), 48, "24 random bytes in hex");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(s2._dir.join("test.db.token"))
+            .unwrap()
+            .permissions()
+            .mode();
+        assert_eq!(mode & 0o777, 0o600);
+    }
+    let url2 = format!("{}/v1/experiments", s2.base);
+    let r = ureq::post(&url2).set("content-type", "application/json");
+    assert_eq!(status(r.send_string(body)), 401);
+    let r = ureq::post(&url2)
+        .set("content-type", "application/json")
+        .set("authorization", &format!("Bearer {}", made.trim()));
+    assert_eq!(status(r.send_string(body)), 202);
 }
 
 #[test]
@@ -347,9 +358,12 @@ fn pause_schedule_metrics_and_the_cli_client() {
     let file = s._dir.join("exp.json");
     std::fs::write(&file, body).unwrap();
     let run = |args: &[&str]| {
+        // The client finds the token `serve` made next to its database.
         let o = Command::new(env!("CARGO_BIN_EXE_zwidth"))
             .args(args)
             .env("ZWIDTH_SERVER", &s.base)
+            .env("ZWIDTH_DB", s._dir.join("test.db"))
+            .env_remove("ZWIDTH_TOKEN")
             .output()
             .unwrap();
         (
@@ -417,7 +431,7 @@ fn rigs_windows_sweeps_comparison_and_exports() {
     );
     let put = |rig: &str, body: &str| {
         fetch(
-            ureq::put(&format!("{}/v1/rigs/{rig}/window", s.base))
+            authed::put(&format!("{}/v1/rigs/{rig}/window", s.base))
                 .set("content-type", "application/json")
                 .send_string(body),
         )
@@ -598,7 +612,7 @@ fn rigs_windows_sweeps_comparison_and_exports() {
     assert_eq!(r.header("x-request-id"), Some("lab-42"));
 
     // Clearing the window lets `night` start its experiment.
-    let (code, _, _) = fetch(ureq::delete(&format!("{}/v1/rigs/night/window", s.base)).call());
+    let (code, _, _) = fetch(authed::delete(&format!("{}/v1/rigs/night/window", s.base)).call());
     assert_eq!(code, 200);
     assert_eq!(wait_end(&s.base, &waiting, 30)["state"], "succeeded");
 }

@@ -35,10 +35,26 @@ pub fn read_samples(input: impl BufRead) -> Result<Vec<f64>, CliError> {
     Ok(out)
 }
 
+/// A client of `server` with the user token from `ZWIDTH_TOKEN`, else the
+/// file `ZWIDTH_TOKEN_FILE`, else the one `serve` made next to its
+/// database (`$ZWIDTH_DB.token`, default `zwidth.db.token`).
 pub(super) fn client(server: String) -> crate::client::Client {
+    let env = |k: &str| std::env::var(k).ok().filter(|t| !t.is_empty());
+    let file = env("ZWIDTH_TOKEN_FILE").unwrap_or_else(|| {
+        format!(
+            "{}.token",
+            env("ZWIDTH_DB").unwrap_or_else(|| "zwidth.db".into())
+        )
+    });
+    let token = env("ZWIDTH_TOKEN").or_else(|| {
+        std::fs::read_to_string(file)
+            .ok()
+            .and_then(|t| t.lines().next().map(|l| l.trim().to_string()))
+            .filter(|t| !t.is_empty())
+    });
     crate::client::Client {
         server: server.trim_end_matches('/').to_string(),
-        token: std::env::var("ZWIDTH_TOKEN").ok().filter(|t| !t.is_empty()),
+        token,
     }
 }
 

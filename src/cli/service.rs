@@ -59,7 +59,10 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             let rigs = crate::rig::parse_list(&rigs)
                 .map_err(|e| CliError::Input(format!("--rigs: {e}")))?;
             use std::io::IsTerminal;
+            // A log that cannot be written (its disk full) is skipped, never
+            // reported on stderr: that report panics, dropping the request.
             let _ = tracing_subscriber::fmt()
+                .log_internal_errors(false)
                 .with_writer(std::io::stderr)
                 .with_ansi(std::io::stderr().is_terminal())
                 .with_env_filter(

@@ -23,6 +23,7 @@ pub use problem::{Problem, ProblemBody};
 
 use crate::rig::Rig;
 use crate::store::Store;
+use guard::token_accepted;
 
 /// Largest request body accepted (bytes).
 pub const BODY_LIMIT: usize = 1 << 20;
@@ -225,11 +226,6 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     if addrs.is_empty() {
         return Err(format!("--bind {bind} names no address"));
     }
-    if tokens.is_empty() && addrs.iter().any(|a| !a.ip().is_loopback()) {
-        return Err(format!(
-            "refusing to serve on {bind} without a token: set ZWIDTH_TOKENS=<secret>[,<secret>…] (or --token-file), or bind to 127.0.0.1"
-        ));
-    }
     // Then the socket (a second server on the same port stops here, before
     // touching the database), then the database, which one server at a time
     // may serve (an exclusive lock on `<db>.lock`).
@@ -275,8 +271,16 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
             }
         }
     }
-    if tokens.is_empty() {
-        tracing::warn!("no token set: anyone on this machine may submit; set ZWIDTH_TOKENS=<secret> to require Authorization: Bearer <secret>");
+    // No write is ever unauthenticated (the service can move hardware):
+    // without a configured token the server makes one, owner-only, next to
+    // the database, where the client commands find it (`<db>.token`).
+    let tokens = if tokens.is_empty() {
+        vec![secret_file(db, "token")?]
+    } else {
+        tokens
+    };
+    if agent_tokens.iter().any(|a| token_accepted(&tokens, a)) {
+        return Err("refusing: an agent token is also a user token; they must differ".into());
     }
     println!("zwidth serving on http://{addr}");
     use std::io::Write;
@@ -361,7 +365,7 @@ pub fn secret_file(db: &std::path::Path, name: &str) -> Result<String, String> {
                 .and_then(|_| f.sync_all())
         })
         .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
-    tracing::info!(path = %path.display(), "{name} made (owner-only): pass it to the agents");
+    tracing::info!(path = %path.display(), "{name} made (owner-only): pass it to the clients that need it");
     Ok(token)
 }
 

@@ -160,6 +160,7 @@ pub async fn audit(
 
 /// `?mode=` of a stop.
 #[derive(Debug, serde::Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 pub struct StopQuery {
     /// deferred (finish the trial), abort (end it now) or halt (abort and
     /// latch: the rig needs a local reset).

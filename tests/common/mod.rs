@@ -62,10 +62,50 @@ pub fn start_on(dir: std::path::PathBuf, bind: &str, extra: &[&str]) -> Server {
         .unwrap();
     let base = line.trim().rsplit(' ').next().unwrap().to_string();
     assert!(base.starts_with("http://127.0.0.1:"), "{line}");
+    // The token the server made on first start (none when given one).
+    if let Ok(t) = std::fs::read_to_string(dir.join("test.db.token")) {
+        TOKENS
+            .lock()
+            .unwrap()
+            .push((base.clone(), t.trim().to_string()));
+    }
     Server {
         child,
         base,
         _dir: dir,
+    }
+}
+
+/// Each server's own token (`<db>.token`), by base URL.
+static TOKENS: std::sync::Mutex<Vec<(String, String)>> = std::sync::Mutex::new(Vec::new());
+
+/// The token of the server `url` is on, if it made one.
+pub fn token_for(url: &str) -> Option<String> {
+    TOKENS
+        .lock()
+        .unwrap()
+        .iter()
+        .rev()
+        .find(|(base, _)| url.starts_with(base.as_str()))
+        .map(|(_, t)| t.clone())
+}
+
+/// Writes as a user does: with the server's token.
+pub mod authed {
+    fn with(r: ureq::Request, url: &str) -> ureq::Request {
+        match super::token_for(url) {
+            Some(t) => r.set("authorization", &format!("Bearer {t}")),
+            None => r,
+        }
+    }
+    pub fn post(url: &str) -> ureq::Request {
+        with(ureq::post(url), url)
+    }
+    pub fn put(url: &str) -> ureq::Request {
+        with(ureq::put(url), url)
+    }
+    pub fn delete(url: &str) -> ureq::Request {
+        with(ureq::delete(url), url)
     }
 }
 
@@ -77,7 +117,7 @@ pub fn uuid_like() -> u128 {
 }
 
 pub fn post(url: &str, body: &str) -> (u16, serde_json::Value, String) {
-    match ureq::post(url)
+    match authed::post(url)
         .set("content-type", "application/json")
         .send_string(body)
     {
