@@ -6,6 +6,8 @@ line from our stdout (docs/rigs.md, "the driver protocol"):
   {"type":"capabilities"}            -> {"type":"capabilities", ...}
   {"type":"trial","request":…,"limits":…} -> {"type":"result","point":…,"measured":…}
                                         or {"type":"error","message":…}
+  {"type":"abort"}                   -> (no answer: end the running trial early,
+                                        answering it with an error)
 Replace `wall_hit` with your controller's (QuaRC, a microcontroller bridge…).
 Here it is a toy device: a mass with viscous and Coulomb friction, an
 encoder of 1 µm, a backward-difference velocity estimate, one sample of
@@ -65,5 +67,9 @@ for line in sys.stdin:
             out = {"type": "result", "point": {"k": req["k"], "b": req["b"], "stable": stable},
                    "measured": measured}
     else:
-        out = {"type": "error", "message": "aborted"}
+        # An abort: this toy runs each trial to its end before it reads the
+        # next line, so there is nothing left to abort. A real driver
+        # watches stdin during a trial, ramps the force down and answers
+        # the trial with {"type":"error","message":"aborted"}.
+        continue
     print(json.dumps(out), flush=True)

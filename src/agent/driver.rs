@@ -145,11 +145,13 @@ enum FromDriver {
 }
 
 /// A rig behind a child process speaking one JSON object per line on its
-/// stdin and stdout (docs/rigs.md, "the driver protocol").
+/// stdin and stdout (docs/rigs.md, "the driver protocol"). Its answers
+/// are read on a thread of their own, so a trial can be aborted while the
+/// driver runs it.
 pub struct StdioDriver {
     child: Child,
     to: ChildStdin,
-    from: BufReader<ChildStdout>,
+    lines: std::sync::mpsc::Receiver<String>,
     capabilities: Capabilities,
 }
 
@@ -164,14 +166,24 @@ impl StdioDriver {
             .spawn()
             .map_err(|e| format!("--driver {command:?} cannot start: {e}"))?;
         let to = child.stdin.take().ok_or("no stdin")?;
-        let from = BufReader::new(child.stdout.take().ok_or("no stdout")?);
+        let from: ChildStdout = child.stdout.take().ok_or("no stdout")?;
+        let (tx, lines) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(from).lines() {
+                let Ok(line) = line else { break };
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
         let mut d = Self {
             child,
             to,
-            from,
+            lines,
             capabilities: SimDriver::default_capabilities(),
         };
-        match d.ask(&ToDriver::Capabilities)? {
+        d.say(&ToDriver::Capabilities)?;
+        match d.answer(None)? {
             FromDriver::Capabilities(c) => {
                 c.validate()
                     .map_err(|e| format!("the driver's capabilities: {e}"))?;
@@ -182,17 +194,35 @@ impl StdioDriver {
         }
     }
 
-    fn ask(&mut self, msg: &ToDriver) -> Result<FromDriver, String> {
+    fn say(&mut self, msg: &ToDriver) -> Result<(), String> {
         let line = serde_json::to_string(msg).map_err(|e| e.to_string())?;
         writeln!(self.to, "{line}")
             .and_then(|_| self.to.flush())
-            .map_err(|e| format!("the driver is gone: {e}"))?;
-        let mut answer = String::new();
-        match self.from.read_line(&mut answer) {
-            Ok(0) => Err("the driver closed its output".into()),
-            Ok(_) => serde_json::from_str(&answer)
-                .map_err(|e| format!("the driver's answer is not a message: {e}: {answer:?}")),
-            Err(e) => Err(format!("the driver's output: {e}")),
+            .map_err(|e| format!("the driver is gone: {e}"))
+    }
+
+    /// The next answer; with `cancel`, an abort is sent (once) when it
+    /// turns true, and the answer to the trial is still awaited.
+    fn answer(&mut self, cancel: Option<&AtomicBool>) -> Result<FromDriver, String> {
+        use std::sync::mpsc::RecvTimeoutError;
+        let mut aborted = false;
+        loop {
+            match self.lines.recv_timeout(Duration::from_millis(10)) {
+                Ok(line) => {
+                    return serde_json::from_str(&line).map_err(|e| {
+                        format!("the driver's answer is not a message: {e}: {line:?}")
+                    })
+                }
+                Err(RecvTimeoutError::Timeout) => {
+                    if !aborted && cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+                        self.say(&ToDriver::Abort)?;
+                        aborted = true;
+                    }
+                }
+                Err(RecvTimeoutError::Disconnected) => {
+                    return Err("the driver closed its output".into())
+                }
+            }
         }
     }
 }
@@ -216,11 +246,14 @@ impl Driver for StdioDriver {
         cancel: &AtomicBool,
     ) -> Result<(Point, Measured), String> {
         if cancel.load(Ordering::Relaxed) {
-            let _ = self.ask(&ToDriver::Abort);
-            return Err("aborted".into());
+            return Err("aborted before it started".into());
         }
-        match self.ask(&ToDriver::Trial { request, limits })? {
-            FromDriver::Result { point, measured } => Ok((point, measured)),
+        self.say(&ToDriver::Trial { request, limits })?;
+        match self.answer(Some(cancel))? {
+            FromDriver::Result { point, measured } if !cancel.load(Ordering::Relaxed) => {
+                Ok((point, measured))
+            }
+            FromDriver::Result { .. } => Err("aborted".into()),
             FromDriver::Error { message } => Err(message),
             FromDriver::Capabilities(_) => {
                 Err("the driver answered a trial with capabilities".into())

@@ -34,6 +34,10 @@ pub struct LocalLimits {
     pub max_force_n: f64,
     pub max_k: f64,
     pub max_b: f64,
+    /// The controller aborts a trial past this speed (m/s) …
+    pub max_speed_m_s: f64,
+    /// … or this penetration (m).
+    pub max_penetration_m: f64,
 }
 
 /// Faults a test injects into the simulated agent (`--faults FILE`).
@@ -71,6 +75,7 @@ enum Done {
     Aborted {
         epoch: u64,
         trial_id: String,
+        code: RefusalCode,
         why: String,
     },
 }
@@ -247,7 +252,7 @@ impl Agent {
                     if last_heard.elapsed() > Duration::from_millis(ttl_ms) {
                         return Err(format!("nothing heard from the server for {ttl_ms} ms"));
                     }
-                    if RESET.swap(false, Ordering::Relaxed) && self.running.is_none() {
+                    if self.running.is_none() && RESET.swap(false, Ordering::Relaxed) {
                         eprintln!("zwidth agent: reset by the operator: armed");
                         self.state = RigState::Armed;
                     }
@@ -268,10 +273,10 @@ impl Agent {
                             }
                             m
                         }
-                        Some(Done::Aborted { epoch: e, trial_id, why }) => AgentMessage::Refused {
+                        Some(Done::Aborted { epoch: e, trial_id, code, why }) => AgentMessage::Refused {
                             epoch: e,
                             trial_id,
-                            code: RefusalCode::NotArmed,
+                            code,
                             reason: why,
                         },
                         None => continue,
@@ -344,20 +349,25 @@ impl Agent {
                 let driver = self.driver.clone();
                 let done = self.done_tx.clone();
                 let report_force = self.cfg.faults.report_peak_force_n;
-                let own_force = self.cfg.limits.max_force_n;
-                let deadline = received + Duration::from_millis(expires_in_ms);
+                let own = self.cfg.limits;
+                let deadline = received
+                    .checked_add(Duration::from_millis(expires_in_ms.min(86_400_000)))
+                    .unwrap_or(received);
                 std::thread::spawn(move || {
                     if Instant::now() > deadline {
                         let _ = done.send(Done::Aborted {
                             epoch: e,
                             trial_id,
+                            code: RefusalCode::Expired,
                             why: "expired before it started".into(),
                         });
                         return;
                     }
+                    // The operator's limits bound the server's: never raised.
                     let limits = TrialLimits {
-                        force_limit_n: limits.force_limit_n.min(own_force),
-                        ..limits
+                        force_limit_n: limits.force_limit_n.min(own.max_force_n),
+                        abort_speed_m_s: limits.abort_speed_m_s.min(own.max_speed_m_s),
+                        abort_penetration_m: limits.abort_penetration_m.min(own.max_penetration_m),
                     };
                     let mut d = driver.lock().unwrap_or_else(|e| e.into_inner());
                     if exit_now {
@@ -376,6 +386,11 @@ impl Agent {
                         Err(why) => Done::Aborted {
                             epoch: e,
                             trial_id,
+                            code: if cancel.load(Ordering::Relaxed) {
+                                RefusalCode::Aborted
+                            } else {
+                                RefusalCode::Failed
+                            },
                             why,
                         },
                     };
@@ -383,8 +398,8 @@ impl Agent {
                 });
                 Ok(vec![])
             }
-            ServerMessage::Ack { trial_id, .. } => {
-                self.outbox.remove(&trial_id);
+            ServerMessage::Ack { epoch: e, trial_id } => {
+                self.outbox.remove(&trial_id, e);
                 Ok(vec![])
             }
             ServerMessage::CancelTrial { trial_id, .. } => {

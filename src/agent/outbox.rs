@@ -17,8 +17,10 @@ impl Outbox {
         Ok(Self { dir: dir.into() })
     }
 
-    /// A file name for a trial id (ids hold '/'; names do not).
-    fn path(&self, trial_id: &str) -> PathBuf {
+    /// A file name for a trial id and the epoch it ran under (ids hold
+    /// '/'; names do not): a result of a trial run again under a later
+    /// epoch is another file, never removed by the first one's ack.
+    fn path(&self, trial_id: &str, epoch: u64) -> PathBuf {
         let name: String = trial_id
             .chars()
             .map(|c| {
@@ -29,13 +31,13 @@ impl Outbox {
                 }
             })
             .collect();
-        self.dir.join(format!("{name}.json"))
+        self.dir.join(format!("{name}_{epoch}.json"))
     }
 
     /// Keep `r` until acknowledged (durably: synced before renamed).
     pub fn put(&self, r: &TrialResult) -> std::io::Result<()> {
         use std::io::Write;
-        let path = self.path(&r.trial_id);
+        let path = self.path(&r.trial_id, r.epoch);
         let tmp = path.with_extension("tmp");
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(serde_json::to_string(r).unwrap_or_default().as_bytes())?;
@@ -48,8 +50,8 @@ impl Outbox {
     }
 
     /// Acknowledged: forget it.
-    pub fn remove(&self, trial_id: &str) {
-        let _ = std::fs::remove_file(self.path(trial_id));
+    pub fn remove(&self, trial_id: &str, epoch: u64) {
+        let _ = std::fs::remove_file(self.path(trial_id, epoch));
     }
 
     /// Everything not yet acknowledged, oldest first (unreadable files are
@@ -92,7 +94,10 @@ mod tests {
         o.put(&r).unwrap();
         // A second outbox on the same directory (the agent restarted) sees it.
         assert_eq!(Outbox::open(&dir).unwrap().all(), vec![r.clone()]);
-        o.remove(&r.trial_id);
+        // An ack under another epoch is another result's.
+        o.remove(&r.trial_id, 2);
+        assert_eq!(o.all().len(), 1);
+        o.remove(&r.trial_id, 3);
         assert!(o.all().is_empty());
         let _ = std::fs::remove_dir_all(dir);
     }

@@ -29,6 +29,8 @@ pub(super) fn run(command: Command) -> Result<(), CliError> {
         max_force_n,
         max_k,
         max_b,
+        max_speed_m_s,
+        max_penetration_m,
     } = command
     else {
         unreachable!("called for the agent command")
@@ -100,6 +102,8 @@ pub(super) fn run(command: Command) -> Result<(), CliError> {
             max_force_n,
             max_k,
             max_b,
+            max_speed_m_s,
+            max_penetration_m,
         },
         faults,
     };

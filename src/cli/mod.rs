@@ -371,9 +371,15 @@ pub enum Command {
         /// … stiffness (N/m) …
         #[arg(long, default_value_t = f64::INFINITY)]
         max_k: f64,
-        /// … and damping (N·s/m).
+        /// … damping (N·s/m) …
         #[arg(long, default_value_t = f64::INFINITY)]
         max_b: f64,
+        /// … the speed past which the controller aborts a trial (m/s) …
+        #[arg(long, default_value_t = f64::INFINITY)]
+        max_speed_m_s: f64,
+        /// … and the penetration past which it does (m).
+        #[arg(long, default_value_t = f64::INFINITY)]
+        max_penetration_m: f64,
     },
     /// Submit an experiment JSON file to a running service; prints its id.
     Submit {

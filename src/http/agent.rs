@@ -194,7 +194,18 @@ async fn session(st: AppState, socket: WebSocket) {
     let end = loop {
         tokio::select! {
             out = rx.recv() => match out {
-                Some(msg) => if !conn.send(&msg).await { break None },
+                Some(msg) => {
+                    // The trial out is recorded before it goes (a restarted
+                    // server takes its result instead of running it again).
+                    if let ServerMessage::Trial { epoch: e, trial_id, .. } = &msg {
+                        if let Err(err) = st.store.set_trial_out(&rig, trial_id, *e).await {
+                            st.store.observe(&err);
+                            attached.refused(*e, trial_id, true, "the server could not record it");
+                            continue;
+                        }
+                    }
+                    if !conn.send(&msg).await { break None }
+                }
                 None => break Some(format!(
                     "epoch {epoch} fenced off: the agent was silent past the heartbeat TTL and grace"
                 )),
@@ -269,6 +280,7 @@ async fn result(
             match st.store.add_trials(&experiment, &[t]).await {
                 Ok(()) => {
                     rig.deliver(&r.trial_id, r.point.clone());
+                    let _ = st.store.clear_trial_out(rig.id(), &r.trial_id).await;
                     true
                 }
                 Err(e) => {

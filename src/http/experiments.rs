@@ -190,6 +190,16 @@ pub async fn submit(
         })?,
     };
     rig.check(&spec.scenes())?;
+    if let (Some(_), ExperimentSpec::Compare(c)) = (rig.attached(), &spec) {
+        if c.tuned.is_some() {
+            return Err(SpecError::new(
+                "tuned",
+                "(set)",
+                "a tuned comparison tunes in this process, not on an attached rig: submit the tunes as tune experiments on the rig, then compare their results",
+            )
+            .into());
+        }
+    }
     let rig_id = rig.info().id;
     let priority = q.int("priority", -1000..=1000)?.unwrap_or(0);
     let not_before_ms = q.int("not_before_ms", 0..=i64::MAX / 2)?;

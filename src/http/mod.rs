@@ -260,6 +260,13 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     };
     for r in agent::attached_rigs(&rigs) {
         r.set_timing(lease);
+        // Reconcile: the epochs handed out and the trial that was out.
+        let epoch = store.epoch(r.id()).await.map_err(|e| e.to_string())?;
+        let out = store.trial_out(r.id()).await.map_err(|e| e.to_string())?;
+        if let Some((trial, e)) = &out {
+            tracing::info!(rig = %r.id(), %trial, epoch = e, "a trial was out at the last stop: its result is awaited from the agent");
+        }
+        r.restore(epoch, out);
         if let Ok(rows) = store.attached_rigs().await {
             if let Some(q) = rows
                 .iter()

@@ -11,7 +11,9 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::Duration;
 
 use super::lease::{Lease, Refusal, Timing};
-use super::protocol::{trial_id, Capabilities, RigState, ServerMessage, TrialLimits, TrialResult};
+use super::protocol::{
+    parse_trial_id, trial_id, Capabilities, RigState, ServerMessage, TrialLimits, TrialResult,
+};
 use super::{check_id, rig_pool, Rig, RigInfo};
 use crate::error::SpecError;
 use crate::store::now_ms;
@@ -130,6 +132,19 @@ impl AttachedRig {
         self.lock().lease.timing = timing;
     }
 
+    /// After a restart: the highest epoch handed out, and the trial that
+    /// was out and its epoch (from the database).
+    pub fn restore(&self, highest_epoch: u64, out: Option<(String, u64)>) {
+        let mut g = self.lock();
+        g.lease.highest_epoch = highest_epoch;
+        g.lease.outstanding = out.map(|(trial_id, epoch)| super::lease::Outstanding {
+            trial_id,
+            sent_epoch: Some(epoch),
+            sent_ms: now_ms(),
+            retry_at_ms: 0,
+        });
+    }
+
     /// Quarantine (Some(why)) or release (None); the caller stores it.
     pub fn set_quarantine(&self, why: Option<String>) {
         self.lock().lease.quarantine = why;
@@ -188,7 +203,7 @@ impl AttachedRig {
     /// The session's link closed.
     pub fn closed(&self, epoch: u64) {
         let mut g = self.lock();
-        g.lease.closed(epoch);
+        g.lease.closed(epoch, now_ms());
         if g.outbox.as_ref().is_some_and(|(e, _)| *e == epoch) {
             g.outbox = None;
         }
@@ -204,10 +219,16 @@ impl AttachedRig {
         if let Err(refusal) = g.lease.check_result(r.epoch, &r.trial_id) {
             return Verdict::Refuse(refusal.describe(r.epoch));
         }
-        let Some(p) = g.pending.as_ref().filter(|p| p.trial_id == r.trial_id) else {
-            return Verdict::Refuse(Refusal::NotSent.describe(r.epoch));
-        };
-        let (experiment, scope) = (p.experiment.clone(), p.scope);
+        // The search waiting for it, or (after a server restart, before the
+        // search has asked again) the trial out as the database recorded it.
+        let (experiment, scope, k, b) =
+            match g.pending.as_ref().filter(|p| p.trial_id == r.trial_id) {
+                Some(p) => (p.experiment.clone(), p.scope, p.request.k, p.request.b),
+                None => match parse_trial_id(&r.trial_id) {
+                    Some((e, s, k, b)) => (e.to_string(), s, k, b),
+                    None => return Verdict::Refuse(Refusal::NotSent.describe(r.epoch)),
+                },
+            };
         let advertised = g
             .agent
             .as_ref()
@@ -219,16 +240,22 @@ impl AttachedRig {
                 r.trial_id
             );
             g.lease.quarantine = Some(why.clone());
-            g.lease.refused(r.epoch, &r.trial_id);
+            g.lease.refused(r.epoch, &r.trial_id, now_ms());
             return Verdict::Refuse(format!("quarantined: {why}"));
         }
-        if r.point.k.to_bits() != p.request.k.to_bits()
-            || r.point.b.to_bits() != p.request.b.to_bits()
-        {
-            return Verdict::Refuse(format!(
-                "the result's (K, B) = ({}, {}) is not its trial's ({}, {})",
-                r.point.k, r.point.b, p.request.k, p.request.b
-            ));
+        if r.point.k.to_bits() != k.to_bits() || r.point.b.to_bits() != b.to_bits() {
+            // A rig that answers another wall than it was asked cannot be
+            // trusted with this one either: the experiment fails saying so.
+            let why = format!(
+                "the result's (K, B) = ({}, {}) is not its trial's ({k}, {b})",
+                r.point.k, r.point.b
+            );
+            g.lease.done(&r.trial_id);
+            if let Some(p) = g.pending.as_mut().filter(|p| p.trial_id == r.trial_id) {
+                p.failed = Some(format!("rig {}: {why}", self.id));
+            }
+            self.shared.changed.notify_all();
+            return Verdict::Refuse(why);
         }
         Verdict::Store { experiment, scope }
     }
@@ -258,7 +285,7 @@ impl AttachedRig {
         if g.lease.check_result(epoch, trial_id).is_err() {
             return;
         }
-        g.lease.refused(epoch, trial_id);
+        g.lease.refused(epoch, trial_id, now_ms());
         if !transient {
             if let Some(p) = g.pending.as_mut().filter(|p| p.trial_id == trial_id) {
                 p.failed = Some(format!("rig {} refused the trial: {reason}", self.id));
@@ -464,8 +491,10 @@ impl TrialBackend for AttachedRun {
         });
         let outcome = loop {
             if observer.cancelled() {
+                // Out on the rig (under this session's epoch or, after a
+                // reconnect, an earlier one): tell the agent to end it.
                 if let (Some(o), Some((epoch, tx))) = (&g.lease.outstanding, &g.outbox) {
-                    if o.trial_id == id && o.sent_epoch == Some(*epoch) {
+                    if o.trial_id == id && o.sent_epoch.is_some() {
                         let _ = tx.send(ServerMessage::CancelTrial {
                             epoch: *epoch,
                             trial_id: id.clone(),
@@ -508,7 +537,7 @@ impl TrialBackend for AttachedRun {
                 });
                 if !sent {
                     // The session's queue is gone: send again to the next.
-                    g.lease.refused(epoch, &id);
+                    g.lease.refused(epoch, &id, now);
                 }
             }
             observer.set_waiting(g.lease.blocked(now));

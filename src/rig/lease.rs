@@ -45,6 +45,9 @@ pub struct Outstanding {
     /// The epoch it was sent under; None: not sent (or to be sent again).
     pub sent_epoch: Option<u64>,
     pub sent_ms: i64,
+    /// Not to be sent again before this (after a refusal: the agent busy
+    /// finishing a cancelled trial is not asked again at once).
+    pub retry_at_ms: i64,
 }
 
 /// Why the server will not take a result (it goes to the audit).
@@ -82,6 +85,9 @@ pub struct Lease {
     pub lost_since_ms: Option<i64>,
     /// The highest epoch handed out (sessions with lower ones are fenced).
     pub highest_epoch: u64,
+    /// When the last session's link closed (its trial is fenced off after
+    /// TTL + grace unless a session takes its result first).
+    pub closed_ms: Option<i64>,
 }
 
 impl Lease {
@@ -128,6 +134,7 @@ impl Lease {
             }
         }
         self.highest_epoch = epoch;
+        self.closed_ms = None;
         self.session = Some(Session {
             epoch,
             agent: agent.to_string(),
@@ -170,6 +177,16 @@ impl Lease {
     /// past TTL + grace the session is fenced off (Some(epoch) to close)
     /// and its trial waits to be sent again.
     pub fn tick(&mut self, now_ms: i64) -> Option<u64> {
+        let limit = (self.timing.ttl_ms + self.timing.grace_ms) as i64;
+        if self.session.is_none() {
+            if let (Some(closed), Some(o)) = (self.closed_ms, &mut self.outstanding) {
+                if now_ms - closed > limit {
+                    o.sent_epoch = None;
+                    self.closed_ms = None;
+                }
+            }
+            return None;
+        }
         let s = self.session.as_ref()?;
         let silent = now_ms - s.last_heard_ms;
         if silent <= self.timing.ttl_ms as i64 {
@@ -177,7 +194,7 @@ impl Lease {
         }
         self.lost_since_ms
             .get_or_insert(s.last_heard_ms + self.timing.ttl_ms as i64);
-        if silent <= (self.timing.ttl_ms + self.timing.grace_ms) as i64 {
+        if silent <= limit {
             return None;
         }
         let epoch = s.epoch;
@@ -202,10 +219,11 @@ impl Lease {
     /// The link of the session under `epoch` closed: no session, but the
     /// trial it held stays out under its epoch (the agent finishes it and
     /// lists the result in its next `hello`), until the grace runs out.
-    pub fn closed(&mut self, epoch: u64) {
+    pub fn closed(&mut self, epoch: u64, now_ms: i64) {
         if self.session.as_ref().is_some_and(|s| s.epoch == epoch) {
             self.session = None;
             self.lost_since_ms = None;
+            self.closed_ms = Some(now_ms);
         }
     }
 
@@ -234,19 +252,28 @@ impl Lease {
     /// nothing may be sent.
     pub fn send(&mut self, trial_id: &str, now_ms: i64) -> Option<u64> {
         if let Some(o) = &self.outstanding {
-            if o.trial_id != trial_id {
-                // One trial at a time: the other one must end first.
-                return None;
-            }
-            if o.sent_epoch.is_some() {
+            if o.trial_id == trial_id {
+                if o.sent_epoch.is_some() || now_ms < o.retry_at_ms {
+                    return None;
+                }
+            } else if o.sent_epoch.is_some() {
+                // Another trial is out on the rig (one at a time): it ends
+                // first. One that is not out (a search since cancelled) is
+                // replaced.
                 return None;
             }
         }
+        let keep_retry = self
+            .outstanding
+            .as_ref()
+            .filter(|o| o.trial_id == trial_id)
+            .map_or(now_ms, |o| o.retry_at_ms);
         if self.blocked(now_ms).is_some() {
-            self.outstanding.get_or_insert(Outstanding {
+            self.outstanding = Some(Outstanding {
                 trial_id: trial_id.to_string(),
                 sent_epoch: None,
                 sent_ms: now_ms,
+                retry_at_ms: keep_retry,
             });
             return None;
         }
@@ -255,6 +282,7 @@ impl Lease {
             trial_id: trial_id.to_string(),
             sent_epoch: Some(epoch),
             sent_ms: now_ms,
+            retry_at_ms: keep_retry,
         });
         Some(epoch)
     }
@@ -286,11 +314,12 @@ impl Lease {
     }
 
     /// The agent refused the trial under `epoch`: it waits to be sent
-    /// again (to a session that can run it).
-    pub fn refused(&mut self, epoch: u64, trial_id: &str) {
+    /// again (to a session that can run it), not before one heartbeat.
+    pub fn refused(&mut self, epoch: u64, trial_id: &str, now_ms: i64) {
         if let Some(o) = &mut self.outstanding {
             if o.trial_id == trial_id && o.sent_epoch == Some(epoch) {
                 o.sent_epoch = None;
+                o.retry_at_ms = now_ms + self.timing.heartbeat_ms as i64;
             }
         }
     }
@@ -373,7 +402,7 @@ mod tests {
                     Op::Heard(n, s) => { l.heard(pick(&epochs, n), s.map(state), now); }
                     Op::Advance(ms) => now += ms as i64,
                     Op::Tick => { l.tick(now); }
-                    Op::Close(n) => l.closed(pick(&epochs, n)),
+                    Op::Close(n) => l.closed(pick(&epochs, n), now),
                     Op::Send(t) => {
                         let t = t as usize;
                         if stored[t] { continue; }
@@ -398,7 +427,7 @@ mod tests {
                             l.done(&id);
                         }
                     }
-                    Op::Refused(t, n) => l.refused(pick(&epochs, n), &format!("t{t}")),
+                    Op::Refused(t, n) => l.refused(pick(&epochs, n), &format!("t{t}"), now),
                     Op::Quarantine(q) => l.quarantine = q.then(|| "q".to_string()),
                 }
                 // One trial out at a time, under the epoch it was last sent with.
@@ -447,5 +476,9 @@ mod tests {
             l.check_result(2, "t"),
             Err(Refusal::StaleEpoch { sent: Some(4) })
         );
+        // Refused (the agent busy): asked again one heartbeat later, not at once.
+        l.refused(4, "t", 2600);
+        assert_eq!(l.send("t", 2699), None);
+        assert_eq!(l.send("t", 2700), Some(4));
     }
 }

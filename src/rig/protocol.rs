@@ -241,13 +241,18 @@ pub enum RefusalCode {
     Busy,
     /// Beyond the agent's own, operator-owned limits.
     BeyondLimits,
+    /// Started, then ended early: cancelled, stopped (abort, halt) or the
+    /// controller's own abort (speed, travel).
+    Aborted,
+    /// The rig could not run it (the driver failed or is gone).
+    Failed,
 }
 
 impl RefusalCode {
     /// Whether the trial may be sent again (to a session that can take
-    /// it); `beyond_limits` never can.
+    /// it); `beyond_limits` and `failed` fail the experiment instead.
     pub fn transient(self) -> bool {
-        self != RefusalCode::BeyondLimits
+        !matches!(self, RefusalCode::BeyondLimits | RefusalCode::Failed)
     }
 }
 
@@ -309,6 +314,17 @@ pub fn trial_id(experiment: &str, scope: u32, k: f64, b: f64) -> String {
         k.to_bits(),
         b.to_bits()
     )
+}
+
+/// The parts of a trial id: experiment, scope, K and B (None: not one).
+pub fn parse_trial_id(id: &str) -> Option<(&str, u32, f64, f64)> {
+    let mut parts = id.split('/');
+    let (e, s, k, b) = (parts.next()?, parts.next()?, parts.next()?, parts.next()?);
+    if parts.next().is_some() || e.is_empty() || k.len() != 16 || b.len() != 16 {
+        return None;
+    }
+    let bits = |h: &str| u64::from_str_radix(h, 16).ok().map(f64::from_bits);
+    Some((e, s.parse().ok()?, bits(k)?, bits(b)?))
 }
 
 /// Read one message: size, JSON, version. Err is the reason, in words.
@@ -432,6 +448,24 @@ mod tests {
         assert!(decode::<AgentMessage>(r#"{"v":1,"seq":1,"type":"launch"}"#)
             .unwrap_err()
             .contains("unreadable"));
+    }
+
+    #[test]
+    fn a_trial_id_names_its_experiment_scope_and_wall_exactly() {
+        // The IEEE-754 bits as Python writes them: struct.pack(">d", 1488.24).hex().
+        let id = trial_id("0193-ab", 2, 1488.24, -0.1);
+        assert_eq!(id, "0193-ab/2/409740f5c28f5c29/bfb999999999999a");
+        assert_eq!(parse_trial_id(&id), Some(("0193-ab", 2, 1488.24, -0.1)));
+        for bad in [
+            "",
+            "a/b",
+            "e/x/409740f5c28f5c29/bfb999999999999a",
+            "e/1/4097/bfb999999999999a",
+            "e/1/409740f5c28f5c29/bfb999999999999a/x",
+            "/1/409740f5c28f5c29/bfb999999999999a",
+        ] {
+            assert_eq!(parse_trial_id(bad), None, "{bad}");
+        }
     }
 
     #[test]

@@ -78,6 +78,54 @@ impl Store {
             .await
     }
 
+    /// The trial out on `rig` (written before it is sent).
+    pub async fn set_trial_out(
+        &self,
+        rig: &str,
+        trial: &str,
+        epoch: u64,
+    ) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        sqlx::query("INSERT INTO rig_trials_out (rig, trial, epoch, sent_ms) VALUES (?, ?, ?, ?) ON CONFLICT (rig) DO UPDATE SET trial = excluded.trial, epoch = excluded.epoch, sent_ms = excluded.sent_ms")
+            .bind(rig)
+            .bind(trial)
+            .bind(epoch.min(i64::MAX as u64) as i64)
+            .bind(now_ms())
+            .execute(&self.pool)
+            .await
+            .map(|_| ())
+    }
+
+    /// `trial` is no longer out on `rig` (its result is committed).
+    pub async fn clear_trial_out(&self, rig: &str, trial: &str) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        sqlx::query("DELETE FROM rig_trials_out WHERE rig = ? AND trial = ?")
+            .bind(rig)
+            .bind(trial)
+            .execute(&self.pool)
+            .await
+            .map(|_| ())
+    }
+
+    /// The trial out on `rig` and its epoch, if one is.
+    pub async fn trial_out(&self, rig: &str) -> Result<Option<(String, u64)>, sqlx::Error> {
+        let row: Option<(String, i64)> =
+            sqlx::query_as("SELECT trial, epoch FROM rig_trials_out WHERE rig = ?")
+                .bind(rig)
+                .fetch_optional(&self.pool)
+                .await?;
+        Ok(row.map(|(t, e)| (t, e.max(0) as u64)))
+    }
+
+    /// The highest epoch handed out to `rig` (0: none).
+    pub async fn epoch(&self, rig: &str) -> Result<u64, sqlx::Error> {
+        let e: Option<i64> = sqlx::query_scalar("SELECT epoch FROM rig_epochs WHERE rig = ?")
+            .bind(rig)
+            .fetch_optional(&self.pool)
+            .await?;
+        Ok(e.unwrap_or(0).max(0) as u64)
+    }
+
     /// Register an attached rig (false: the id exists).
     pub async fn add_attached_rig(&self, id: &str, description: &str) -> Result<bool, sqlx::Error> {
         self.writable()?;
