@@ -759,3 +759,47 @@ fn a_result_for_another_wall_fails_the_experiment_saying_so() {
         serde_json::json!([])
     );
 }
+
+#[test]
+fn a_rig_registered_through_the_api_is_data() {
+    let dir = std::env::temp_dir().join(format!(
+        "zwidth-agents-{}-{}",
+        std::process::id(),
+        uuid_like()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut args = vec!["--rigs", "sim:1"];
+    args.extend(LEASE);
+    let s = start_with(dir.clone(), &args);
+    // Unknown rig: refused naming `rig`.
+    let (code, v, _) = post(&format!("{}/v1/experiments?rig=bench", s.base), MAP);
+    assert_eq!((code, v["field"].as_str()), (422, Some("rig")), "{v}");
+    let (code, v, _) = post(
+        &format!("{}/v1/rigs", s.base),
+        r#"{"id":"bench","description":"the lab's device"}"#,
+    );
+    assert_eq!(code, 201, "{v}");
+    assert_eq!(v["kind"], "attached");
+    assert_eq!(v["attached"]["connected"], false);
+    let (code, _, _) = post(&format!("{}/v1/rigs", s.base), r#"{"id":"bench"}"#);
+    assert_eq!(code, 409);
+    let (code, v, _) = post(&format!("{}/v1/rigs", s.base), r#"{"id":"no spaces"}"#);
+    assert_eq!((code, v["field"].as_str()), (422, Some("id")), "{v}");
+    // Submitted before its agent connects: it waits, saying why.
+    let id = submit(&s, "bench", MAP);
+    wait_for("waiting for the rig", 20, || {
+        get(&format!("{}/v1/experiments/{id}", s.base))["progress"]["waiting_for_rig"]
+            .as_str()
+            .is_some_and(|w| w.contains("no agent connected"))
+    });
+    // After a restart the rig is still there (and the queued map with it).
+    let mut s = s;
+    let _ = s.child.kill();
+    let _ = s.child.wait();
+    std::mem::forget(s);
+    let s = start_with(dir, &args);
+    assert_eq!(rig(&s, "bench")["description"], "the lab's device");
+    let _a = agent(&s, "a", &[]);
+    let there = outcome(&s, &id);
+    assert_eq!(there, reference(&s));
+}

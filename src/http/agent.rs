@@ -134,7 +134,7 @@ async fn session(st: AppState, socket: WebSocket) {
     else {
         return conn.refuse("the first message must be hello".into()).await;
     };
-    let Some(handle) = st.rig(&rig).cloned() else {
+    let Some(handle) = st.rig(&rig) else {
         let why = format!(
             "rig {rig:?} is not one of this server's rigs: {}",
             st.rig_ids()

@@ -180,8 +180,8 @@ pub async fn submit(
     let spec = experiment_body(&body)?;
     let estimate = spec.validate()?;
     let rig = match q.str("rig") {
-        None => st.rigs[0].clone(),
-        Some(id) => st.rig(id).cloned().ok_or_else(|| {
+        None => st.rig_list()[0].clone(),
+        Some(id) => st.rig(id).ok_or_else(|| {
             Problem::from(SpecError::new(
                 "rig",
                 format!("{id:?}"),

@@ -41,15 +41,25 @@ pub struct AppState {
     pub agent_tokens: Arc<Vec<String>>,
     /// Origins besides the server's own that may write (`--allow-origin`).
     pub allow_origins: Arc<Vec<String>>,
-    /// The rigs experiments run on; the first is the default.
-    pub rigs: Arc<Vec<Arc<dyn Rig>>>,
+    /// The rigs experiments run on; the first is the default. Attached
+    /// rigs registered through the API join at run time.
+    pub rigs: Arc<std::sync::RwLock<Vec<Arc<dyn Rig>>>>,
+    /// Starts the queue runner of a rig registered at run time.
+    pub start_runner: Arc<dyn Fn(Arc<dyn Rig>) + Send + Sync>,
+    /// Heartbeat, TTL and grace of attached rigs' sessions.
+    pub lease: crate::rig::lease::Timing,
     /// Running experiments' observers (cancel reaches them at once).
     pub running: crate::jobs::Running,
 }
 
 impl AppState {
-    fn rig(&self, id: &str) -> Option<&Arc<dyn Rig>> {
-        self.rigs.iter().find(|r| r.info().id == id)
+    fn rig(&self, id: &str) -> Option<Arc<dyn Rig>> {
+        self.rig_list().into_iter().find(|r| r.info().id == id)
+    }
+
+    /// Every rig, the default first.
+    pub fn rig_list(&self) -> Vec<Arc<dyn Rig>> {
+        self.rigs.read().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
     /// A storage error as a problem; a corrupt page met on the way is
@@ -60,7 +70,7 @@ impl AppState {
     }
 
     fn rig_ids(&self) -> String {
-        self.rigs
+        self.rig_list()
             .iter()
             .map(|r| r.info().id.clone())
             .collect::<Vec<_>>()
@@ -146,7 +156,7 @@ pub fn router(state: AppState, timeout: Duration) -> Router {
     );
     Router::new()
         .route("/healthz", get(queue::healthz))
-        .route("/v1/rigs", get(rigs::rigs))
+        .route("/v1/rigs", get(rigs::rigs).post(rigs::register))
         .route("/v1/agent", get(agent::agent))
         .route(
             "/v1/rigs/{id}/quarantine",
@@ -258,6 +268,16 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     } else {
         agent_tokens
     };
+    // Attached rigs registered through the API (`POST /v1/rigs`) are data:
+    // they come back with the database.
+    let mut rigs = rigs;
+    for row in store.attached_rigs().await.map_err(|e| e.to_string())? {
+        if !rigs.iter().any(|r| r.info().id == row.id) {
+            let rig = crate::rig::AttachedRig::new(&row.id, &row.description)
+                .map_err(|e| format!("stored rig {}: {e}", row.id))?;
+            rigs.push(Arc::new(rig));
+        }
+    }
     for r in agent::attached_rigs(&rigs) {
         r.set_timing(lease);
         // Reconcile: the epochs handed out and the trial that was out.
@@ -294,24 +314,36 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     let _ = std::io::stdout().flush();
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     let running = crate::jobs::Running::default();
-    let runners: Vec<_> = rigs
-        .iter()
-        .map(|r| {
+    let runners = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let start_runner: Arc<dyn Fn(Arc<dyn Rig>) + Send + Sync> = {
+        let (store, running, stop_rx, runners) = (
+            store.clone(),
+            running.clone(),
+            stop_rx.clone(),
+            runners.clone(),
+        );
+        Arc::new(move |r: Arc<dyn Rig>| {
             tracing::info!(rig = %r.info().id, parallelism = r.info().parallelism, "rig ready");
-            tokio::spawn(crate::jobs::runner(
+            let task = tokio::spawn(crate::jobs::runner(
                 store.clone(),
-                r.clone(),
+                r,
                 running.clone(),
                 stop_rx.clone(),
-            ))
+            ));
+            runners.lock().unwrap_or_else(|e| e.into_inner()).push(task);
         })
-        .collect();
+    };
+    for r in &rigs {
+        start_runner(r.clone());
+    }
     let state = AppState {
         store: store.clone(),
         tokens: Arc::new(tokens),
         agent_tokens: Arc::new(agent_tokens),
         allow_origins: Arc::new(allow_origins),
-        rigs: Arc::new(rigs),
+        rigs: Arc::new(std::sync::RwLock::new(rigs)),
+        start_runner,
+        lease,
         running,
     };
     // On the signal the runners stop at once (the running experiment is
@@ -330,7 +362,8 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     .await
     .map_err(|e| e.to_string());
     let _ = stop_tx.send(true);
-    for r in runners {
+    let tasks = std::mem::take(&mut *runners.lock().unwrap_or_else(|e| e.into_inner()));
+    for r in tasks {
         let _ = r.await;
     }
     // Everything in the WAL goes into the database file: the `.db` alone

@@ -57,7 +57,7 @@ pub async fn rig_view(st: &AppState, rig: &Arc<dyn Rig>) -> Result<RigView, Prob
 #[utoipa::path(get, path = "/v1/rigs", responses((status = 200, description = "the rigs, the first is the default", body = Vec<RigView>)))]
 pub async fn rigs(State(st): State<AppState>) -> Result<Json<Vec<RigView>>, Problem> {
     let mut out = Vec::new();
-    for r in st.rigs.iter() {
+    for r in st.rig_list().iter() {
         out.push(rig_view(&st, r).await?);
     }
     Ok(Json(out))
@@ -77,10 +77,7 @@ pub async fn set_window(
     body: Bytes,
 ) -> Result<Json<RigView>, Problem> {
     authorize(&st, &headers)?;
-    let rig = st
-        .rig(&id)
-        .cloned()
-        .ok_or_else(|| Problem::not_found("rig", &id))?;
+    let rig = st.rig(&id).ok_or_else(|| Problem::not_found("rig", &id))?;
     require_json(&headers)?;
     let w: Window = json_body(
         &body,
@@ -106,10 +103,7 @@ pub async fn clear_window(
     Path(id): Path<String>,
 ) -> Result<Json<RigView>, Problem> {
     authorize(&st, &headers)?;
-    let rig = st
-        .rig(&id)
-        .cloned()
-        .ok_or_else(|| Problem::not_found("rig", &id))?;
+    let rig = st.rig(&id).ok_or_else(|| Problem::not_found("rig", &id))?;
     st.store
         .set_rig_window(&id, None)
         .await
@@ -130,10 +124,7 @@ pub async fn release(
     Path(id): Path<String>,
 ) -> Result<Json<RigView>, Problem> {
     authorize(&st, &headers)?;
-    let rig = st
-        .rig(&id)
-        .cloned()
-        .ok_or_else(|| Problem::not_found("rig", &id))?;
+    let rig = st.rig(&id).ok_or_else(|| Problem::not_found("rig", &id))?;
     if let Some(a) = rig.attached() {
         st.store
             .set_quarantine(&id, None)
@@ -183,10 +174,7 @@ pub async fn stop(
     axum::extract::RawQuery(query): axum::extract::RawQuery,
 ) -> Result<(axum::http::StatusCode, Json<RigView>), Problem> {
     authorize(&st, &headers)?;
-    let rig = st
-        .rig(&id)
-        .cloned()
-        .ok_or_else(|| Problem::not_found("rig", &id))?;
+    let rig = st.rig(&id).ok_or_else(|| Problem::not_found("rig", &id))?;
     let q = super::problem::QueryArgs::parse(query.as_deref(), &["mode"])?;
     let mode = match q.str("mode") {
         Some("deferred") => crate::rig::protocol::StopMode::Deferred,
@@ -219,6 +207,90 @@ pub async fn stop(
     }
     Ok((
         axum::http::StatusCode::ACCEPTED,
+        Json(rig_view(&st, &rig).await?),
+    ))
+}
+
+/// Most rigs one server runs (each has a queue runner).
+pub const MAX_RIGS: usize = 64;
+
+/// A rig to register: hardware behind a `zwidth agent`.
+#[derive(Debug, serde::Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NewRig {
+    /// 1 to 64 letters, digits, '-' or '_'.
+    pub id: String,
+    /// What it is, for people (at most 500 characters).
+    #[serde(default)]
+    pub description: String,
+}
+
+#[utoipa::path(post, path = "/v1/rigs", request_body = NewRig,
+    description = "Register an attached rig (hardware behind a `zwidth agent`, docs/rigs.md). It is stored, and experiments may be submitted for it at once: they wait until its agent connects.",
+    responses((status = 201, body = RigView),
+              (status = 401, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 403, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 409, description = "a rig with this id exists", body = ProblemBody, content_type = "application/problem+json"),
+              (status = 415, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 422, description = "bad id or description", body = ProblemBody, content_type = "application/problem+json")),
+    security((), ("bearer" = [])))]
+pub async fn register(
+    State(st): State<AppState>,
+    headers: HeaderMap,
+    body: Bytes,
+) -> Result<(axum::http::StatusCode, Json<RigView>), Problem> {
+    authorize(&st, &headers)?;
+    require_json(&headers)?;
+    let new: NewRig = json_body(&body, r#"rig {"id":"bench","description":"…"}"#)?;
+    crate::rig::check_id("id", &new.id)?;
+    if new.description.chars().count() > 500 {
+        return Err(crate::error::SpecError::new(
+            "description",
+            format!("({} characters)", new.description.chars().count()),
+            "at most 500 characters",
+        )
+        .into());
+    }
+    let conflict = || {
+        Problem::new(
+            axum::http::StatusCode::CONFLICT,
+            "Conflict",
+            format!("a rig {:?} exists (GET /v1/rigs)", new.id),
+        )
+        .with_field("id")
+    };
+    if st.rig(&new.id).is_some() {
+        return Err(conflict());
+    }
+    if st.rig_list().len() >= MAX_RIGS {
+        return Err(crate::error::SpecError::new(
+            "id",
+            &new.id,
+            format!("a server has at most {MAX_RIGS} rigs"),
+        )
+        .into());
+    }
+    let rig = crate::rig::AttachedRig::new(&new.id, &new.description)?;
+    rig.set_timing(st.lease);
+    if !st
+        .store
+        .add_attached_rig(&new.id, &new.description)
+        .await
+        .map_err(|e| st.fail(e))?
+    {
+        return Err(conflict());
+    }
+    let rig: Arc<dyn Rig> = Arc::new(rig);
+    {
+        let mut list = st.rigs.write().unwrap_or_else(|e| e.into_inner());
+        if list.iter().any(|r| r.info().id == new.id) {
+            return Err(conflict());
+        }
+        list.push(rig.clone());
+    }
+    (st.start_runner)(rig.clone());
+    Ok((
+        axum::http::StatusCode::CREATED,
         Json(rig_view(&st, &rig).await?),
     ))
 }
