@@ -23,6 +23,12 @@ const LEASE: [&str; 6] = [
 const MAP: &str = r#"{"kind":"map","scene":{"device":{"coulomb":0.05,"quantization":1e-6,"force_limit":8},"loop":{"sample_hz":2000,"render_hz":1000}},"method":"time","criterion":"stability","b":[0,2,4],"accuracy":"draft"}"#;
 
 fn serve() -> Server {
+    serve_with_grace("600")
+}
+
+/// The same with another grace (ms): a test that must see the rig lost
+/// before it is fenced gets a window wider than a loaded machine's lag.
+fn serve_with_grace(grace_ms: &str) -> Server {
     let dir = std::env::temp_dir().join(format!(
         "zwidth-agents-{}-{}",
         std::process::id(),
@@ -30,7 +36,8 @@ fn serve() -> Server {
     ));
     std::fs::create_dir_all(&dir).unwrap();
     let mut args = vec!["--rigs", "sim:1,bench:attached"];
-    args.extend(LEASE);
+    args.extend(&LEASE[..4]);
+    args.extend(["--agent-grace-ms", grace_ms]);
     start_with(dir, &args)
 }
 
@@ -212,7 +219,7 @@ fn signal(child: &Child, sig: &str) {
 #[cfg(unix)]
 #[test]
 fn a_stopped_agent_is_fenced_its_late_result_audited_and_the_trial_run_again() {
-    let s = serve();
+    let s = serve_with_grace("3000");
     let here = reference(&s);
     // Each trial takes 400 ms: stopped during one, for 2 s (> TTL + grace).
     let a = agent(&s, "a", &["--trial-ms", "400"]);
@@ -230,7 +237,7 @@ fn a_stopped_agent_is_fenced_its_late_result_audited_and_the_trial_run_again() {
             .as_str()
             .is_some_and(|w| w.contains("lost contact"))
     });
-    wait_for("fenced", 5, || {
+    wait_for("fenced", 10, || {
         rig(&s, "bench")["attached"]["agent"].is_string()
             && rig(&s, "bench")["attached"]["connected"] == false
             && rig(&s, "bench")["attached"]["lost_contact"] == false
@@ -672,7 +679,7 @@ fn agent_via(s: &Server, p: &Proxy, name: &str, extra: &[&str]) -> Agent {
 #[test]
 fn a_link_closed_or_black_holed_mid_trial_loses_nothing() {
     use std::sync::atomic::Ordering;
-    let s = serve();
+    let s = serve_with_grace("3000");
     let here = reference(&s);
     let p = Proxy::to(&s);
     let _a = agent_via(&s, &p, "a", &["--trial-ms", "200"]);

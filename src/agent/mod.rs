@@ -202,9 +202,14 @@ impl Agent {
                 .parse()
                 .map_err(|_| "the token is not a valid header value".to_string())?,
         );
-        let (mut ws, _) = tokio_tungstenite::connect_async(req)
-            .await
-            .map_err(|e| format!("cannot connect to {}: {e}", self.url()))?;
+        // A link that swallows the handshake (a black hole) is given up.
+        let (mut ws, _) = tokio::time::timeout(
+            Duration::from_secs(10),
+            tokio_tungstenite::connect_async(req),
+        )
+        .await
+        .map_err(|_| format!("no answer from {} within 10 s", self.url()))?
+        .map_err(|e| format!("cannot connect to {}: {e}", self.url()))?;
         let mut seq = 0u64;
         let mut send = |msg: &AgentMessage| {
             seq += 1;
