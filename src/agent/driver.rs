@@ -41,31 +41,9 @@ pub struct SimDriver {
 }
 
 impl SimDriver {
-    /// A bench-top device's figures: 10 N peak, 1 µm encoder, the rates
-    /// and every estimator and probe zwidth has.
+    /// A bench-top device's figures (`Capabilities::bench`).
     pub fn default_capabilities() -> Capabilities {
-        Capabilities {
-            peak_force_n: 10.0,
-            continuous_force_n: 4.0,
-            k_max: 1e6,
-            b_max: 1e4,
-            travel_m: 0.1,
-            speed_m_s: 1.0,
-            encoder_m: 1e-6,
-            sample_hz: vec![1000.0, 2000.0, 5000.0, 10000.0],
-            estimators: [
-                "fdm",
-                "butterworth",
-                "kalman",
-                "adaptive_kalman",
-                "foaw",
-                "levant",
-            ]
-            .map(String::from)
-            .to_vec(),
-            probes: vec!["wall_hit".into(), "multisine".into()],
-            model: None,
-        }
+        Capabilities::bench()
     }
 }
 

@@ -16,11 +16,17 @@ use super::protocol::{
 };
 use super::{check_id, rig_pool, Rig, RigInfo};
 use crate::error::SpecError;
-use crate::store::now_ms;
 use crate::zwidth::scene::SceneSpec;
 use crate::zwidth::search::{Observer, Point};
 use crate::zwidth::settings::Method;
 use crate::zwidth::trial::{TrialBackend, TrialRequest};
+
+/// Now, in unix ms (the lease's clock).
+fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}
 
 /// Where the live session's messages go (the WebSocket handler's queue).
 pub type Outbox = tokio::sync::mpsc::UnboundedSender<ServerMessage>;
