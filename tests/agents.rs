@@ -810,3 +810,56 @@ fn a_rig_registered_through_the_api_is_data() {
     let there = outcome(&s, &id);
     assert_eq!(there, reference(&s));
 }
+
+#[test]
+fn the_rig_window_closing_mid_experiment_pauses_it_until_it_opens() {
+    let s = serve();
+    let here = reference(&s);
+    let _a = agent(&s, "a", &["--trial-ms", "100"]);
+    let id = submit(&s, "bench", MAP);
+    wait_for("a trial out", 20, || {
+        rig(&s, "bench")["attached"]["trial_out"].is_string()
+    });
+    // A window that opens in two hours (UTC): closed now.
+    let now_h = (std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs()
+        / 3600)
+        % 24;
+    let w = format!(
+        r#"{{"start":"{:02}:00","end":"{:02}:00","tz":"UTC"}}"#,
+        (now_h + 2) % 24,
+        (now_h + 3) % 24
+    );
+    let (code, _, body) = fetch(
+        authed::put(&format!("{}/v1/rigs/bench/window", s.base))
+            .set("content-type", "application/json")
+            .send_string(&w),
+    );
+    assert_eq!(code, 200, "{body}");
+    wait_for("the experiment to wait for the window", 20, || {
+        get(&format!("{}/v1/experiments/{id}", s.base))["progress"]["waiting_for_rig"]
+            .as_str()
+            .is_some_and(|w| w.contains("outside the rig's window"))
+    });
+    let v = get(&format!("{}/v1/experiments/{id}", s.base));
+    assert_eq!(v["state"], "running");
+    assert!(
+        v["progress"]["eta_s"].is_null(),
+        "no ETA while waiting: {v}"
+    );
+    let n = get(&format!("{}/v1/experiments/{id}/trials", s.base))
+        .as_array()
+        .unwrap()
+        .len();
+    std::thread::sleep(Duration::from_millis(800));
+    let m = get(&format!("{}/v1/experiments/{id}/trials", s.base))
+        .as_array()
+        .unwrap()
+        .len();
+    assert!(m <= n + 1, "no new trial started while closed ({n} -> {m})");
+    let (code, _, _) = fetch(authed::delete(&format!("{}/v1/rigs/bench/window", s.base)).call());
+    assert_eq!(code, 200);
+    assert_eq!(outcome(&s, &id), here);
+}

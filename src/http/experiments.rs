@@ -114,7 +114,11 @@ impl AppState {
             v.progress["held"] = json!(why);
         }
         if let Some(why) = waiting {
+            // No ETA while the rig is away: nothing is running.
             v.progress["waiting_for_rig"] = json!(why);
+            if let Some(p) = v.progress.as_object_mut() {
+                p.remove("eta_s");
+            }
         }
         v
     }

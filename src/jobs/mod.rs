@@ -80,6 +80,23 @@ pub async fn runner(
     }
 }
 
+/// Why a rig's `window` keeps it from starting anything at `now` (None:
+/// open, or no window).
+fn window_closed(
+    window: Option<&crate::rig::window::Window>,
+    now: jiff::Timestamp,
+) -> Option<String> {
+    let hours = window?.validate().ok()?;
+    if hours.is_open(now) {
+        return None;
+    }
+    let next = hours.next_open(now);
+    Some(format!(
+        "outside the rig's window (opens again in {} min)",
+        (next.as_millisecond() - now.as_millisecond() + 59_999) / 60_000
+    ))
+}
+
 /// Trials and evaluations finished but not yet stored. A write that fails
 /// (disk full, a writer holding the lock) keeps them for the next try; while
 /// they cannot be written the simulation is held (it waits between trials),
@@ -252,7 +269,8 @@ async fn run_one(
         .unwrap_or_else(|e| e.into_inner())
         .insert(id.clone(), observer.clone());
     let obs = observer.clone();
-    let mut task = tokio::task::spawn_blocking(move || rig.pool().install(|| parsed.run(obs)));
+    let on_rig = rig.clone();
+    let mut task = tokio::task::spawn_blocking(move || on_rig.pool().install(|| parsed.run(obs)));
     // Every 100 ms: store the trials finished since (one transaction), write
     // progress, and look for a cancel request or shutdown.
     let mut rate_mark = (std::time::Instant::now(), 0usize);
@@ -275,6 +293,13 @@ async fn run_one(
                 if let Ok(Some(state)) = store.state(&id).await {
                     if state == "cancelled" {
                         observer.cancel.store(true, Ordering::Relaxed);
+                    }
+                }
+                // Hardware moves only inside its window: an attached rig
+                // takes no new trial once it closes (the experiment waits).
+                if let Some(a) = rig.attached() {
+                    if let Ok(w) = store.rig_window(&rig.info().id).await {
+                        a.set_window_closed(window_closed(w.as_ref(), jiff::Timestamp::now()));
                     }
                 }
                 if *shutdown.borrow() && !interrupted {

@@ -151,6 +151,17 @@ impl AttachedRig {
         });
     }
 
+    /// The rig's window closed (Some(why)) or open (None): nothing new is
+    /// sent while it is closed.
+    pub fn set_window_closed(&self, why: Option<String>) {
+        let mut g = self.lock();
+        if g.lease.window_closed != why {
+            g.lease.window_closed = why;
+            drop(g);
+            self.shared.changed.notify_all();
+        }
+    }
+
     /// Quarantine (Some(why)) or release (None); the caller stores it.
     pub fn set_quarantine(&self, why: Option<String>) {
         self.lock().lease.quarantine = why;

@@ -81,6 +81,8 @@ pub struct Lease {
     pub outstanding: Option<Outstanding>,
     /// Why the rig takes no trials until an operator lifts it.
     pub quarantine: Option<String>,
+    /// Why the rig takes no new trials now: its window is closed.
+    pub window_closed: Option<String>,
     /// Since when the live session has been silent past the TTL.
     pub lost_since_ms: Option<i64>,
     /// The highest epoch handed out (sessions with lower ones are fenced).
@@ -231,6 +233,9 @@ impl Lease {
     pub fn blocked(&self, now_ms: i64) -> Option<String> {
         if let Some(q) = &self.quarantine {
             return Some(format!("quarantined: {q}"));
+        }
+        if let Some(w) = &self.window_closed {
+            return Some(format!("waiting for the rig: {w}"));
         }
         let Some(s) = &self.session else {
             return Some("waiting for the rig: no agent connected".into());
