@@ -646,7 +646,11 @@ impl Proxy {
                                 break;
                             }
                         }
-                        let _ = to.shutdown(std::net::Shutdown::Both);
+                        // A black hole passes no close either: the other
+                        // end only ever sees silence.
+                        if !bh.load(Ordering::Relaxed) {
+                            let _ = to.shutdown(std::net::Shutdown::Both);
+                        }
                     });
                 }
             }

@@ -446,6 +446,98 @@ mod tests {
         }
     }
 
+    fn timing() -> Timing {
+        Timing {
+            heartbeat_ms: 100,
+            ttl_ms: 500,
+            grace_ms: 500,
+        }
+    }
+
+    #[test]
+    fn a_message_keeps_only_its_own_session_alive() {
+        // Opened at 10 s (a clock far from 0, so a sum is not a difference).
+        let mut l = Lease::new(timing());
+        l.open(5, "a", "b", RigState::Disarmed, 10_000).unwrap();
+        assert!(!l.heard(4, Some(RigState::Armed), 10_400), "a stale epoch");
+        assert!(!l.connected(10_501), "still silent since 10 000");
+        assert_eq!(l.session.as_ref().unwrap().state, RigState::Disarmed);
+        assert!(l.heard(5, Some(RigState::Armed), 10_400));
+        assert!(l.session.as_ref().unwrap().state.armed());
+        assert!(l.connected(10_900) && !l.connected(10_901));
+        // Lost from 10 901 (since 10 900), fenced after 11 400.
+        assert_eq!(l.tick(10_900), None);
+        assert_eq!(l.lost_since_ms, None);
+        assert_eq!(l.tick(10_901), None);
+        assert_eq!(l.lost_since_ms, Some(10_900));
+        assert_eq!(l.tick(11_400), None);
+        assert!(l.session.is_some());
+        assert_eq!(l.tick(11_401), Some(5));
+        assert!(l.session.is_none());
+    }
+
+    #[test]
+    fn a_reconnect_keeps_the_trial_the_agent_runs_and_sends_again_the_one_it_lost() {
+        let mut l = Lease::new(timing());
+        l.open(1, "a", "b", RigState::Armed, 0).unwrap();
+        assert_eq!(l.send("t", 0), Some(1));
+        l.closed(2, 100);
+        assert!(l.session.is_some(), "another epoch's close changes nothing");
+        l.closed(1, 100);
+        assert!(l.session.is_none());
+        assert_eq!(l.check_result(1, "t"), Ok(()), "still out under epoch 1");
+        // The agent comes back running it: it stays out under epoch 1.
+        l.open(2, "a", "b", RigState::Armed, 200).unwrap();
+        l.resume(Some("t"));
+        assert_eq!(l.check_result(1, "t"), Ok(()));
+        assert_eq!(l.send("t", 200), None, "not sent twice");
+        // It comes back (killed meanwhile) running nothing: sent again.
+        l.closed(2, 300);
+        l.open(3, "a", "c", RigState::Armed, 400).unwrap();
+        l.resume(None);
+        assert_eq!(
+            l.check_result(1, "t"),
+            Err(Refusal::StaleEpoch { sent: None })
+        );
+        assert_eq!(l.send("t", 400), Some(3));
+    }
+
+    #[test]
+    fn a_closed_links_trial_is_fenced_after_ttl_and_grace() {
+        // Closed at 2 s: its trial is still taken under its epoch until
+        // TTL + grace (1 s) have passed, then fenced.
+        let mut l = Lease::new(timing());
+        l.open(1, "a", "b", RigState::Armed, 1_000).unwrap();
+        assert_eq!(l.send("t", 1_000), Some(1));
+        l.closed(1, 2_000);
+        assert_eq!(l.closed_ms, Some(2_000));
+        assert_eq!(l.tick(3_000), None);
+        assert_eq!(l.check_result(1, "t"), Ok(()));
+        assert_eq!(l.tick(3_001), None);
+        assert_eq!(
+            l.check_result(1, "t"),
+            Err(Refusal::StaleEpoch { sent: None })
+        );
+        assert_eq!(l.closed_ms, None);
+    }
+
+    #[test]
+    fn refusals_say_which_epoch_and_why() {
+        // The texts the audit and tests/agents.rs look for.
+        assert_eq!(
+            Refusal::NotSent.describe(3),
+            "a result for a trial that is not out"
+        );
+        assert_eq!(
+            Refusal::StaleEpoch { sent: Some(4) }.describe(2),
+            "stale epoch 2: the trial is out under epoch 4"
+        );
+        assert_eq!(
+            Refusal::StaleEpoch { sent: None }.describe(1),
+            "stale epoch 1: the trial was fenced off and waits to be sent again"
+        );
+    }
+
     #[test]
     fn silence_loses_contact_after_the_ttl_and_fences_after_the_grace() {
         // TTL 500 ms, grace 500 ms (the figures given): heard at 0, lost
