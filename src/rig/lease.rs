@@ -522,6 +522,29 @@ mod tests {
     }
 
     #[test]
+    fn one_trial_is_out_at_a_time_and_one_not_yet_out_gives_way() {
+        let mut l = Lease::new(timing());
+        l.open(1, "a", "b", RigState::Armed, 0).unwrap();
+        assert_eq!(l.send("a", 0), Some(1));
+        assert_eq!(l.send("b", 0), None, "a is out: b waits");
+        assert_eq!(l.check_result(1, "b"), Err(Refusal::NotSent));
+        l.done("b");
+        assert_eq!(l.check_result(1, "a"), Ok(()), "done(b) leaves a out");
+        l.done("a");
+        assert_eq!(l.send("b", 0), Some(1));
+        l.done("b");
+        // Quarantined: c waits unsent; a search that asks for d instead
+        // (c's was cancelled) replaces it, and d goes once released.
+        l.quarantine = Some("q".into());
+        assert_eq!(l.send("c", 0), None);
+        assert_eq!(l.send("d", 0), None);
+        assert_eq!(l.outstanding.as_ref().unwrap().trial_id, "d");
+        l.quarantine = None;
+        assert_eq!(l.send("d", 0), Some(1));
+        assert_eq!(l.check_result(1, "c"), Err(Refusal::NotSent));
+    }
+
+    #[test]
     fn refusals_say_which_epoch_and_why() {
         // The texts the audit and tests/agents.rs look for.
         assert_eq!(
