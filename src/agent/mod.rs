@@ -205,7 +205,8 @@ impl Agent {
         // A link that swallows the handshake (a black hole) is given up.
         let (mut ws, _) = tokio::time::timeout(
             Duration::from_secs(10),
-            tokio_tungstenite::connect_async(req),
+            // No Nagle delay on small messages (docs/rigs.md, figures).
+            tokio_tungstenite::connect_async_with_config(req, None, true),
         )
         .await
         .map_err(|_| format!("no answer from {} within 10 s", self.url()))?

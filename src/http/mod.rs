@@ -350,6 +350,12 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     // interrupted within a trial) while open requests drain.
     let stop_tx = Arc::new(stop_tx);
     let stop = stop_tx.clone();
+    // No Nagle delay: an agent's small messages (a trial, a result, an
+    // ack) would otherwise wait for the peer's delayed ACK, ~40 ms each.
+    use axum::serve::ListenerExt;
+    let listener = listener.tap_io(|tcp| {
+        let _ = tcp.set_nodelay(true);
+    });
     let served = axum::serve(
         listener,
         router(state, Duration::from_secs_f64(request_timeout_s)),
