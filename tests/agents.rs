@@ -867,3 +867,42 @@ fn the_rig_window_closing_mid_experiment_pauses_it_until_it_opens() {
     assert_eq!(code, 200);
     assert_eq!(outcome(&s, &id), here);
 }
+
+#[test]
+fn results_out_of_order_change_nothing() {
+    // A protocol client that runs each trial with the engines' own
+    // `trial::run` and, after each result, sends the previous trial's
+    // result again (late, out of order): each repeat is audited, the map
+    // is the in-process one.
+    let s = serve();
+    let here = reference(&s);
+    let mut ws = dial(&s, &agent_token(&s)).unwrap();
+    say(&mut ws, &hello(|_| {}));
+    let epoch = hear(&mut ws).unwrap()["epoch"].as_u64().unwrap();
+    let id = submit(&s, "bench", MAP);
+    let mut seq = 1;
+    let mut previous: Option<serde_json::Value> = None;
+    let mut results = 0;
+    while results < 30 {
+        let m = hear(&mut ws).unwrap();
+        if m["type"] != "trial" {
+            continue;
+        }
+        let request: zwidth::zwidth::trial::TrialRequest =
+            serde_json::from_value(m["request"].clone()).unwrap();
+        let point = zwidth::zwidth::trial::run(&request).unwrap();
+        let r = serde_json::json!({"type":"result","epoch":epoch,"trial_id":m["trial_id"],
+            "point":point,"measured":{"peak_force_n":1.0,"peak_speed_m_s":0.1,"penetration_m":0.001}});
+        for msg in [Some(&r), previous.as_ref()].into_iter().flatten() {
+            seq += 1;
+            let mut msg = msg.clone();
+            msg["v"] = 1.into();
+            msg["seq"] = seq.into();
+            say(&mut ws, &msg.to_string());
+        }
+        previous = Some(r);
+        results += 1;
+    }
+    assert_eq!(outcome(&s, &id), here);
+    assert_eq!(audit(&s).len(), 29, "each late repeat audited");
+}
