@@ -268,17 +268,13 @@ impl Lease {
                 return None;
             }
         }
-        let keep_retry = self
-            .outstanding
-            .as_ref()
-            .filter(|o| o.trial_id == trial_id)
-            .map_or(now_ms, |o| o.retry_at_ms);
+        // Past its retry time (checked above): nothing to keep of it.
         if self.blocked(now_ms).is_some() {
             self.outstanding = Some(Outstanding {
                 trial_id: trial_id.to_string(),
                 sent_epoch: None,
                 sent_ms: now_ms,
-                retry_at_ms: keep_retry,
+                retry_at_ms: now_ms,
             });
             return None;
         }
@@ -287,7 +283,7 @@ impl Lease {
             trial_id: trial_id.to_string(),
             sent_epoch: Some(epoch),
             sent_ms: now_ms,
-            retry_at_ms: keep_retry,
+            retry_at_ms: now_ms,
         });
         Some(epoch)
     }
