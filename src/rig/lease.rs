@@ -522,6 +522,10 @@ mod tests {
         let mut l = Lease::new(timing());
         l.open(1, "a", "b", RigState::Armed, 0).unwrap();
         assert_eq!(l.send("a", 0), Some(1));
+        // A refusal of another trial, or of a under another epoch, leaves a out.
+        l.refused(1, "b", 0);
+        l.refused(7, "a", 0);
+        assert_eq!(l.check_result(1, "a"), Ok(()));
         assert_eq!(l.send("b", 0), None, "a is out: b waits");
         assert_eq!(l.check_result(1, "b"), Err(Refusal::NotSent));
         l.done("b");
