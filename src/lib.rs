@@ -7,6 +7,7 @@
 pub mod agent;
 pub mod cli;
 pub mod client;
+pub mod clock;
 pub mod experiment;
 pub mod http;
 pub mod jobs;

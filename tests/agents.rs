@@ -26,15 +26,21 @@ fn serve() -> Server {
     serve_with_grace("600")
 }
 
-/// The same with another grace (ms): a test that must see the rig lost
-/// before it is fenced gets a window wider than a loaded machine's lag.
-fn serve_with_grace(grace_ms: &str) -> Server {
+/// A new directory for one server's database.
+fn fresh_dir() -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!(
         "zwidth-agents-{}-{}",
         std::process::id(),
         uuid_like()
     ));
     std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The same with another grace (ms): a test that must see the rig lost
+/// before it is fenced gets a window wider than a loaded machine's lag.
+fn serve_with_grace(grace_ms: &str) -> Server {
+    let dir = fresh_dir();
     let mut args = vec!["--rigs", "sim:1,bench:attached"];
     args.extend(&LEASE[..4]);
     args.extend(["--agent-grace-ms", grace_ms]);
@@ -443,7 +449,7 @@ fn hear(ws: &mut Ws) -> Option<serde_json::Value> {
 
 /// A valid hello for rig `bench`, with `caps` edited by `edit`.
 fn hello(edit: impl FnOnce(&mut serde_json::Value)) -> String {
-    let mut caps = serde_json::to_value(zwidth::agent::SimDriver::default_capabilities()).unwrap();
+    let mut caps = serde_json::to_value(zwidth::rig::protocol::Capabilities::bench()).unwrap();
     edit(&mut caps);
     serde_json::json!({"v":1,"seq":1,"type":"hello","rig":"bench","agent":"raw","boot":"b1",
         "last_epoch":0,"running":null,"unacked":[],"state":"armed","capabilities":caps})
@@ -452,12 +458,7 @@ fn hello(edit: impl FnOnce(&mut serde_json::Value)) -> String {
 
 #[test]
 fn tokens_open_sessions_only_for_agents_and_bad_hellos_are_refused_saying_why() {
-    let dir = std::env::temp_dir().join(format!(
-        "zwidth-agents-{}-{}",
-        std::process::id(),
-        uuid_like()
-    ));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_dir();
     let s = start_with(
         dir,
         &["--rigs", "sim:1,bench:attached", "--token", "user-secret"],
@@ -773,12 +774,7 @@ fn a_result_for_another_wall_fails_the_experiment_saying_so() {
 
 #[test]
 fn a_rig_registered_through_the_api_is_data() {
-    let dir = std::env::temp_dir().join(format!(
-        "zwidth-agents-{}-{}",
-        std::process::id(),
-        uuid_like()
-    ));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_dir();
     let mut args = vec!["--rigs", "sim:1"];
     args.extend(LEASE);
     let s = start_with(dir.clone(), &args);

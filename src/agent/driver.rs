@@ -40,13 +40,6 @@ pub struct SimDriver {
     pub trial_ms: u64,
 }
 
-impl SimDriver {
-    /// A bench-top device's figures (`Capabilities::bench`).
-    pub fn default_capabilities() -> Capabilities {
-        Capabilities::bench()
-    }
-}
-
 /// Peak force, speed and penetration over a simulated wall hit.
 #[derive(Default)]
 struct Peaks(Measured);
@@ -158,7 +151,7 @@ impl StdioDriver {
             child,
             to,
             lines,
-            capabilities: SimDriver::default_capabilities(),
+            capabilities: Capabilities::bench(),
         };
         d.say(&ToDriver::Capabilities)?;
         match d.answer(None)? {

@@ -166,7 +166,7 @@ impl Agent {
     }
 
     /// A finished trial: into the outbox (it is sent from there).
-    fn finished(&mut self, d: Done) -> Option<Done> {
+    fn finished(&mut self, d: Done) -> Done {
         if let Done::Result(r) = &d {
             if let Err(e) = self.outbox.put(r) {
                 eprintln!("zwidth agent: the outbox cannot be written: {e}");
@@ -183,7 +183,7 @@ impl Agent {
                 self.state = RigState::Disarmed;
             }
         }
-        Some(d)
+        d
     }
 
     /// One connection, until it ends (Err: why).
@@ -269,7 +269,7 @@ impl Agent {
                     let Some(d) = d else { return Err("the driver thread ended".into()) };
                     let state_before = self.state.clone();
                     let msg = match self.finished(d) {
-                        Some(Done::Result(r)) => {
+                        Done::Result(r) => {
                             if self.cfg.faults.delay_result_ms > 0 {
                                 tokio::time::sleep(Duration::from_millis(self.cfg.faults.delay_result_ms)).await;
                             }
@@ -279,13 +279,12 @@ impl Agent {
                             }
                             m
                         }
-                        Some(Done::Aborted { epoch: e, trial_id, code, why }) => AgentMessage::Refused {
+                        Done::Aborted { epoch: e, trial_id, code, why } => AgentMessage::Refused {
                             epoch: e,
                             trial_id,
                             code,
                             reason: why,
                         },
-                        None => continue,
                     };
                     ws.send(send(&msg)).await.map_err(|e| e.to_string())?;
                     if self.state != state_before {

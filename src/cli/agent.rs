@@ -64,7 +64,7 @@ pub(super) fn run(command: Command) -> Result<(), CliError> {
         (true, _) => {
             let capabilities: Capabilities = match &capabilities {
                 Some(p) => read_json("--capabilities", p)?,
-                None => SimDriver::default_capabilities(),
+                None => Capabilities::bench(),
             };
             capabilities
                 .validate()

@@ -269,6 +269,7 @@ async fn run_one(
         .unwrap_or_else(|e| e.into_inner())
         .insert(id.clone(), observer.clone());
     let obs = observer.clone();
+    let rig_id = rig.info().id;
     let on_rig = rig.clone();
     let mut task = tokio::task::spawn_blocking(move || on_rig.pool().install(|| parsed.run(obs)));
     // Every 100 ms: store the trials finished since (one transaction), write
@@ -298,7 +299,7 @@ async fn run_one(
                 // Hardware moves only inside its window: an attached rig
                 // takes no new trial once it closes (the experiment waits).
                 if let Some(a) = rig.attached() {
-                    if let Ok(w) = store.rig_window(&rig.info().id).await {
+                    if let Ok(w) = store.rig_window(&rig_id).await {
                         a.set_window_closed(window_closed(w.as_ref(), jiff::Timestamp::now()));
                     }
                 }

@@ -15,18 +15,12 @@ use super::protocol::{
     parse_trial_id, trial_id, Capabilities, RigState, ServerMessage, TrialLimits, TrialResult,
 };
 use super::{check_id, rig_pool, Rig, RigInfo};
+use crate::clock::now_ms;
 use crate::error::SpecError;
 use crate::zwidth::scene::SceneSpec;
 use crate::zwidth::search::{Observer, Point};
 use crate::zwidth::settings::Method;
 use crate::zwidth::trial::{TrialBackend, TrialRequest};
-
-/// Now, in unix ms (the lease's clock).
-fn now_ms() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as i64)
-}
 
 /// Where the live session's messages go (the WebSocket handler's queue).
 pub type Outbox = tokio::sync::mpsc::UnboundedSender<ServerMessage>;

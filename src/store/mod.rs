@@ -78,12 +78,7 @@ pub struct NewExperiment<'a> {
     pub rig: &'a str,
 }
 
-pub fn now_ms() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_millis() as i64)
-        .unwrap_or(0)
-}
+pub use crate::clock::now_ms;
 
 impl Store {
     /// Open (creating it if needed) and migrate the database at `path`.
