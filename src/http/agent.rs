@@ -273,11 +273,14 @@ async fn result(
 ) -> bool {
     let committed = match rig.check_result(&r) {
         Verdict::Store { experiment, scope } => {
+            // Its place in the map is stored when the search takes it.
             let t = StoredTrial {
                 scope,
+                column: 0,
+                index: 0,
                 point: r.point.clone(),
             };
-            match st.store.add_trials(&experiment, &[t]).await {
+            match st.store.add_trial_unplaced(&experiment, &t).await {
                 Ok(()) => {
                     rig.deliver(&r.trial_id, r.point.clone());
                     let _ = st.store.clear_trial_out(rig.id(), &r.trial_id).await;

@@ -407,7 +407,7 @@ pub const TRIALS_PAGE_MAX: i64 = 10_000;
            ("scope" = Option<u32>, Query, description = "only this map of the experiment (0, 1, …)"),
            ("offset" = Option<i64>, Query, description = "skip this many (default 0)"),
            ("limit" = Option<i64>, Query, description = "at most this many, 1 to 10000 (default 1000)")),
-    responses((status = 200, description = "stored trials in the order they finished", body = Vec<StoredTrial>),
+    responses((status = 200, description = "stored trials in their maps' order: by scope, then column (the position of B in the map's B list), then the order the search asked them in", body = Vec<StoredTrial>),
               (status = 404, description = "no such experiment", body = ProblemBody, content_type = "application/problem+json"),
               (status = 422, description = "bad scope, offset or limit", body = ProblemBody, content_type = "application/problem+json")))]
 pub async fn trials(

@@ -104,6 +104,8 @@ fn window_closed(
 #[derive(Default)]
 struct Unstored {
     trials: Vec<StoredTrial>,
+    /// Columns dropped from a map: (scope, first dropped column).
+    dropped: Vec<(u32, u32)>,
     evals: Vec<StoredEvaluation>,
     failing_since: Option<std::time::Instant>,
 }
@@ -114,16 +116,23 @@ impl Unstored {
     async fn flush(&mut self, store: &Store, id: &str, observer: &Observer) -> Result<(), Fault> {
         self.trials.extend(observer.take_new());
         self.evals.extend(observer.take_new_evaluations());
-        let r = match store.add_trials(id, &self.trials).await {
-            Ok(()) => {
-                self.trials.clear();
-                store
-                    .add_evaluations(id, &self.evals, observer.best())
-                    .await
-                    .map(|_| self.evals.clear())
+        self.dropped.extend(observer.take_dropped());
+        let r = async {
+            store.add_trials(id, &self.trials).await?;
+            self.trials.clear();
+            // After the trials: a dropped column may have had some in the
+            // batch just stored.
+            while let Some(&(scope, column)) = self.dropped.first() {
+                store.drop_columns(id, scope, column).await?;
+                self.dropped.remove(0);
             }
-            Err(e) => Err(e),
-        };
+            store
+                .add_evaluations(id, &self.evals, observer.best())
+                .await?;
+            self.evals.clear();
+            Ok::<(), sqlx::Error>(())
+        }
+        .await;
         match r {
             Ok(()) => {
                 if self.failing_since.take().is_some() {

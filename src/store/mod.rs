@@ -458,25 +458,70 @@ impl Store {
             .await
     }
 
-    /// Store finished trials in one transaction (already stored ones are kept).
+    /// Store finished trials in one transaction. A trial already stored
+    /// keeps its point and takes the place given here (the search that
+    /// asked for it knows it; an attached rig's result is stored first,
+    /// without one: [`Store::add_trial_unplaced`]).
     pub async fn add_trials(&self, id: &str, trials: &[StoredTrial]) -> Result<(), sqlx::Error> {
+        self.insert_trials(id, trials, true).await
+    }
+
+    /// Store a trial whose place in its map is not known here; a trial
+    /// already stored is kept as it is.
+    pub async fn add_trial_unplaced(
+        &self,
+        id: &str,
+        trial: &StoredTrial,
+    ) -> Result<(), sqlx::Error> {
+        self.insert_trials(id, std::slice::from_ref(trial), false)
+            .await
+    }
+
+    async fn insert_trials(
+        &self,
+        id: &str,
+        trials: &[StoredTrial],
+        place: bool,
+    ) -> Result<(), sqlx::Error> {
         self.writable()?;
         if trials.is_empty() {
             return Ok(());
         }
+        let sql = if place {
+            "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES (?, ?, ?, ?, ?, ?, ?)
+             ON CONFLICT (experiment_id, scope, k, b) DO UPDATE SET col = excluded.col, idx = excluded.idx"
+        } else {
+            "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES (?, ?, ?, ?, ?, ?, ?)
+             ON CONFLICT (experiment_id, scope, k, b) DO NOTHING"
+        };
         let mut tx = self.pool.begin().await?;
         for t in trials {
             let point = serde_json::to_string(&t.point).unwrap_or_default();
-            sqlx::query("INSERT OR IGNORE INTO trials (experiment_id, scope, k, b, point) VALUES (?, ?, ?, ?, ?)")
+            sqlx::query(sql)
                 .bind(id)
                 .bind(t.scope as i64)
                 .bind(t.point.k)
                 .bind(t.point.b)
                 .bind(point)
+                .bind(t.column as i64)
+                .bind(t.index as i64)
                 .execute(&mut *tx)
                 .await?;
         }
         tx.commit().await
+    }
+
+    /// Delete the stored trials of map `scope`'s columns from `column` on
+    /// (columns a search ran past the end of its map).
+    pub async fn drop_columns(&self, id: &str, scope: u32, column: u32) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        sqlx::query("DELETE FROM trials WHERE experiment_id = ? AND scope = ? AND col >= ?")
+            .bind(id)
+            .bind(scope as i64)
+            .bind(column as i64)
+            .execute(&self.pool)
+            .await
+            .map(|_| ())
     }
 
     /// Every stored trial of an experiment.
@@ -485,7 +530,8 @@ impl Store {
         self.trials_page(id, None, 0, -1).await
     }
 
-    /// Stored trials in the order they finished, a page at a time.
+    /// Stored trials in their maps' order (scope, column, then the order
+    /// within a column), a page at a time.
     pub async fn trials_page(
         &self,
         id: &str,
@@ -493,9 +539,9 @@ impl Store {
         offset: i64,
         limit: i64,
     ) -> Result<Vec<StoredTrial>, sqlx::Error> {
-        let rows: Vec<(i64, String)> = sqlx::query_as(
-            "SELECT scope, point FROM trials WHERE experiment_id = ?1 AND (?2 IS NULL OR scope = ?2)
-             ORDER BY rowid LIMIT ?3 OFFSET ?4",
+        let rows: Vec<(i64, i64, i64, String)> = sqlx::query_as(
+            "SELECT scope, col, idx, point FROM trials WHERE experiment_id = ?1 AND (?2 IS NULL OR scope = ?2)
+             ORDER BY scope, col, idx, rowid LIMIT ?3 OFFSET ?4",
         )
         .bind(id)
         .bind(scope.map(|s| s as i64))
@@ -505,9 +551,11 @@ impl Store {
         .await?;
         Ok(rows
             .into_iter()
-            .filter_map(|(scope, p)| {
+            .filter_map(|(scope, column, index, p)| {
                 serde_json::from_str(&p).ok().map(|point| StoredTrial {
                     scope: scope as u32,
+                    column: column as u32,
+                    index: index as u32,
                     point,
                 })
             })

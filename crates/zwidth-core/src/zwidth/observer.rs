@@ -7,10 +7,19 @@ use serde::Serialize;
 
 use super::search::Point;
 
-/// A finished trial of map `scope` within one experiment.
+/// A finished trial of map `scope` within one experiment, with its place
+/// in the map: `column` is the position of its B in the map's B list (the
+/// automatic range counts from B = 0), `index` its order among that
+/// column's trials. Stored trials are listed by (scope, column, index):
+/// the order the map's own search visits them, whatever the thread count,
+/// the worker or the interruptions.
 #[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct StoredTrial {
     pub scope: u32,
+    #[serde(default)]
+    pub column: u32,
+    #[serde(default)]
+    pub index: u32,
     pub point: Point,
 }
 
@@ -22,8 +31,15 @@ pub struct StoredTrial {
 pub struct Observer {
     pub trials: std::sync::atomic::AtomicUsize,
     pub cancel: std::sync::atomic::AtomicBool,
-    done: std::collections::HashMap<(u32, u64, u64), Point>,
+    done: std::collections::HashMap<(u32, u64, u64), StoredTrial>,
     new: std::sync::Mutex<Vec<StoredTrial>>,
+    /// Trials asked so far per (scope, column), replayed ones included:
+    /// the next trial's `index`.
+    asked: std::sync::Mutex<std::collections::HashMap<(u32, u32), u32>>,
+    /// Columns dropped from a map after they ran (an automatic B range
+    /// searched past its end): (scope, first dropped column), for whoever
+    /// stored their trials to delete them.
+    dropped: std::sync::Mutex<Vec<(u32, u32)>>,
     /// Maps expected in the experiment (0 counts as 1) and each one's
     /// fraction done, for the progress and ETA.
     scopes: std::sync::atomic::AtomicUsize,
@@ -66,7 +82,7 @@ impl Observer {
         Self {
             done: done
                 .into_iter()
-                .map(|t| ((t.scope, t.point.k.to_bits(), t.point.b.to_bits()), t.point))
+                .map(|t| ((t.scope, t.point.k.to_bits(), t.point.b.to_bits()), t))
                 .collect(),
             ..Self::default()
         }
@@ -220,18 +236,44 @@ impl Observer {
         (p.values().sum::<f64>() / n as f64).clamp(0.0, 1.0)
     }
 
-    pub(super) fn replay(&self, scope: u32, k: f64, b: f64) -> Option<Point> {
-        self.done.get(&(scope, k.to_bits(), b.to_bits())).cloned()
+    /// The place of the next trial asked in `column` of map `scope`.
+    pub(super) fn next_index(&self, scope: u32, column: u32) -> u32 {
+        let mut a = self.asked.lock().unwrap_or_else(|e| e.into_inner());
+        let n = a.entry((scope, column)).or_insert(0);
+        *n += 1;
+        *n - 1
     }
 
-    pub(super) fn record(&self, scope: u32, p: &Point) {
+    /// The stored trial at exactly (scope, K, B), if an earlier run did it.
+    pub(super) fn replay(&self, scope: u32, k: f64, b: f64) -> Option<&StoredTrial> {
+        self.done.get(&(scope, k.to_bits(), b.to_bits()))
+    }
+
+    pub(super) fn record(&self, trial: StoredTrial) {
         self.new
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .push(StoredTrial {
-                scope,
-                point: p.clone(),
-            });
+            .push(trial);
+    }
+
+    /// Drop columns `from` onwards of map `scope`: their trials not yet
+    /// taken are forgotten, and [`Observer::take_dropped`] tells whoever
+    /// stored the others.
+    pub(super) fn drop_columns(&self, scope: u32, from: u32) {
+        self.new
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .retain(|t| t.scope != scope || t.column < from);
+        self.dropped
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push((scope, from));
+    }
+
+    /// Columns dropped since the last call: (scope, first dropped column).
+    /// Delete their stored trials after storing [`Observer::take_new`]'s.
+    pub fn take_dropped(&self) -> Vec<(u32, u32)> {
+        std::mem::take(&mut *self.dropped.lock().unwrap_or_else(|e| e.into_inner()))
     }
 }
 
@@ -271,18 +313,18 @@ mod tests {
             ..Point::default()
         };
         let o = Observer::default();
-        o.record(3, &p);
+        let t = StoredTrial {
+            scope: 3,
+            column: 2,
+            index: 5,
+            point: p.clone(),
+        };
+        o.record(t.clone());
         let new = o.take_new();
-        assert_eq!(
-            new,
-            [StoredTrial {
-                scope: 3,
-                point: p.clone()
-            }]
-        );
+        assert_eq!(new, std::slice::from_ref(&t));
         assert!(o.take_new().is_empty(), "taken once");
         let r = Observer::resuming(new);
-        assert_eq!(r.replay(3, 1500.0, 20.0), Some(p));
+        assert_eq!(r.replay(3, 1500.0, 20.0), Some(&t));
         // The key is the exact bits of K and B, and the map's scope.
         assert_eq!(r.replay(2, 1500.0, 20.0), None);
         assert_eq!(r.replay(3, 1500.0, 20.000_001), None);
@@ -294,6 +336,32 @@ mod tests {
         }]);
         assert_eq!(e.stored_evaluation("a"), Some(serde_json::json!(1)));
         assert_eq!(e.stored_evaluation("b"), None);
+    }
+
+    #[test]
+    fn trials_are_numbered_per_column_and_dropped_columns_are_forgotten() {
+        let o = Observer::default();
+        // Each (scope, column) counts its own trials from 0.
+        assert_eq!(o.next_index(0, 0), 0);
+        assert_eq!(o.next_index(0, 0), 1);
+        assert_eq!(o.next_index(0, 1), 0);
+        assert_eq!(o.next_index(1, 0), 0);
+        assert_eq!(o.next_index(0, 0), 2);
+        let t = |scope, column| StoredTrial {
+            scope,
+            column,
+            index: 0,
+            point: Point::default(),
+        };
+        for (s, c) in [(0, 1), (0, 2), (0, 3), (1, 3)] {
+            o.record(t(s, c));
+        }
+        // Dropping scope 0 from column 2: its columns 2 and 3 go, column 1
+        // and the other scope's column 3 stay; the drop is told once.
+        o.drop_columns(0, 2);
+        assert_eq!(o.take_new(), [t(0, 1), t(1, 3)]);
+        assert_eq!(o.take_dropped(), [(0, 2)]);
+        assert!(o.take_dropped().is_empty());
     }
 
     #[test]

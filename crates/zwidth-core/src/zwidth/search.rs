@@ -155,6 +155,9 @@ pub struct Evaluator {
     probe_setup: Option<ProbeSetup>,
     observer: Option<std::sync::Arc<Observer>>,
     scope: u32,
+    /// The map's B list, by the bits of each B: a trial's column (B values
+    /// not in it, and evaluators outside a map, count as column 0).
+    columns: std::collections::HashMap<u64, u32>,
     /// The accuracy as specified (a remote trial resolves it again, on the
     /// same scene, to the same `res`); set by the map.
     accuracy: Option<super::settings::Accuracy>,
@@ -229,6 +232,7 @@ impl Evaluator {
             probe_setup,
             observer: None,
             scope: 0,
+            columns: std::collections::HashMap::new(),
             accuracy: None,
         })
     }
@@ -336,8 +340,22 @@ impl Evaluator {
             }
             o.wait_while_held();
             o.count_trial();
+            let column = self.columns.get(&b.to_bits()).copied().unwrap_or(0);
+            let index = o.next_index(self.scope, column);
+            let trial = |point: Point| StoredTrial {
+                scope: self.scope,
+                column,
+                index,
+                point,
+            };
             if let Some(done) = o.replay(self.scope, k, b) {
-                return done;
+                // Stored without its place (by an older version, or by an
+                // attached rig's result before the search took it): store
+                // the place again.
+                if (done.column, done.index) != (column, index) {
+                    o.record(trial(done.point.clone()));
+                }
+                return done.point.clone();
             }
             let p = match (o.backend(), &self.accuracy) {
                 (Some(backend), Some(accuracy)) => {
@@ -361,7 +379,7 @@ impl Evaluator {
                 }
                 _ => self.evaluate(p),
             };
-            o.record(self.scope, &p);
+            o.record(trial(p.clone()));
             return p;
         }
         self.evaluate(p)
@@ -532,8 +550,16 @@ fn prepare(spec: &MapSpec) -> Result<(Evaluator, Cost), SpecError> {
                 "give at least one damping value, or leave b out",
             ));
         }
-        for &b in bs {
+        for (i, &b) in bs.iter().enumerate() {
             validate_wall(0.0, b)?;
+            // Each B once: a column is where its B is in the list.
+            if bs[..i].iter().any(|&a| a.to_bits() == b.to_bits()) {
+                return Err(SpecError::new(
+                    "b",
+                    b,
+                    "appears twice in the list; give each damping value once",
+                ));
+            }
         }
     }
     let ev = Evaluator::new(scene, spec.method, spec.criterion, res)?;
@@ -614,6 +640,10 @@ pub fn map_observed(
             .take_while(|&b| b <= spec.b_max + 1e-9)
             .collect(),
     };
+    // Each B's column: its first place in the list.
+    for (i, b) in spec.b.as_deref().unwrap_or(&b_auto).iter().enumerate() {
+        ev.columns.entry(b.to_bits()).or_insert(i as u32);
+    }
     let (boundary, points) = match (spec.search, ev.criterion, &ev.model) {
         (_, Criterion::StrictPassivity, Some(m)) => {
             // Exact per B: no search needed.
@@ -780,26 +810,35 @@ fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPo
         let points = r.iter().flat_map(|(_, p)| p.clone()).collect();
         return (r.into_iter().map(|(b, _)| b).collect(), points);
     }
-    // Batches of B in parallel; stop after two B values in a row surely
-    // render nothing (on a noisy scene, an empty column whose verdicts at
-    // the smallest K were undecided does not count: B-width's interval
-    // needs the columns beyond it).
+    // Batches of B in parallel; the map ends at the first two B values in
+    // a row that surely render nothing (on a noisy scene, an empty column
+    // whose verdicts at the smallest K were undecided does not count:
+    // B-width's interval needs the columns beyond it). A batch may run
+    // columns past that end: they are dropped, trials and all, so the map
+    // is the same on any number of threads (issue 14).
     let k_floor = ev.res.k_step;
     let batch = rayon::current_num_threads().max(2);
-    let (mut boundary, mut points) = (Vec::new(), Vec::new());
+    let mut columns: Vec<(BoundaryPoint, Vec<Point>)> = Vec::new();
     for chunk in b_auto.chunks(batch) {
-        let r: Vec<_> = chunk.par_iter().map(|&b| one(b)).collect();
-        for (bp, pts) in r {
-            boundary.push(bp);
-            points.extend(pts);
-        }
-        let n = boundary.len();
-        if n >= 2 && boundary[n - 1].surely_empty(k_floor) && boundary[n - 2].surely_empty(k_floor)
-        {
+        let from = columns.len();
+        columns.extend(chunk.par_iter().map(|&b| one(b)).collect::<Vec<_>>());
+        if let Some(end) = end_of_auto_range(&columns, from, k_floor) {
+            if end < columns.len() {
+                columns.truncate(end);
+                if let Some(o) = &ev.observer {
+                    o.drop_columns(ev.scope, end as u32);
+                }
+            }
             break;
         }
-        ev.report(n as f64 / planned_b(&boundary, b_auto.len(), ev.res.b_step) as f64);
+        let boundary: Vec<BoundaryPoint> = columns.iter().map(|(bp, _)| *bp).collect();
+        ev.report(boundary.len() as f64 / planned_b(&boundary, b_auto.len(), ev.res.b_step) as f64);
     }
+    let points = columns
+        .iter()
+        .flat_map(|(_, p)| p.iter().cloned())
+        .collect();
+    let mut boundary: Vec<BoundaryPoint> = columns.into_iter().map(|(bp, _)| bp).collect();
     // Drop the trailing B values that render nothing but the first.
     while boundary.len() >= 2
         && boundary[boundary.len() - 1].surely_empty(k_floor)
@@ -808,6 +847,20 @@ fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPo
         boundary.pop();
     }
     (boundary, points)
+}
+
+/// Where an automatic B range ends, given its columns so far of which
+/// those from `from` on are new: the length up to and including the first
+/// pair of columns in a row that surely render nothing (a pair may span
+/// the last batch and this one). None: not yet.
+fn end_of_auto_range(
+    columns: &[(BoundaryPoint, Vec<Point>)],
+    from: usize,
+    k_floor: f64,
+) -> Option<usize> {
+    (from.max(1)..columns.len())
+        .find(|&i| columns[i - 1].0.surely_empty(k_floor) && columns[i].0.surely_empty(k_floor))
+        .map(|i| i + 1)
 }
 
 fn trace(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
@@ -955,6 +1008,105 @@ mod tests {
             planned_b(&[bp(10.0, 1000.0), bp(20.0, 900.0)], 68, 10.0),
             14
         );
+    }
+
+    /// The 2018 device without friction and quantization (analytic: each
+    /// trial well under a millisecond), with a B step that makes the
+    /// automatic range end after a handful of columns.
+    fn auto_b_map(search: SearchKind) -> MapSpec {
+        MapSpec {
+            scene: SceneSpec::from_json(
+                r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+            )
+            .unwrap(),
+            method: Method::Analytic,
+            criterion: Criterion::Impedance,
+            search,
+            accuracy: serde_json::from_str(r#"{"preset":"draft","b_step":100}"#).unwrap(),
+            b: None,
+            b_max: 5000.0,
+            k_max: 1e6,
+        }
+    }
+
+    #[test]
+    fn an_automatic_b_range_ends_at_its_first_empty_pair_on_any_thread_count() {
+        let spec = auto_b_map(SearchKind::Bisect);
+        // Independently, column by column (one B per map): the first two
+        // B values in a row where nothing renders end the range.
+        let empty = |b: f64| {
+            let one = MapSpec {
+                b: Some(vec![b]),
+                ..spec.clone()
+            };
+            map_observed(&one, None, 0).unwrap().k_width == 0.0
+        };
+        let step = 100.0;
+        let mut end = 1;
+        while !(empty(step * (end - 1) as f64) && empty(step * end as f64)) {
+            end += 1;
+            assert!(
+                step * end as f64 <= spec.b_max,
+                "the range ends before b_max"
+            );
+        }
+        let n_columns = end + 1;
+        // Not a multiple of any batch size tried below but 1 (13 here):
+        // batches of 2, 3 and 5 all run past the end.
+        assert!(
+            [2, 3, 5].iter().all(|n| n_columns % n != 0),
+            "{n_columns} columns"
+        );
+        let mut first: Option<(MapResult, Vec<StoredTrial>)> = None;
+        for threads in [1, 2, 3, 5] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let o = std::sync::Arc::new(Observer::default());
+            let r = pool
+                .install(|| map_observed(&spec, Some(o.clone()), 4))
+                .unwrap();
+            // What a store would hold: every trial recorded, less the
+            // dropped columns, in (column, index) order.
+            let dropped = o.take_dropped();
+            let mut stored: Vec<StoredTrial> = o
+                .take_new()
+                .into_iter()
+                .filter(|t| dropped.iter().all(|&(s, c)| t.scope != s || t.column < c))
+                .collect();
+            stored.sort_by_key(|t| (t.column, t.index));
+            assert!(stored.iter().all(|t| t.scope == 4));
+            assert_eq!(
+                stored.last().unwrap().column as usize,
+                n_columns - 1,
+                "{threads} threads"
+            );
+            // The points are the stored trials, in the same order; the
+            // boundary keeps one empty column at the end.
+            let points: Vec<Point> = stored.iter().map(|t| t.point.clone()).collect();
+            assert_eq!(r.points, points, "{threads} threads");
+            assert_eq!(r.boundary.len(), n_columns - 1);
+            match &first {
+                None => first = Some((r, stored)),
+                Some((r0, s0)) => {
+                    assert_eq!(&stored, s0, "{threads} threads");
+                    assert_eq!(r.boundary, r0.boundary);
+                    assert_eq!(r.k_width.to_bits(), r0.k_width.to_bits());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_b_list_with_a_value_twice_is_refused() {
+        let spec = MapSpec {
+            b: Some(vec![0.0, 10.0, 0.0]),
+            ..auto_b_map(SearchKind::Bisect)
+        };
+        let e = map_observed(&spec, None, 0).unwrap_err();
+        assert_eq!(e.field, "b");
+        assert!(e.to_string().contains("twice"), "{e}");
     }
 
     #[test]
@@ -1178,9 +1330,10 @@ mod tests {
     #[test]
     fn an_automatic_b_range_starts_empty_and_ends_at_two_empty_columns() {
         // Undamped: B = 0 renders nothing, 100 … 1000 do (up to 2m/T =
-        // 1040), 1100 and beyond nothing. In batches of two columns the
-        // search stops after the batch (1200, 1300), both empty, and keeps
-        // one empty column past the last that renders.
+        // 1040), 1100 and beyond nothing. The search ends at the first
+        // two empty columns (1100, 1200), whatever its batches (here two
+        // columns: the batch (1200, 1300) ran past it, and 1300 is
+        // dropped), and keeps one empty column past the last that renders.
         let mut spec = analytic(
             UNDAMPED,
             Criterion::Stability,
@@ -1209,7 +1362,7 @@ mod tests {
         }
         assert_eq!((r.boundary[0].k_max, r.boundary[11].k_max), (0.0, 0.0));
         assert_eq!(r.b_width, 1000.0);
-        assert_eq!(r.points.iter().map(|p| p.b).fold(0.0, f64::max), 1300.0);
+        assert_eq!(r.points.iter().map(|p| p.b).fold(0.0, f64::max), 1200.0);
         // Two columns, the first empty: both kept.
         spec.b_max = 100.0;
         let r = map(&spec).unwrap();
