@@ -92,7 +92,10 @@ async fn a_trial_stored_without_its_place_takes_it_from_the_search() {
         ..t.clone()
     };
     st.add_trial_unplaced("e1", &unplaced).await.unwrap();
-    assert_eq!(st.trials("e1").await.unwrap(), std::slice::from_ref(&unplaced));
+    assert_eq!(
+        st.trials("e1").await.unwrap(),
+        std::slice::from_ref(&unplaced)
+    );
     st.add_trials("e1", std::slice::from_ref(&t)).await.unwrap();
     assert_eq!(st.trials("e1").await.unwrap(), std::slice::from_ref(&t));
     st.add_trial_unplaced("e1", &unplaced).await.unwrap();
