@@ -276,11 +276,13 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
-    /// Run the HTTP service: queue experiments, run them, store every run in SQLite.
+    /// Run the HTTP service: queue experiments, run them, store every run
+    /// in SQLite (the default) or PostgreSQL.
     Serve {
-        /// SQLite database file (created and migrated on first start).
+        /// The database: a SQLite file (created and migrated on first start)
+        /// or a postgres:// URL (the database must exist; it is migrated).
         #[arg(long, env = "ZWIDTH_DB", default_value = "zwidth.db")]
-        db: PathBuf,
+        db: String,
         /// Address to listen on; port 0 picks a free one (printed on start).
         #[arg(long, env = "ZWIDTH_BIND", default_value = "127.0.0.1:8080")]
         bind: String,

@@ -58,6 +58,7 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             }
             let rigs = crate::rig::parse_list(&rigs)
                 .map_err(|e| CliError::Input(format!("--rigs: {e}")))?;
+            let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
             use std::io::IsTerminal;
             // A log that cannot be written (its disk full) is skipped, never
             // reported on stderr: that report panics, dropping the request.
@@ -135,6 +136,15 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             writeln!(stdout, "{doc}").map_err(io)
         }
         Command::Backup { db, out } => {
+            match crate::store::Location::parse(&db.to_string_lossy()) {
+                Ok(crate::store::Location::Sqlite(_)) => {}
+                Ok(pg) => {
+                    return Err(CliError::Input(format!(
+                        "--db {pg}: backup copies a SQLite file; a PostgreSQL database is copied with pg_dump"
+                    )))
+                }
+                Err(e) => return Err(CliError::Input(e)),
+            }
             if !db.is_file() {
                 return Err(CliError::Input(format!(
                     "--db {} is not a database file",

@@ -80,10 +80,11 @@ impl AppState {
 
 /// How `serve` runs.
 pub struct ServeConfig {
-    pub db: std::path::PathBuf,
+    pub db: crate::store::Location,
     pub bind: String,
     pub tokens: Vec<String>,
-    /// Agent tokens; empty: the one in `<db>.agent-token` (made on first start).
+    /// Agent tokens; empty: the one in `<db>.agent-token` (made on first
+    /// start; with PostgreSQL, none: agents need `--agent-token-file`).
     pub agent_tokens: Vec<String>,
     pub allow_origins: Vec<String>,
     pub rigs: Vec<Arc<dyn Rig>>,
@@ -218,7 +219,6 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         lease,
         request_timeout_s,
     } = cfg;
-    let db = db.as_path();
     if rigs.is_empty() {
         return Err("refusing to serve without a rig".into());
     }
@@ -226,6 +226,11 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         return Err(format!(
             "refusing: --request-timeout-s = {request_timeout_s} must be 0.1 to 3600 s"
         ));
+    }
+    // With PostgreSQL, several API processes serve one database: they and
+    // the clients share the user token, so it is given, never made here.
+    if db.sqlite_path().is_none() && tokens.is_empty() {
+        return Err("refusing: with a PostgreSQL database give the user token (--token-file, ZWIDTH_TOKENS or --token): the API processes and their clients must share it".into());
     }
     // Every check that can refuse comes before any side effect (no
     // socket, no database file).
@@ -243,15 +248,18 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         .await
         .map_err(|e| format!("cannot bind {bind}: {e}"))?;
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
-    let _serving = lock_database(db)?;
-    let store = Store::open(db)
-        .await
-        .map_err(|e| format!("cannot open database {}: {e}", db.display()))?;
+    // One server per SQLite file; PostgreSQL takes many.
+    let _serving = db.sqlite_path().map(lock_database).transpose()?;
+    let store = Store::connect(&db).await.map_err(|e| match e {
+        crate::store::OpenError::Refused(m) => format!("refusing: {m}"),
+        crate::store::OpenError::Failed(m) => m,
+    })?;
     // A corrupt database is served read-only: /healthz says so, writes are
     // refused with the reason, nothing is requeued or run.
     if let Some(why) = store.health().corrupt {
         tracing::error!(%why, "the database failed its integrity check: serving it read-only; restore a backup");
-    } else {
+    } else if db.sqlite_path().is_some() {
+        // The only server on this file: whatever it ran before is its own.
         let requeued = store
             .requeue_interrupted()
             .await
@@ -263,10 +271,13 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
             );
         }
     }
-    let agent_tokens = if agent_tokens.is_empty() {
-        vec![secret_file(db, "agent-token")?]
-    } else {
-        agent_tokens
+    let agent_tokens = match (agent_tokens.is_empty(), db.sqlite_path()) {
+        (false, _) => agent_tokens,
+        (true, Some(path)) => vec![secret_file(path, "agent-token")?],
+        (true, None) => {
+            tracing::warn!("no --agent-token-file: attached rigs' agents cannot connect");
+            vec![random_secret()]
+        }
     };
     // Attached rigs registered through the API (`POST /v1/rigs`) are data:
     // they come back with the database.
@@ -301,10 +312,9 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     // No write is ever unauthenticated (the service can move hardware):
     // without a configured token the server makes one, owner-only, next to
     // the database, where the client commands find it (`<db>.token`).
-    let tokens = if tokens.is_empty() {
-        vec![secret_file(db, "token")?]
-    } else {
-        tokens
+    let tokens = match db.sqlite_path() {
+        Some(path) if tokens.is_empty() => vec![secret_file(path, "token")?],
+        _ => tokens,
     };
     if agent_tokens.iter().any(|a| token_accepted(&tokens, a)) {
         return Err("refusing: an agent token is also a user token; they must differ".into());
@@ -394,9 +404,7 @@ pub fn secret_file(db: &std::path::Path, name: &str) -> Result<String, String> {
             return Ok(t);
         }
     }
-    use rand::Rng;
-    let bytes: [u8; 24] = rand::rng().random();
-    let token: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
+    let token = random_secret();
     let mut opts = std::fs::OpenOptions::new();
     opts.write(true).create(true).truncate(true);
     #[cfg(unix)]
@@ -413,6 +421,13 @@ pub fn secret_file(db: &std::path::Path, name: &str) -> Result<String, String> {
         .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
     tracing::info!(path = %path.display(), "{name} made (owner-only): pass it to the clients that need it");
     Ok(token)
+}
+
+/// 24 random bytes in hex.
+fn random_secret() -> String {
+    use rand::Rng;
+    let bytes: [u8; 24] = rand::rng().random();
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// Hold an exclusive lock on `<db>.lock` while serving: a second server

@@ -1,5 +1,10 @@
-//! The SQLite store (sqlx): experiments and their results. Queries only; no
-//! HTTP types. WAL and `synchronous = NORMAL`; the queue is claimed with one
+//! The store (sqlx): experiments and their results, in SQLite (the embedded
+//! default: WAL and `synchronous = NORMAL`) or PostgreSQL (shared by several
+//! processes). Queries only; no HTTP types. One code path for both: an enum
+//! over the two pools, the same SQL where the dialects agree (`$n`
+//! placeholders, `ON CONFLICT`, `RETURNING`), per-backend SQL only where they
+//! do not (claiming, integrity checks, backups, DDL: `migrations/sqlite/`
+//! and `migrations/postgres/`). The queue is claimed with one
 //! `UPDATE … RETURNING`, so two runners never take the same experiment.
 //!
 //! Every statement runs to completion before its answer is used: with
@@ -12,20 +17,61 @@ pub mod agents;
 pub mod fault;
 pub use fault::{Fault, Health};
 
+pub mod location;
+pub use location::Location;
+
 use serde::Serialize;
+use sqlx::postgres::PgPoolOptions;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
-use sqlx::{FromRow, SqlitePool};
+use sqlx::{FromRow, PgPool, SqlitePool};
 use std::path::Path;
 use std::time::Duration;
 
 use crate::rig::window::Window;
 use crate::zwidth::search::{StoredEvaluation, StoredTrial};
 
-static MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations");
+static SQLITE_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations/sqlite");
+static POSTGRES_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations/postgres");
+
+/// The database behind a store.
+#[derive(Debug, Clone)]
+enum Db {
+    Sqlite(SqlitePool),
+    Postgres(PgPool),
+}
+
+/// Run `$body` with `$p` bound to this store's pool, whichever database it
+/// is: the body is compiled once per backend (shared SQL, typed twice).
+macro_rules! on_pool {
+    ($store:expr, $p:ident => $body:expr) => {
+        match &$store.db {
+            Db::Sqlite($p) => $body,
+            Db::Postgres($p) => $body,
+        }
+    };
+}
+pub(crate) use on_pool;
+
+/// Why a store could not be opened: the location is wrong or unusable (a
+/// bad URL, an unreachable server, a refused password, a schema newer than
+/// this binary; nothing was written), or something failed on the way.
+#[derive(Debug)]
+pub enum OpenError {
+    Refused(String),
+    Failed(String),
+}
+
+impl std::fmt::Display for OpenError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            OpenError::Refused(m) | OpenError::Failed(m) => f.write_str(m),
+        }
+    }
+}
 
 #[derive(Debug, Clone)]
 pub struct Store {
-    pool: SqlitePool,
+    db: Db,
     /// What the last integrity check found; a corrupt database refuses writes.
     health: std::sync::Arc<std::sync::Mutex<Health>>,
 }
@@ -81,7 +127,7 @@ pub struct NewExperiment<'a> {
 pub use crate::clock::now_ms;
 
 impl Store {
-    /// Open (creating it if needed) and migrate the database at `path`.
+    /// Open (creating it if needed) and migrate the SQLite database at `path`.
     pub async fn open(path: &Path) -> Result<Self, sqlx::Error> {
         let opts = SqliteConnectOptions::new()
             .filename(path)
@@ -94,21 +140,89 @@ impl Store {
             .max_connections(4)
             .connect_with(opts)
             .await?;
-        MIGRATOR.run(&pool).await?;
+        SQLITE_MIGRATOR.run(&pool).await?;
+        Self::ready(Db::Sqlite(pool)).await
+    }
+
+    /// Open the store at `at`: a SQLite file (created if missing) or a
+    /// PostgreSQL database (which must exist). Migrations are applied; a
+    /// schema newer than this binary's is refused before anything is
+    /// written.
+    pub async fn connect(at: &Location) -> Result<Self, OpenError> {
+        let shown = at.to_string();
+        let failed =
+            |e: sqlx::Error| OpenError::Failed(format!("cannot open database {shown}: {e}"));
+        let newer = |e: &sqlx::migrate::MigrateError| {
+            match e {
+            sqlx::migrate::MigrateError::VersionMissing(v) => Some(OpenError::Refused(format!(
+                "the database {shown} has schema version {v}, newer than this zwidth knows: upgrade zwidth (nothing was written)"
+            ))),
+            _ => None,
+        }
+        };
+        match at {
+            // The migrator checks the versions applied against its own
+            // before it applies anything.
+            Location::Sqlite(path) => Self::open(path).await.map_err(|e| match &e {
+                sqlx::Error::Migrate(m) => newer(m).unwrap_or_else(|| failed(e)),
+                _ => failed(e),
+            }),
+            Location::Postgres(url) => {
+                let opts: sqlx::postgres::PgConnectOptions = url
+                    .parse()
+                    .map_err(|e| OpenError::Refused(format!("--db {shown}: {e}")))?;
+                // One connection first: its error says why (refused,
+                // password, no such database), where a pool only times out.
+                {
+                    use sqlx::{ConnectOptions, Connection};
+                    let c = opts.connect().await.map_err(|e| {
+                        OpenError::Refused(format!("cannot connect to the database {shown}: {e}"))
+                    })?;
+                    let _ = c.close().await;
+                }
+                let pool = PgPoolOptions::new()
+                    .max_connections(8)
+                    .acquire_timeout(Duration::from_secs(10))
+                    .connect_with(opts)
+                    .await
+                    .map_err(|e| {
+                        OpenError::Refused(format!("cannot connect to the database {shown}: {e}"))
+                    })?;
+                if let Err(e) = POSTGRES_MIGRATOR.run(&pool).await {
+                    return Err(
+                        newer(&e).unwrap_or_else(|| failed(sqlx::Error::Migrate(Box::new(e))))
+                    );
+                }
+                Self::ready(Db::Postgres(pool)).await.map_err(failed)
+            }
+        }
+    }
+
+    async fn ready(db: Db) -> Result<Self, sqlx::Error> {
         let store = Self {
-            pool,
+            db,
             health: Default::default(),
         };
         store.check().await?;
         Ok(store)
     }
 
-    /// `PRAGMA quick_check` (O(pages), no index cross-check): remember and
-    /// return what it found. Run at start and on `GET /healthz?check=true`.
+    /// Which database this is: "sqlite" or "postgres".
+    pub fn backend(&self) -> &'static str {
+        match self.db {
+            Db::Sqlite(_) => "sqlite",
+            Db::Postgres(_) => "postgres",
+        }
+    }
+
+    /// SQLite: `PRAGMA quick_check` (O(pages), no index cross-check);
+    /// PostgreSQL: a round trip (the server checks its own pages). Remember
+    /// and return what it found. Run at start and on `GET /healthz?check=true`.
     pub async fn check(&self) -> Result<Health, sqlx::Error> {
-        let rows: Result<Vec<String>, sqlx::Error> = sqlx::query_scalar("PRAGMA quick_check")
-            .fetch_all(&self.pool)
-            .await;
+        let rows: Result<Vec<String>, sqlx::Error> = match &self.db {
+            Db::Sqlite(p) => sqlx::query_scalar("PRAGMA quick_check").fetch_all(p).await,
+            Db::Postgres(p) => sqlx::query_scalar("SELECT 'ok'::text").fetch_all(p).await,
+        };
         let h = match rows {
             Ok(r) if r.len() == 1 && r[0] == "ok" => Health::ok(),
             Ok(r) => Health::corrupt(r.join("; ")),
@@ -148,28 +262,42 @@ impl Store {
     /// Write everything in the WAL into the database file and close every
     /// connection, so the `.db` file alone is a complete copy (clean shutdown).
     pub async fn close(&self) -> Result<(), sqlx::Error> {
-        let r = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
-            .execute(&self.pool)
-            .await
-            .map(|_| ());
-        self.pool.close().await;
-        r
+        match &self.db {
+            Db::Sqlite(p) => {
+                let r = sqlx::query("PRAGMA wal_checkpoint(TRUNCATE)")
+                    .execute(p)
+                    .await
+                    .map(|_| ());
+                p.close().await;
+                r
+            }
+            Db::Postgres(p) => {
+                p.close().await;
+                Ok(())
+            }
+        }
     }
 
-    /// A consistent copy of the whole database in one file (`VACUUM INTO`),
-    /// safe while the service runs. `to` must not exist.
+    /// A consistent copy of the whole SQLite database in one file (`VACUUM
+    /// INTO`), safe while the service runs. `to` must not exist. (A
+    /// PostgreSQL database is copied with its own tools: pg_dump.)
     pub async fn backup(&self, to: &Path) -> Result<(), sqlx::Error> {
-        sqlx::query("VACUUM INTO ?")
-            .bind(to.to_string_lossy().into_owned())
-            .execute(&self.pool)
-            .await
-            .map(|_| ())
+        match &self.db {
+            Db::Sqlite(p) => sqlx::query("VACUUM INTO $1")
+                .bind(to.to_string_lossy().into_owned())
+                .execute(p)
+                .await
+                .map(|_| ()),
+            Db::Postgres(_) => Err(sqlx::Error::Protocol(
+                "a PostgreSQL database is backed up with pg_dump, not zwidth backup".into(),
+            )),
+        }
     }
 
     /// Insert a queued experiment and commit it. With an idempotency key
     /// used before, nothing is inserted and the earlier row is returned
     /// (one `INSERT … ON CONFLICT DO NOTHING`: concurrent submissions with
-    /// one key store one experiment).
+    /// one key store one experiment, also from several API processes).
     pub async fn insert(&self, e: NewExperiment<'_>) -> Result<Inserted, sqlx::Error> {
         self.writable()?;
         let NewExperiment {
@@ -187,9 +315,9 @@ impl Store {
             "queued"
         };
         let created_ms = now_ms();
-        let r = sqlx::query(
+        let r = on_pool!(self, p => sqlx::query(
             "INSERT INTO experiments (id, kind, spec, state, priority, created_ms, idempotency_key, not_before_ms, rig)
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (idempotency_key) DO NOTHING",
+             VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) ON CONFLICT (idempotency_key) DO NOTHING",
         )
         .bind(id)
         .bind(kind)
@@ -200,9 +328,10 @@ impl Store {
         .bind(key)
         .bind(not_before_ms)
         .bind(rig)
-        .execute(&self.pool)
-        .await?;
-        if r.rows_affected() == 1 {
+        .execute(p)
+        .await
+        .map(|r| r.rows_affected()))?;
+        if r == 1 {
             // Committed: the row is what was written (no read that could
             // fail after the commit and turn a stored submission into an error).
             return Ok(Inserted::New(ExperimentRow {
@@ -224,12 +353,12 @@ impl Store {
                 best: None,
             }));
         }
-        let row = sqlx::query_as::<_, ExperimentRow>(
-            "SELECT * FROM experiments WHERE idempotency_key = ?",
+        let row = on_pool!(self, p => sqlx::query_as::<_, ExperimentRow>(
+            "SELECT * FROM experiments WHERE idempotency_key = $1",
         )
         .bind(key)
-        .fetch_one(&self.pool)
-        .await?;
+        .fetch_one(p)
+        .await)?;
         let same = row.spec == spec
             && row.priority == priority
             && row.rig == rig
@@ -242,10 +371,10 @@ impl Store {
     }
 
     pub async fn get(&self, id: &str) -> Result<Option<ExperimentRow>, sqlx::Error> {
-        sqlx::query_as::<_, ExperimentRow>("SELECT * FROM experiments WHERE id = ?")
+        on_pool!(self, p => sqlx::query_as::<_, ExperimentRow>("SELECT * FROM experiments WHERE id = $1")
             .bind(id)
-            .fetch_optional(&self.pool)
-            .await
+            .fetch_optional(p)
+            .await)
     }
 
     /// A page of experiments, newest first, after `cursor` (the last page's
@@ -260,22 +389,22 @@ impl Store {
         // Two fixed statements (sqlx takes no SQL built at run time).
         let sql = if full {
             "SELECT * FROM experiments
-             WHERE ?1 = '' OR created_ms < ?2 OR (created_ms = ?2 AND id < ?1)
-             ORDER BY created_ms DESC, id DESC LIMIT ?3"
+             WHERE $1 = '' OR created_ms < $2 OR (created_ms = $2 AND id < $1)
+             ORDER BY created_ms DESC, id DESC LIMIT $3"
         } else {
             "SELECT id, kind, '' AS spec, state, priority, created_ms, started_ms, finished_ms, trials_done,
                     NULL AS result, error, idempotency_key, not_before_ms, rig, progress, best
              FROM experiments
-             WHERE ?1 = '' OR created_ms < ?2 OR (created_ms = ?2 AND id < ?1)
-             ORDER BY created_ms DESC, id DESC LIMIT ?3"
+             WHERE $1 = '' OR created_ms < $2 OR (created_ms = $2 AND id < $1)
+             ORDER BY created_ms DESC, id DESC LIMIT $3"
         };
         let (t, id) = cursor.unwrap_or((i64::MAX, ""));
-        sqlx::query_as::<_, ExperimentRow>(sql)
+        on_pool!(self, p => sqlx::query_as::<_, ExperimentRow>(sql)
             .bind(id)
             .bind(t)
             .bind(limit)
-            .fetch_all(&self.pool)
-            .await
+            .fetch_all(p)
+            .await)
     }
 
     /// Claim `rig`'s next experiment that may start now (highest priority,
@@ -284,27 +413,47 @@ impl Store {
     pub async fn claim_next(&self, rig: &str) -> Result<Option<ExperimentRow>, sqlx::Error> {
         self.writable()?;
         let now = now_ms();
-        sqlx::query_as::<_, ExperimentRow>(
-            "UPDATE experiments SET state = 'running', started_ms = ?1
-             WHERE id = (SELECT id FROM experiments
-                         WHERE rig = ?2 AND state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= ?1)
-                           AND (SELECT paused FROM queue_control WHERE id = 1) = 0
-                         ORDER BY priority DESC, created_ms, id LIMIT 1)
-             RETURNING *",
-        )
-        .bind(now)
-        .bind(rig)
-        .fetch_all(&self.pool)
-        .await
-        .map(|mut rows| rows.pop())
+        match &self.db {
+            Db::Sqlite(p) => sqlx::query_as::<_, ExperimentRow>(
+                "UPDATE experiments SET state = 'running', started_ms = $1
+                 WHERE id = (SELECT id FROM experiments
+                             WHERE rig = $2 AND state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= $1)
+                               AND (SELECT paused FROM queue_control WHERE id = 1) = 0
+                             ORDER BY priority DESC, created_ms, id LIMIT 1)
+                 RETURNING *",
+            )
+            .bind(now)
+            .bind(rig)
+            .fetch_all(p)
+            .await
+            .map(|mut rows| rows.pop()),
+            // Several processes claim at once: the row is locked by the
+            // claim that found it first, and the others skip it.
+            Db::Postgres(p) => sqlx::query_as::<_, ExperimentRow>(
+                "WITH next AS MATERIALIZED (
+                     SELECT id FROM experiments
+                     WHERE rig = $2 AND state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= $1)
+                       AND (SELECT paused FROM queue_control WHERE id = 1) = 0
+                     ORDER BY priority DESC, created_ms, id LIMIT 1
+                     FOR UPDATE SKIP LOCKED)
+                 UPDATE experiments e SET state = 'running', started_ms = $1
+                 FROM next WHERE e.id = next.id
+                 RETURNING e.*",
+            )
+            .bind(now)
+            .bind(rig)
+            .fetch_all(p)
+            .await
+            .map(|mut rows| rows.pop()),
+        }
     }
 
     /// The rig's window, if it has one.
     pub async fn rig_window(&self, rig: &str) -> Result<Option<Window>, sqlx::Error> {
-        let w: Option<String> = sqlx::query_scalar("SELECT window FROM rig_windows WHERE rig = ?")
+        let w: Option<String> = on_pool!(self, p => sqlx::query_scalar(r#"SELECT "window" FROM rig_windows WHERE rig = $1"#)
             .bind(rig)
-            .fetch_optional(&self.pool)
-            .await?;
+            .fetch_optional(p)
+            .await)?;
         Ok(w.and_then(|w| serde_json::from_str(&w).ok()))
     }
 
@@ -312,63 +461,66 @@ impl Store {
     pub async fn set_rig_window(&self, rig: &str, w: Option<&Window>) -> Result<(), sqlx::Error> {
         self.writable()?;
         match w {
-            Some(w) => sqlx::query("INSERT INTO rig_windows (rig, window) VALUES (?, ?) ON CONFLICT (rig) DO UPDATE SET window = excluded.window")
+            Some(w) => {
+                on_pool!(self, p => sqlx::query(r#"INSERT INTO rig_windows (rig, "window") VALUES ($1, $2) ON CONFLICT (rig) DO UPDATE SET "window" = excluded."window""#)
                 .bind(rig)
                 .bind(serde_json::to_string(w).unwrap_or_default())
-                .execute(&self.pool)
+                .execute(p)
                 .await
-                .map(|_| ()),
-            None => sqlx::query("DELETE FROM rig_windows WHERE rig = ?")
+                .map(|_| ()))
+            }
+            None => on_pool!(self, p => sqlx::query("DELETE FROM rig_windows WHERE rig = $1")
                 .bind(rig)
-                .execute(&self.pool)
+                .execute(p)
                 .await
-                .map(|_| ()),
+                .map(|_| ())),
         }
     }
 
     /// Per rig: experiments waiting, and the one running (if any).
     pub async fn rig_load(&self, rig: &str) -> Result<(i64, Option<String>), sqlx::Error> {
-        let waiting: i64 = sqlx::query_scalar(
-            "SELECT COUNT(*) FROM experiments WHERE rig = ? AND state IN ('queued', 'scheduled')",
+        let waiting: i64 = on_pool!(self, p => sqlx::query_scalar(
+            "SELECT COUNT(*) FROM experiments WHERE rig = $1 AND state IN ('queued', 'scheduled')",
         )
         .bind(rig)
-        .fetch_one(&self.pool)
-        .await?;
-        let running: Option<String> = sqlx::query_scalar(
-            "SELECT id FROM experiments WHERE rig = ? AND state = 'running' LIMIT 1",
+        .fetch_one(p)
+        .await)?;
+        let running: Option<String> = on_pool!(self, p => sqlx::query_scalar(
+            "SELECT id FROM experiments WHERE rig = $1 AND state = 'running' ORDER BY started_ms, id LIMIT 1",
         )
         .bind(rig)
-        .fetch_optional(&self.pool)
-        .await?;
+        .fetch_optional(p)
+        .await)?;
         Ok((waiting, running))
     }
 
     pub async fn set_paused(&self, paused: bool) -> Result<(), sqlx::Error> {
         self.writable()?;
-        sqlx::query("UPDATE queue_control SET paused = ? WHERE id = 1")
+        on_pool!(self, p => sqlx::query("UPDATE queue_control SET paused = $1 WHERE id = 1")
             .bind(paused as i64)
-            .execute(&self.pool)
+            .execute(p)
             .await
-            .map(|_| ())
+            .map(|_| ()))
     }
 
     pub async fn paused(&self) -> Result<bool, sqlx::Error> {
-        sqlx::query_scalar::<_, i64>("SELECT paused FROM queue_control WHERE id = 1")
-            .fetch_one(&self.pool)
+        on_pool!(self, p => sqlx::query_scalar::<_, i64>("SELECT paused FROM queue_control WHERE id = 1")
+            .fetch_one(p)
             .await
-            .map(|p| p != 0)
+            .map(|p| p != 0))
     }
 
     /// Experiments per state, and the trials done over all of them.
     pub async fn counts(&self) -> Result<(Vec<(String, i64)>, i64), sqlx::Error> {
-        let by_state: Vec<(String, i64)> =
+        let by_state: Vec<(String, i64)> = on_pool!(self, p =>
             sqlx::query_as("SELECT state, COUNT(*) FROM experiments GROUP BY state ORDER BY state")
-                .fetch_all(&self.pool)
-                .await?;
-        let trials: i64 =
-            sqlx::query_scalar("SELECT COALESCE(SUM(trials_done), 0) FROM experiments")
-                .fetch_one(&self.pool)
-                .await?;
+                .fetch_all(p)
+                .await)?;
+        // SUM of BIGINT is NUMERIC in PostgreSQL: cast back.
+        let trials: i64 = on_pool!(self, p =>
+            sqlx::query_scalar("SELECT CAST(COALESCE(SUM(trials_done), 0) AS BIGINT) FROM experiments")
+                .fetch_one(p)
+                .await)?;
         Ok((by_state, trials))
     }
 
@@ -379,13 +531,13 @@ impl Store {
         fraction: f64,
     ) -> Result<(), sqlx::Error> {
         self.writable()?;
-        sqlx::query("UPDATE experiments SET trials_done = ?, progress = ? WHERE id = ? AND state = 'running'")
+        on_pool!(self, p => sqlx::query("UPDATE experiments SET trials_done = $1, progress = $2 WHERE id = $3 AND state = 'running'")
             .bind(trials)
             .bind(if fraction.is_finite() { fraction.clamp(0.0, 1.0) } else { 0.0 })
             .bind(id)
-            .execute(&self.pool)
+            .execute(p)
             .await
-            .map(|_| ())
+            .map(|_| ()))
     }
 
     /// Record the end of a run: `state` is succeeded, failed or cancelled.
@@ -401,61 +553,63 @@ impl Store {
         error: Option<&str>,
     ) -> Result<bool, sqlx::Error> {
         self.writable()?;
-        let r = sqlx::query("UPDATE experiments SET state = ?1, trials_done = ?2, result = ?3, error = ?4,
-                     finished_ms = COALESCE(CASE WHEN state = 'cancelled' THEN finished_ms END, ?5),
-                     progress = CASE WHEN ?1 = 'succeeded' THEN 1 ELSE progress END
-                     WHERE id = ?6 AND (state = 'running' OR (state = 'cancelled' AND ?1 = 'cancelled'))")
+        let r = on_pool!(self, p => sqlx::query("UPDATE experiments SET state = $1, trials_done = $2, result = $3, error = $4,
+                     finished_ms = COALESCE(CASE WHEN state = 'cancelled' THEN finished_ms END, $5),
+                     progress = CASE WHEN $1 = 'succeeded' THEN 1 ELSE progress END
+                     WHERE id = $6 AND (state = 'running' OR (state = 'cancelled' AND $1 = 'cancelled'))")
             .bind(state)
             .bind(trials)
             .bind(result)
             .bind(error)
             .bind(now_ms())
             .bind(id)
-            .execute(&self.pool)
-            .await?;
-        Ok(r.rows_affected() == 1)
+            .execute(p)
+            .await
+            .map(|r| r.rows_affected()))?;
+        Ok(r == 1)
     }
 
     /// Ask a queued, scheduled, running or interrupted experiment to stop;
     /// true if it was one of those.
     pub async fn cancel(&self, id: &str) -> Result<bool, sqlx::Error> {
         self.writable()?;
-        let r = sqlx::query("UPDATE experiments SET state = 'cancelled', finished_ms = ? WHERE id = ? AND state IN ('queued', 'scheduled', 'running', 'interrupted')")
+        let r = on_pool!(self, p => sqlx::query("UPDATE experiments SET state = 'cancelled', finished_ms = $1 WHERE id = $2 AND state IN ('queued', 'scheduled', 'running', 'interrupted')")
             .bind(now_ms())
             .bind(id)
-            .execute(&self.pool)
-            .await?;
-        Ok(r.rows_affected() == 1)
+            .execute(p)
+            .await
+            .map(|r| r.rows_affected()))?;
+        Ok(r == 1)
     }
 
     /// A running experiment stopped by shutdown (its trials are stored).
     pub async fn interrupt(&self, id: &str, trials: i64) -> Result<(), sqlx::Error> {
         self.writable()?;
-        sqlx::query("UPDATE experiments SET state = 'interrupted', trials_done = ? WHERE id = ? AND state = 'running'")
+        on_pool!(self, p => sqlx::query("UPDATE experiments SET state = 'interrupted', trials_done = $1 WHERE id = $2 AND state = 'running'")
             .bind(trials)
             .bind(id)
-            .execute(&self.pool)
+            .execute(p)
             .await
-            .map(|_| ())
+            .map(|_| ()))
     }
 
     /// After a restart: anything left running (killed) or interrupted
     /// (shut down) is queued again; it resumes from its stored trials.
     pub async fn requeue_interrupted(&self) -> Result<u64, sqlx::Error> {
         self.writable()?;
-        let r = sqlx::query(
+        on_pool!(self, p => sqlx::query(
             "UPDATE experiments SET state = 'queued', started_ms = NULL WHERE state IN ('running', 'interrupted')",
         )
-        .execute(&self.pool)
-        .await?;
-        Ok(r.rows_affected())
+        .execute(p)
+        .await
+        .map(|r| r.rows_affected()))
     }
 
     pub async fn state(&self, id: &str) -> Result<Option<String>, sqlx::Error> {
-        sqlx::query_scalar::<_, String>("SELECT state FROM experiments WHERE id = ?")
+        on_pool!(self, p => sqlx::query_scalar::<_, String>("SELECT state FROM experiments WHERE id = $1")
             .bind(id)
-            .fetch_optional(&self.pool)
-            .await
+            .fetch_optional(p)
+            .await)
     }
 
     /// Store finished trials in one transaction. A trial already stored
@@ -488,46 +642,47 @@ impl Store {
             return Ok(());
         }
         let sql = if place {
-            "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES (?, ?, ?, ?, ?, ?, ?)
+            "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES ($1, $2, $3, $4, $5, $6, $7)
              ON CONFLICT (experiment_id, scope, k, b) DO UPDATE SET col = excluded.col, idx = excluded.idx"
         } else {
-            "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES (?, ?, ?, ?, ?, ?, ?)
+            "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES ($1, $2, $3, $4, $5, $6, $7)
              ON CONFLICT (experiment_id, scope, k, b) DO NOTHING"
         };
-        let mut tx = self.pool.begin().await?;
-        for t in trials {
-            let point = serde_json::to_string(&t.point).unwrap_or_default();
-            sqlx::query(sql)
-                .bind(id)
-                .bind(t.scope as i64)
-                .bind(t.point.k)
-                .bind(t.point.b)
-                .bind(point)
-                .bind(t.column as i64)
-                .bind(t.index as i64)
-                .execute(&mut *tx)
-                .await?;
-        }
-        tx.commit().await
+        on_pool!(self, p => {
+            let mut tx = p.begin().await?;
+            for t in trials {
+                let point = serde_json::to_string(&t.point).unwrap_or_default();
+                sqlx::query(sql)
+                    .bind(id)
+                    .bind(t.scope as i64)
+                    .bind(t.point.k)
+                    .bind(t.point.b)
+                    .bind(point)
+                    .bind(t.column as i64)
+                    .bind(t.index as i64)
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            tx.commit().await
+        })
     }
 
     /// Delete the stored trials of map `scope`'s columns from `column` on
     /// (columns a search ran past the end of its map).
     pub async fn drop_columns(&self, id: &str, scope: u32, column: u32) -> Result<(), sqlx::Error> {
         self.writable()?;
-        sqlx::query("DELETE FROM trials WHERE experiment_id = ? AND scope = ? AND col >= ?")
+        on_pool!(self, p => sqlx::query("DELETE FROM trials WHERE experiment_id = $1 AND scope = $2 AND col >= $3")
             .bind(id)
             .bind(scope as i64)
             .bind(column as i64)
-            .execute(&self.pool)
+            .execute(p)
             .await
-            .map(|_| ())
+            .map(|_| ()))
     }
 
     /// Every stored trial of an experiment.
     pub async fn trials(&self, id: &str) -> Result<Vec<StoredTrial>, sqlx::Error> {
-        // LIMIT -1: no limit (SQLite).
-        self.trials_page(id, None, 0, -1).await
+        self.trials_page(id, None, 0, i64::MAX).await
     }
 
     /// Stored trials in their maps' order (scope, column, then the order
@@ -539,16 +694,25 @@ impl Store {
         offset: i64,
         limit: i64,
     ) -> Result<Vec<StoredTrial>, sqlx::Error> {
-        let rows: Vec<(i64, i64, i64, String)> = sqlx::query_as(
-            "SELECT scope, col, idx, point FROM trials WHERE experiment_id = ?1 AND (?2 IS NULL OR scope = ?2)
-             ORDER BY scope, col, idx, rowid LIMIT ?3 OFFSET ?4",
-        )
-        .bind(id)
-        .bind(scope.map(|s| s as i64))
-        .bind(limit)
-        .bind(offset)
-        .fetch_all(&self.pool)
-        .await?;
+        // Trials stored before they had a place (0, 0) keep their
+        // insertion order in SQLite (rowid); PostgreSQL has only placed ones.
+        let sql = match self.db {
+            Db::Sqlite(_) => {
+                "SELECT scope, col, idx, point FROM trials WHERE experiment_id = $1 AND ($2 IS NULL OR scope = $2)
+                 ORDER BY scope, col, idx, rowid LIMIT $3 OFFSET $4"
+            }
+            Db::Postgres(_) => {
+                "SELECT scope, col, idx, point FROM trials WHERE experiment_id = $1 AND ($2::BIGINT IS NULL OR scope = $2)
+                 ORDER BY scope, col, idx, k, b LIMIT $3 OFFSET $4"
+            }
+        };
+        let rows: Vec<(i64, i64, i64, String)> = on_pool!(self, p => sqlx::query_as(sql)
+            .bind(id)
+            .bind(scope.map(|s| s as i64))
+            .bind(limit)
+            .bind(offset)
+            .fetch_all(p)
+            .await)?;
         Ok(rows
             .into_iter()
             .filter_map(|(scope, column, index, p)| {
@@ -573,36 +737,39 @@ impl Store {
         if evals.is_empty() {
             return Ok(());
         }
-        let mut tx = self.pool.begin().await?;
-        for e in evals {
-            sqlx::query(
-                "INSERT OR IGNORE INTO evaluations (experiment_id, key, seq, record)
-                 VALUES (?1, ?2, (SELECT COUNT(*) FROM evaluations WHERE experiment_id = ?1), ?3)",
-            )
-            .bind(id)
-            .bind(&e.key)
-            .bind(e.record.to_string())
-            .execute(&mut *tx)
-            .await?;
-        }
-        if let Some(b) = best {
-            sqlx::query("UPDATE experiments SET best = ? WHERE id = ?")
-                .bind(b.to_string())
+        on_pool!(self, p => {
+            let mut tx = p.begin().await?;
+            for e in evals {
+                sqlx::query(
+                    "INSERT INTO evaluations (experiment_id, key, seq, record)
+                     VALUES ($1, $2, (SELECT COUNT(*) FROM evaluations WHERE experiment_id = $1), $3)
+                     ON CONFLICT (experiment_id, key) DO NOTHING",
+                )
                 .bind(id)
+                .bind(&e.key)
+                .bind(e.record.to_string())
                 .execute(&mut *tx)
                 .await?;
-        }
-        tx.commit().await
+            }
+            if let Some(b) = &best {
+                sqlx::query("UPDATE experiments SET best = $1 WHERE id = $2")
+                    .bind(b.to_string())
+                    .bind(id)
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            tx.commit().await
+        })
     }
 
     /// Every stored evaluation of a tune, in the order stored.
     pub async fn evaluations(&self, id: &str) -> Result<Vec<StoredEvaluation>, sqlx::Error> {
-        let rows: Vec<(String, String)> = sqlx::query_as(
-            "SELECT key, record FROM evaluations WHERE experiment_id = ? ORDER BY seq",
+        let rows: Vec<(String, String)> = on_pool!(self, p => sqlx::query_as(
+            "SELECT key, record FROM evaluations WHERE experiment_id = $1 ORDER BY seq",
         )
         .bind(id)
-        .fetch_all(&self.pool)
-        .await?;
+        .fetch_all(p)
+        .await)?;
         Ok(rows
             .into_iter()
             .filter_map(|(key, r)| {
@@ -614,9 +781,9 @@ impl Store {
     }
 
     pub async fn trial_count(&self, id: &str) -> Result<i64, sqlx::Error> {
-        sqlx::query_scalar("SELECT COUNT(*) FROM trials WHERE experiment_id = ?")
+        on_pool!(self, p => sqlx::query_scalar("SELECT COUNT(*) FROM trials WHERE experiment_id = $1")
             .bind(id)
-            .fetch_one(&self.pool)
-            .await
+            .fetch_one(p)
+            .await)
     }
 }

@@ -169,3 +169,4 @@ pub fn wait_end(base: &str, id: &str, secs: u64) -> serde_json::Value {
         std::thread::sleep(Duration::from_millis(50));
     }
 }
+pub mod pg;
