@@ -1,6 +1,6 @@
 //! The store's own rules, checked through its public methods.
 
-use zwidth::store::{Location, NewExperiment, Store};
+use zwidth::store::{Held, Lease, Location, NewExperiment, Store};
 use zwidth::zwidth::search::{Point, StoredTrial};
 
 mod common;
@@ -56,6 +56,16 @@ mod tempdir {
     }
 }
 
+/// Claim e1 (the only experiment) for worker "w1".
+async fn claim(st: &Store) -> Lease {
+    let row = st.claim("sim", "w1", 60_000).await.unwrap().unwrap();
+    assert_eq!(row.id, "e1");
+    Lease {
+        id: row.id,
+        attempt: row.attempt,
+    }
+}
+
 fn trial(scope: u32, column: u32, index: u32, k: f64, passive: bool) -> StoredTrial {
     StoredTrial {
         scope,
@@ -85,8 +95,13 @@ async fn trials_are_listed_in_map_order_not_insertion_order() {
             trial(0, 1, 1, 1600.0, false),
             trial(0, 0, 1, 400.0, true),
         ];
-        st.add_trials("e1", &stored[..3]).await.unwrap();
-        st.add_trials("e1", &stored[3..]).await.unwrap();
+        let run = claim(st).await;
+        st.add_trials(&run, &stored[..3], &[], (0, 0.0))
+            .await
+            .unwrap();
+        st.add_trials(&run, &stored[3..], &[], (0, 0.0))
+            .await
+            .unwrap();
         let got = st.trials("e1").await.unwrap();
         let order: Vec<(u32, u32, u32)> =
             got.iter().map(|t| (t.scope, t.column, t.index)).collect();
@@ -121,7 +136,10 @@ async fn a_trial_stored_without_its_place_takes_it_from_the_search() {
             st.trials("e1").await.unwrap(),
             std::slice::from_ref(&unplaced)
         );
-        st.add_trials("e1", std::slice::from_ref(&t)).await.unwrap();
+        let run = claim(st).await;
+        st.add_trials(&run, std::slice::from_ref(&t), &[], (0, 0.0))
+            .await
+            .unwrap();
         assert_eq!(st.trials("e1").await.unwrap(), std::slice::from_ref(&t));
         st.add_trial_unplaced("e1", &unplaced).await.unwrap();
         assert_eq!(st.trials("e1").await.unwrap(), std::slice::from_ref(&t));
@@ -133,7 +151,7 @@ async fn a_trial_stored_without_its_place_takes_it_from_the_search() {
             },
             ..t.clone()
         };
-        st.add_trials("e1", &[other]).await.unwrap();
+        st.add_trials(&run, &[other], &[], (0, 0.0)).await.unwrap();
         assert_eq!(st.trials("e1").await.unwrap(), [t]);
     }
 }
@@ -151,12 +169,314 @@ async fn dropped_columns_lose_their_trials_and_nothing_else() {
             trial(0, 3, 0, 100.0, false),
             trial(1, 2, 0, 100.0, true),
         ];
-        st.add_trials("e1", &all).await.unwrap();
-        st.drop_columns("e1", 0, 2).await.unwrap();
+        let run = claim(st).await;
+        st.add_trials(&run, &all, &[], (0, 0.0)).await.unwrap();
+        st.add_trials(&run, &[], &[(0, 2)], (0, 0.0)).await.unwrap();
         assert_eq!(
             st.trials("e1").await.unwrap(),
             [all[0].clone(), all[1].clone(), all[4].clone()]
         );
         assert_eq!(st.trial_count("e1").await.unwrap(), 3);
     }
+}
+
+/// Defect 8 (issue 9): a cancel answered `cancelled` stays cancelled, even
+/// when the run was finishing at that moment (the end-of-run write is
+/// guarded by the state).
+#[tokio::test]
+async fn a_cancelled_experiment_never_ends_succeeded() {
+    for (store, _dir) in stores("cancel").await {
+        let st = &store;
+        let run = claim(st).await;
+        assert!(st.cancel("e1").await.unwrap());
+        // The run ends a moment later with a result: it must not overwrite.
+        let changed = st
+            .finish(&run, "succeeded", 10, Some("{}"), None)
+            .await
+            .unwrap();
+        assert!(!changed, "{}", st.backend());
+        let row = st.get("e1").await.unwrap().unwrap();
+        assert_eq!(row.state, "cancelled");
+        assert!(row.result.is_none());
+        // Its heartbeat says so; its own cancelled record still lands.
+        assert_eq!(
+            st.heartbeat(&run, 7, 0.5, 60_000).await.unwrap(),
+            Held::Cancelled
+        );
+        assert!(st.finish(&run, "cancelled", 7, None, None).await.unwrap());
+        assert_eq!(st.get("e1").await.unwrap().unwrap().trials_done, 7);
+    }
+}
+
+/// Issue 14: a lease that expires is claimed again by the next claim
+/// (attempt 2); from then on every write of attempt 1 changes nothing and
+/// says the lease is lost, while attempt 2 writes as usual.
+#[tokio::test]
+async fn an_expired_lease_is_taken_over_and_the_old_holder_is_fenced() {
+    for (store, _dir) in stores("fence").await {
+        let st = &store;
+        let first = st.claim("sim", "w1", 300).await.unwrap().unwrap();
+        assert_eq!((first.attempt, first.worker.as_deref()), (1, Some("w1")));
+        let old = Lease {
+            id: "e1".into(),
+            attempt: 1,
+        };
+        // Held: nobody else can claim it, and its heartbeat holds it.
+        assert!(st.claim("sim", "w2", 300).await.unwrap().is_none());
+        assert_eq!(st.heartbeat(&old, 3, 0.1, 300).await.unwrap(), Held::Held);
+        tokio::time::sleep(std::time::Duration::from_millis(400)).await;
+        let second = st.claim("sim", "w2", 60_000).await.unwrap().unwrap();
+        assert_eq!(
+            (second.id.as_str(), second.attempt, second.worker.as_deref()),
+            ("e1", 2, Some("w2")),
+            "{}",
+            st.backend()
+        );
+        let new = Lease {
+            id: "e1".into(),
+            attempt: 2,
+        };
+        // The old holder: heartbeat lost, trials refused, end refused.
+        assert_eq!(st.heartbeat(&old, 99, 0.9, 300).await.unwrap(), Held::Lost);
+        let e = st
+            .add_trials(&old, &[trial(0, 0, 0, 1.0, true)], &[], (0, 0.0))
+            .await
+            .unwrap_err();
+        assert_eq!(
+            zwidth::store::Fault::of(&e),
+            zwidth::store::Fault::Lost,
+            "{e}"
+        );
+        assert!(!st
+            .finish(&old, "succeeded", 99, Some("{}"), None)
+            .await
+            .unwrap());
+        st.interrupt(&old, 99).await.unwrap();
+        let row = st.get("e1").await.unwrap().unwrap();
+        // (3: its last heartbeat while it held the lease; nothing since.)
+        assert_eq!((row.state.as_str(), row.trials_done), ("running", 3));
+        assert!(st.trials("e1").await.unwrap().is_empty());
+        // The new holder writes.
+        st.add_trials(&new, &[trial(0, 0, 0, 1.0, true)], &[], (0, 0.0))
+            .await
+            .unwrap();
+        assert_eq!(
+            st.heartbeat(&new, 1, 1.0, 60_000).await.unwrap(),
+            Held::Held
+        );
+        assert!(st
+            .finish(&new, "succeeded", 1, Some("{}"), None)
+            .await
+            .unwrap());
+        assert_eq!(st.get("e1").await.unwrap().unwrap().state, "succeeded");
+    }
+}
+
+/// Issue 14: a run whose worker keeps dying is not claimed forever: at its
+/// `MAX_LOST`-th expired lease it fails, naming the last worker.
+#[tokio::test]
+async fn a_run_whose_lease_expires_max_lost_times_fails_with_the_reason() {
+    for (store, _dir) in stores("lost").await {
+        let st = &store;
+        for n in 1..zwidth::store::leases::MAX_LOST {
+            let row = st
+                .claim("sim", &format!("w{n}"), 300)
+                .await
+                .unwrap()
+                .unwrap();
+            assert_eq!(row.attempt, n);
+            tokio::time::sleep(std::time::Duration::from_millis(400)).await;
+        }
+        // Expired MAX_LOST - 1 times and claimed again each time; the last
+        // claim (attempt MAX_LOST) expires too: failed, not claimed.
+        let last = st.claim("sim", "w-last", 300).await.unwrap().unwrap();
+        assert_eq!(last.attempt, zwidth::store::leases::MAX_LOST);
+        tokio::time::sleep(std::time::Duration::from_millis(400)).await;
+        assert!(st.claim("sim", "w-next", 300).await.unwrap().is_none());
+        let row = st.get("e1").await.unwrap().unwrap();
+        assert_eq!(row.state, "failed", "{}", st.backend());
+        let why = row.error.unwrap();
+        assert!(
+            why.contains("stopped answering 3 times") && why.contains("w-last"),
+            "{why}"
+        );
+    }
+}
+
+/// Issue 14: a shut-down run (interrupted) is claimed again at once, and
+/// a paused queue or a future start time keeps it waiting.
+#[tokio::test]
+async fn interrupted_runs_are_claimed_again_and_pause_holds_everything() {
+    for (store, _dir) in stores("resume").await {
+        let st = &store;
+        let run = claim(st).await;
+        st.interrupt(&run, 5).await.unwrap();
+        st.set_paused(true).await.unwrap();
+        assert!(st.claim("sim", "w2", 60_000).await.unwrap().is_none());
+        st.set_paused(false).await.unwrap();
+        let again = st.claim("sim", "w2", 60_000).await.unwrap().unwrap();
+        assert_eq!((again.attempt, again.trials_done), (2, 5));
+        // Another rig's queue is its own.
+        assert!(st.claim("bench", "w3", 60_000).await.unwrap().is_none());
+    }
+}
+
+/// One step of a worker in the claim model.
+#[derive(Debug, Clone)]
+enum Step {
+    /// Worker `w` claims the next runnable experiment (if it holds none).
+    Claim(usize),
+    /// `w` renews its lease.
+    Beat(usize),
+    /// `w` stalls past its lease (its lease ends now).
+    Stall(usize),
+    /// `w` stores a trial and ends its run succeeded.
+    Complete(usize),
+    /// `w` dies: it forgets its run without a word (and its lease runs out).
+    Crash(usize),
+}
+
+fn step() -> impl proptest::strategy::Strategy<Value = Step> {
+    use proptest::prelude::*;
+    (0usize..3, 0u8..5).prop_map(|(w, k)| match k {
+        0 => Step::Claim(w),
+        1 => Step::Beat(w),
+        2 => Step::Stall(w),
+        3 => Step::Complete(w),
+        _ => Step::Crash(w),
+    })
+}
+
+/// Issue 14, the claim rules as a property: for any interleaving of
+/// claims, heartbeats, stalls past the lease, completions and crashes of
+/// three workers over four experiments, no experiment is completed twice
+/// and none is lost: once the survivors drain the queue, each one ended
+/// exactly once, succeeded, or failed after `MAX_LOST` lost leases.
+#[test]
+fn no_experiment_is_done_twice_or_lost_whatever_the_interleaving() {
+    use proptest::prelude::*;
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let mut runner = proptest::test_runner::TestRunner::new(ProptestConfig {
+        cases: 48,
+        ..ProptestConfig::default()
+    });
+    let ids = ["e1", "e2", "e3", "e4"];
+    runner
+        .run(&proptest::collection::vec(step(), 1..40), |steps| {
+            rt.block_on(async {
+                let dir = tempdir::Dir::new("claims");
+                let st = Store::connect(&Location::Sqlite(dir.0.join("z.db")))
+                    .await
+                    .unwrap();
+                for id in ids {
+                    st.insert(NewExperiment {
+                        id,
+                        kind: "map",
+                        spec: "{}",
+                        priority: 0,
+                        key: None,
+                        not_before_ms: None,
+                        rig: "sim",
+                    })
+                    .await
+                    .unwrap();
+                }
+                let mut held: [Option<Lease>; 4] = Default::default();
+                let mut completed: std::collections::BTreeMap<String, u32> = Default::default();
+                let complete = |st: &Store, l: Lease| {
+                    let st = st.clone();
+                    async move {
+                        let t = trial(0, 0, 0, 1.0, true);
+                        let stored = st.add_trials(&l, &[t], &[], (1, 1.0)).await;
+                        let ended = st
+                            .finish(&l, "succeeded", 1, Some("{}"), None)
+                            .await
+                            .unwrap();
+                        // A write is refused exactly when the end is.
+                        assert_eq!(stored.is_ok(), ended, "{l:?}: {stored:?}");
+                        (l.id, ended)
+                    }
+                };
+                for s in steps {
+                    match s {
+                        Step::Claim(w) if held[w].is_none() => {
+                            if let Some(r) =
+                                st.claim("sim", &format!("w{w}"), 60_000).await.unwrap()
+                            {
+                                held[w] = Some(Lease {
+                                    id: r.id,
+                                    attempt: r.attempt,
+                                });
+                            }
+                        }
+                        Step::Beat(w) => {
+                            if let Some(l) = &held[w] {
+                                st.heartbeat(l, 0, 0.5, 60_000).await.unwrap();
+                            }
+                        }
+                        Step::Stall(w) => {
+                            // Its lease runs out while it is stalled; it
+                            // wakes up later still believing it holds it.
+                            if let Some(l) = &held[w] {
+                                st.heartbeat(l, 0, 0.5, -1).await.unwrap();
+                            }
+                        }
+                        Step::Complete(w) => {
+                            if let Some(l) = held[w].take() {
+                                let (id, ended) = complete(&st, l).await;
+                                if ended {
+                                    *completed.entry(id).or_default() += 1;
+                                }
+                            }
+                        }
+                        Step::Crash(w) => {
+                            // Time passes: a dead worker's lease runs out.
+                            if let Some(l) = held[w].take() {
+                                st.heartbeat(&l, 0, 0.5, -1).await.unwrap();
+                            }
+                        }
+                        Step::Claim(_) => {}
+                    }
+                }
+                // The survivors (workers that held nothing, and a fresh
+                // one) drain the queue; a held lease left over is a worker
+                // that never comes back: it expires.
+                for l in held.iter().flatten() {
+                    st.heartbeat(l, 0, 0.5, -1).await.unwrap();
+                }
+                let mut rounds = 0;
+                while let Some(r) = st.claim("sim", "drain", 60_000).await.unwrap() {
+                    let (id, ended) = complete(
+                        &st,
+                        Lease {
+                            id: r.id,
+                            attempt: r.attempt,
+                        },
+                    )
+                    .await;
+                    prop_assert!(ended);
+                    *completed.entry(id).or_default() += 1;
+                    rounds += 1;
+                    prop_assert!(rounds <= ids.len());
+                }
+                for id in ids {
+                    let row = st.get(id).await.unwrap().unwrap();
+                    let n = completed.get(id).copied().unwrap_or(0);
+                    match row.state.as_str() {
+                        "succeeded" => prop_assert_eq!(n, 1, "{} completed {} times", id, n),
+                        "failed" => {
+                            prop_assert_eq!(n, 0);
+                            prop_assert!(row.error.unwrap().contains("stopped answering"));
+                        }
+                        s => prop_assert!(false, "{} left {}", id, s),
+                    }
+                    // Exactly the one trial of its one completion.
+                    let stored = st.trial_count(id).await.unwrap();
+                    prop_assert_eq!(stored, i64::from(n));
+                }
+                st.close().await.unwrap();
+                Ok(())
+            })
+        })
+        .unwrap();
 }

@@ -1,4 +1,4 @@
--- The whole schema for PostgreSQL, as the SQLite migrations 0001-0009 build
+-- The whole schema for PostgreSQL, as the SQLite migrations 0001-0010 build
 -- it (migrations/sqlite/ explains each table). Integers are BIGINT and reals
 -- DOUBLE PRECISION, so one Rust type (i64, f64) reads both databases. A
 -- change to the schema adds a migration to both folders.
@@ -19,7 +19,11 @@ CREATE TABLE experiments (
     not_before_ms   BIGINT,
     rig             TEXT NOT NULL DEFAULT 'sim',
     progress        DOUBLE PRECISION NOT NULL DEFAULT 0,
-    best            TEXT
+    best            TEXT,
+    attempt         BIGINT NOT NULL DEFAULT 0,
+    worker          TEXT,
+    lease_until_ms  BIGINT,
+    lost            BIGINT NOT NULL DEFAULT 0
 );
 CREATE INDEX experiments_queue ON experiments (state, priority DESC, created_ms);
 CREATE INDEX experiments_rig_queue ON experiments (rig, state, priority DESC, created_ms);
@@ -83,4 +87,13 @@ CREATE TABLE rig_trials_out (
     trial   TEXT   NOT NULL,
     epoch   BIGINT NOT NULL,
     sent_ms BIGINT NOT NULL
+);
+
+CREATE TABLE workers (
+    id           TEXT PRIMARY KEY,
+    rigs         TEXT   NOT NULL,
+    started_ms   BIGINT NOT NULL,
+    seen_ms      BIGINT NOT NULL,
+    running      TEXT,
+    trials_per_s DOUBLE PRECISION NOT NULL DEFAULT 0
 );

@@ -328,6 +328,30 @@ pub enum Command {
         /// Longest a request may take before a 503 (s).
         #[arg(long, env = "ZWIDTH_REQUEST_TIMEOUT_S", default_value_t = 30.0)]
         request_timeout_s: f64,
+        /// Run no experiments here, only the API (and attached rigs, whose
+        /// agents connect here): `zwidth worker` processes run the rest.
+        /// Needs a PostgreSQL database.
+        #[arg(long)]
+        api_only: bool,
+        /// How long a running experiment's lease lasts without a heartbeat
+        /// (ms): a process silent this long loses the run to another.
+        #[arg(long, env = "ZWIDTH_LEASE_MS", default_value_t = crate::jobs::LEASE_MS)]
+        lease_ms: i64,
+    },
+    /// Run experiments from a shared PostgreSQL database, next to any
+    /// number of other workers and `serve --api-only` processes.
+    Worker {
+        /// The PostgreSQL database the API processes use (postgres://…).
+        #[arg(long, env = "ZWIDTH_DB")]
+        db: String,
+        /// Simulated rigs this worker runs, comma-separated NAME[:THREADS]
+        /// (0 threads: one per core); the same names the API was given.
+        #[arg(long, env = "ZWIDTH_RIGS", default_value = "sim:0")]
+        rigs: String,
+        /// How long a running experiment's lease lasts without a heartbeat
+        /// (ms): a worker silent this long loses the run to another.
+        #[arg(long, env = "ZWIDTH_LEASE_MS", default_value_t = crate::jobs::LEASE_MS)]
+        lease_ms: i64,
     },
     /// Connect a rig to a server: run its trials (on the simulated plant
     /// with --sim, or on a driver process) and send the results back.
@@ -503,6 +527,7 @@ impl Command {
         matches!(
             self,
             Command::Serve { .. }
+                | Command::Worker { .. }
                 | Command::Agent { .. }
                 | Command::Submit { .. }
                 | Command::Openapi { .. }

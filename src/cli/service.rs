@@ -20,6 +20,8 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             agent_ttl_ms,
             agent_grace_ms,
             request_timeout_s,
+            api_only,
+            lease_ms,
         } => {
             let agent_tokens = match &agent_token_file {
                 Some(f) => std::fs::read_to_string(f)
@@ -59,22 +61,14 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             let rigs = crate::rig::parse_list(&rigs)
                 .map_err(|e| CliError::Input(format!("--rigs: {e}")))?;
             let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
-            use std::io::IsTerminal;
-            // A log that cannot be written (its disk full) is skipped, never
-            // reported on stderr: that report panics, dropping the request.
-            let _ = tracing_subscriber::fmt()
-                .log_internal_errors(false)
-                .with_writer(std::io::stderr)
-                .with_ansi(std::io::stderr().is_terminal())
-                .with_env_filter(
-                    tracing_subscriber::EnvFilter::try_from_default_env()
-                        .unwrap_or_else(|_| "info".into()),
-                )
-                .try_init();
-            let rt = tokio::runtime::Builder::new_multi_thread()
-                .enable_all()
-                .build()
-                .map_err(|e| CliError::Failure(format!("cannot start the runtime: {e}")))?;
+            check_lease_ms(lease_ms)?;
+            if api_only && db.sqlite_path().is_some() {
+                return Err(CliError::Input(format!(
+                    "--api-only with --db {db}: a SQLite database is served by one process, which runs its experiments itself; give a postgres:// URL to run workers apart"
+                )));
+            }
+            init_logs();
+            let rt = runtime()?;
             let tokens: Vec<String> = tokens
                 .into_iter()
                 .map(|t| t.trim().to_string())
@@ -89,6 +83,8 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
                 rigs,
                 lease,
                 request_timeout_s,
+                api_only,
+                worker: crate::jobs::Worker::new(lease_ms),
             }))
             .map_err(|e| {
                 if e.starts_with("refusing") {
@@ -96,6 +92,34 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
                 } else {
                     CliError::Failure(e)
                 }
+            })
+        }
+        Command::Worker { db, rigs, lease_ms } => {
+            let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
+            if db.sqlite_path().is_some() {
+                return Err(CliError::Input(format!(
+                    "--db {db}: zwidth worker needs a PostgreSQL database (postgres://…); with SQLite, `zwidth serve` runs the experiments itself"
+                )));
+            }
+            check_lease_ms(lease_ms)?;
+            let rigs = crate::rig::parse_list(&rigs)
+                .map_err(|e| CliError::Input(format!("--rigs: {e}")))?;
+            if let Some(r) = rigs.iter().find(|r| r.attached().is_some()) {
+                return Err(CliError::Input(format!(
+                    "--rigs {}:attached: an attached rig runs in the `zwidth serve` process its agent connects to, not in a worker",
+                    r.info().id
+                )));
+            }
+            init_logs();
+            let rt = runtime()?;
+            rt.block_on(crate::jobs::worker::run(
+                db,
+                rigs,
+                crate::jobs::Worker::new(lease_ms),
+            ))
+            .map_err(|e| match e {
+                crate::store::OpenError::Refused(m) => CliError::Input(m),
+                crate::store::OpenError::Failed(m) => CliError::Failure(m),
             })
         }
         command @ Command::Agent { .. } => super::agent::run(command),
@@ -213,4 +237,37 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
         }
         other => Err(CliError::Failure(format!("{other:?} is not handled here"))),
     }
+}
+
+/// A lease from 300 ms (tests) to 10 minutes.
+fn check_lease_ms(lease_ms: i64) -> Result<(), CliError> {
+    if (300..=600_000).contains(&lease_ms) {
+        Ok(())
+    } else {
+        Err(CliError::Input(format!(
+            "--lease-ms = {lease_ms}: a lease lasts 300 to 600000 ms"
+        )))
+    }
+}
+
+/// Logs to stderr. A log that cannot be written (its disk full) is
+/// skipped, never reported on stderr: that report panics, dropping the
+/// request.
+fn init_logs() {
+    use std::io::IsTerminal;
+    let _ = tracing_subscriber::fmt()
+        .log_internal_errors(false)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .try_init();
+}
+
+fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::Failure(format!("cannot start the runtime: {e}")))
 }

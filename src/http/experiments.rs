@@ -34,6 +34,12 @@ pub struct ExperimentView {
     pub not_before_ms: Option<i64>,
     /// The rig it runs on.
     pub rig: String,
+    /// The worker process (host:pid:tag) running it, or that ran it last.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub worker: Option<String>,
+    /// How many times it was claimed: 1 for a run that went through at
+    /// once; more after a shutdown or a worker lost (0: never started).
+    pub attempt: i64,
     /// `trials_done`, `fraction` (0 to 1), a tune's `best` so far, while
     /// running `elapsed_s`, `eta_s` and `trials_total_estimate`, and `held`
     /// with the reason while its trials cannot be stored.
@@ -81,6 +87,8 @@ impl From<ExperimentRow> for ExperimentView {
         Self {
             progress: progress(&r),
             rig: r.rig.clone(),
+            worker: r.worker.clone(),
+            attempt: r.attempt,
             spec: serde_json::from_str(&r.spec).ok(),
             result: r
                 .result

@@ -92,6 +92,10 @@ pub struct ServeConfig {
     pub lease: crate::rig::lease::Timing,
     /// Longest a request may take before a 503 (s).
     pub request_timeout_s: f64,
+    /// Run only attached rigs here (workers run the simulated ones).
+    pub api_only: bool,
+    /// This process as a worker (its id on the leases it holds).
+    pub worker: crate::jobs::Worker,
 }
 
 /// The URI as logged: query values of anything that looks like a secret
@@ -218,7 +222,10 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         rigs,
         lease,
         request_timeout_s,
+        api_only,
+        worker,
     } = cfg;
+    let me = Arc::new(worker);
     if rigs.is_empty() {
         return Err("refusing to serve without a rig".into());
     }
@@ -332,13 +339,19 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
             stop_rx.clone(),
             runners.clone(),
         );
+        let me = me.clone();
         Arc::new(move |r: Arc<dyn Rig>| {
+            if api_only && r.attached().is_none() {
+                tracing::info!(rig = %r.info().id, "rig accepted; its experiments run on workers (--api-only)");
+                return;
+            }
             tracing::info!(rig = %r.info().id, parallelism = r.info().parallelism, "rig ready");
             let task = tokio::spawn(crate::jobs::runner(
                 store.clone(),
                 r,
                 running.clone(),
                 stop_rx.clone(),
+                me.clone(),
             ));
             runners.lock().unwrap_or_else(|e| e.into_inner()).push(task);
         })
@@ -346,6 +359,19 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     for r in &rigs {
         start_runner(r.clone());
     }
+    // This process in the `workers` table, with the rigs it runs.
+    let ran: Vec<Arc<dyn Rig>> = rigs
+        .iter()
+        .filter(|r| !api_only || r.attached().is_some())
+        .cloned()
+        .collect();
+    let announce = tokio::spawn(crate::jobs::worker::announce(
+        store.clone(),
+        me.clone(),
+        crate::jobs::worker::rig_names(&ran),
+        running.clone(),
+        stop_rx.clone(),
+    ));
     let state = AppState {
         store: store.clone(),
         tokens: Arc::new(tokens),
@@ -371,7 +397,7 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         router(state, Duration::from_secs_f64(request_timeout_s)),
     )
     .with_graceful_shutdown(async move {
-        shutdown_signal().await;
+        crate::jobs::worker::shutdown_signal().await;
         tracing::info!("shutting down: stopping the runners, draining requests");
         let _ = stop.send(true);
     })
@@ -382,6 +408,8 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     for r in tasks {
         let _ = r.await;
     }
+    let _ = announce.await;
+    let _ = store.worker_gone(&me.id).await;
     // Everything in the WAL goes into the database file: the `.db` alone
     // is then a complete copy.
     match store.close().await {
@@ -450,27 +478,5 @@ fn lock_database(db: &std::path::Path) -> Result<std::fs::File, String> {
             path.display()
         )),
         Err(std::fs::TryLockError::Error(e)) => Err(format!("cannot lock {}: {e}", path.display())),
-    }
-}
-
-/// Ctrl-C or SIGTERM (what `docker stop` sends).
-async fn shutdown_signal() {
-    let ctrl_c = async {
-        let _ = tokio::signal::ctrl_c().await;
-    };
-    #[cfg(unix)]
-    let term = async {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut s) => {
-                s.recv().await;
-            }
-            Err(_) => std::future::pending::<()>().await,
-        }
-    };
-    #[cfg(not(unix))]
-    let term = std::future::pending::<()>();
-    tokio::select! {
-        _ = ctrl_c => {},
-        _ = term => {},
     }
 }

@@ -95,7 +95,7 @@ impl Problem {
                     format!("{e}; restore a backup (zwidth backup) and restart"),
                 )
             }
-            Fault::Other => Self::internal(e),
+            Fault::Other | Fault::Lost => Self::internal(e),
         }
     }
 

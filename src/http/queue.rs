@@ -123,10 +123,17 @@ pub async fn metrics(State(st): State<AppState>) -> Result<Response, Problem> {
     }
     out.push_str("# HELP zwidth_trials_total Trials done over all experiments.\n# TYPE zwidth_trials_total counter\n");
     out.push_str(&format!("zwidth_trials_total {trials}\n"));
-    out.push_str("# HELP zwidth_trials_per_second Trials per second of the running experiment, last second.\n# TYPE zwidth_trials_per_second gauge\n");
+    // Every worker process (this one too) reports itself each second:
+    // those seen in the last three seconds are alive.
+    let workers = st.store.workers(3_000).await.map_err(|e| st.fail(e))?;
+    let rate: f64 = workers.iter().map(|w| w.trials_per_s).sum();
+    let busy = workers.iter().filter(|w| w.running.is_some()).count();
+    out.push_str("# HELP zwidth_trials_per_second Trials per second over every worker, last second.\n# TYPE zwidth_trials_per_second gauge\n");
+    out.push_str(&format!("zwidth_trials_per_second {rate}\n"));
+    out.push_str("# HELP zwidth_workers Worker processes seen in the last 3 s, by whether they run an experiment.\n# TYPE zwidth_workers gauge\n");
     out.push_str(&format!(
-        "zwidth_trials_per_second {}\n",
-        crate::jobs::TRIALS_PER_SECOND.load(std::sync::atomic::Ordering::Relaxed)
+        "zwidth_workers{{busy=\"true\"}} {busy}\nzwidth_workers{{busy=\"false\"}} {}\n",
+        workers.len() - busy
     ));
     Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out).into_response())
 }

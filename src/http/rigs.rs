@@ -26,11 +26,22 @@ pub struct RigView {
     pub next_start_ms: i64,
     /// Experiments waiting for it (queued or scheduled).
     pub waiting: i64,
-    /// The experiment it is running, if any.
+    /// The experiment it is running, if any (the oldest, when several
+    /// workers run it: see `runs`).
     pub running: Option<String>,
+    /// Every experiment running on it, and the worker process running each.
+    pub runs: Vec<RunningOn>,
     /// An attached rig: its agent's session, state and capabilities.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub attached: Option<crate::rig::attached::AttachedView>,
+}
+
+/// An experiment running, and where.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct RunningOn {
+    pub id: String,
+    /// The worker process (host:pid:tag) holding its lease.
+    pub worker: Option<String>,
 }
 
 pub async fn rig_view(st: &AppState, rig: &Arc<dyn Rig>) -> Result<RigView, Problem> {
@@ -50,7 +61,11 @@ pub async fn rig_view(st: &AppState, rig: &Arc<dyn Rig>) -> Result<RigView, Prob
         next_start_ms: next.as_millisecond(),
         window,
         waiting,
-        running,
+        running: running.first().map(|(id, _)| id.clone()),
+        runs: running
+            .into_iter()
+            .map(|(id, worker)| RunningOn { id, worker })
+            .collect(),
     })
 }
 

@@ -7,9 +7,11 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::Duration;
 
+pub mod worker;
+
 use crate::experiment::ExperimentSpec;
 use crate::rig::Rig;
-use crate::store::{Fault, Store};
+use crate::store::{Fault, Held, Lease, Store};
 use crate::zwidth::search::{Observer, StoredEvaluation, StoredTrial};
 
 /// The observers of running experiments by id, so a cancel request reaches
@@ -31,6 +33,40 @@ pub fn cancel_running(running: &Running, id: &str) -> bool {
 /// Trials per second of the running experiment over the last second (for /metrics).
 pub static TRIALS_PER_SECOND: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
+/// This process as a worker: its id in the `workers` table and on the
+/// leases it holds, and how long a lease lasts without a heartbeat.
+#[derive(Debug, Clone)]
+pub struct Worker {
+    pub id: String,
+    pub lease_ms: i64,
+}
+
+impl Worker {
+    /// A new worker id, `host:pid:random`, unique across restarts.
+    pub fn new(lease_ms: i64) -> Self {
+        use rand::Rng;
+        let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+            .map(|h| h.trim().to_string())
+            .ok()
+            .filter(|h| !h.is_empty())
+            .unwrap_or_else(|| "host".into());
+        let tag: u32 = rand::rng().random();
+        Self {
+            id: format!("{host}:{}:{tag:08x}", std::process::id()),
+            lease_ms,
+        }
+    }
+
+    /// How often a running experiment's lease is renewed: a third of the
+    /// lease (two heartbeats may be missed), at most once a second.
+    pub fn heartbeat(&self) -> Duration {
+        Duration::from_millis((self.lease_ms / 3).clamp(100, 1000) as u64)
+    }
+}
+
+/// The default lease: a worker silent this long loses its run.
+pub const LEASE_MS: i64 = 15_000;
+
 /// Claim and run `rig`'s experiments until `shutdown` turns true. Outside
 /// the rig's window (if it has one) nothing new starts. On shutdown a
 /// running experiment stops within one trial, its finished trials stored,
@@ -40,6 +76,7 @@ pub async fn runner(
     rig: Arc<dyn Rig>,
     running: Running,
     shutdown: tokio::sync::watch::Receiver<bool>,
+    me: Arc<Worker>,
 ) {
     let id = rig.info().id.clone();
     while !*shutdown.borrow() {
@@ -59,15 +96,20 @@ pub async fn runner(
             Ok(None) => {}
             Err(e) => tracing::warn!(error = %e, rig = %id, "reading the rig window failed"),
         }
-        match store.claim_next(&id).await {
+        match store.claim(&id, &me.id, me.lease_ms).await {
             Ok(Some(row)) => {
+                let lease = Lease {
+                    id: row.id,
+                    attempt: row.attempt,
+                };
                 run_one(
                     &store,
                     rig.clone(),
                     &running,
-                    row.id,
+                    lease,
                     row.spec,
                     shutdown.clone(),
+                    &me,
                 )
                 .await
             }
@@ -103,6 +145,8 @@ fn window_closed(
 /// and the experiment shows why in its progress.
 #[derive(Default)]
 struct Unstored {
+    /// The run's lease was taken over: nothing more is written.
+    lost: bool,
     trials: Vec<StoredTrial>,
     /// Columns dropped from a map: (scope, first dropped column).
     dropped: Vec<(u32, u32)>,
@@ -113,21 +157,32 @@ struct Unstored {
 impl Unstored {
     /// Store what finished since the last call (and a tune's best so far).
     /// Err: what could not be stored is kept for the next call.
-    async fn flush(&mut self, store: &Store, id: &str, observer: &Observer) -> Result<(), Fault> {
+    async fn flush(
+        &mut self,
+        store: &Store,
+        lease: &Lease,
+        observer: &Observer,
+    ) -> Result<(), Fault> {
+        if self.lost {
+            return Err(Fault::Lost);
+        }
         self.trials.extend(observer.take_new());
         self.evals.extend(observer.take_new_evaluations());
         self.dropped.extend(observer.take_dropped());
         let r = async {
-            store.add_trials(id, &self.trials).await?;
-            self.trials.clear();
-            // After the trials: a dropped column may have had some in the
-            // batch just stored.
-            while let Some(&(scope, column)) = self.dropped.first() {
-                store.drop_columns(id, scope, column).await?;
-                self.dropped.remove(0);
-            }
+            // Dropped columns after the trials, in the same transaction: a
+            // dropped column may have had some in this batch.
+            let progress = (
+                observer.trials.load(Ordering::Relaxed) as i64,
+                observer.fraction(),
+            );
             store
-                .add_evaluations(id, &self.evals, observer.best())
+                .add_trials(lease, &self.trials, &self.dropped, progress)
+                .await?;
+            self.trials.clear();
+            self.dropped.clear();
+            store
+                .add_evaluations(lease, &self.evals, observer.best())
                 .await?;
             self.evals.clear();
             Ok::<(), sqlx::Error>(())
@@ -140,6 +195,12 @@ impl Unstored {
                     observer.hold(None);
                 }
                 Ok(())
+            }
+            Err(e) if Fault::of(&e) == Fault::Lost => {
+                tracing::warn!(error = %e, "the run's lease was taken over: abandoning it");
+                self.lost = true;
+                observer.cancel.store(true, Ordering::Relaxed);
+                Err(Fault::Lost)
             }
             Err(e) => {
                 store.observe(&e);
@@ -211,15 +272,17 @@ where
     }
 }
 
-#[tracing::instrument(skip(store, rig, running, spec, shutdown), fields(rig = %rig.info().id))]
+#[tracing::instrument(skip(store, rig, running, spec, shutdown, me), fields(rig = %rig.info().id, id = %lease.id, attempt = lease.attempt))]
 async fn run_one(
     store: &Store,
     rig: Arc<dyn Rig>,
     running: &Running,
-    id: String,
+    lease: Lease,
     spec: String,
     shutdown: tokio::sync::watch::Receiver<bool>,
+    me: &Worker,
 ) {
+    let id = lease.id.clone();
     // A stored spec is checked again: one stored by an older version may
     // not pass today's limits, and must fail here, not take the server down.
     let checked = serde_json::from_str::<ExperimentSpec>(&spec)
@@ -232,7 +295,7 @@ async fn run_one(
         Ok(x) => x,
         Err(e) => {
             let _ = retrying("recording a failed spec", &shutdown, store, None, || {
-                store.finish(&id, "failed", 0, None, Some(&e))
+                store.finish(&lease, "failed", 0, None, Some(&e))
             })
             .await;
             return;
@@ -257,7 +320,7 @@ async fn run_one(
         Err(e) => {
             if !*shutdown.borrow() {
                 let why = format!("its stored trials could not be read: {e}");
-                let _ = store.finish(&id, "failed", 0, None, Some(&why)).await;
+                let _ = store.finish(&lease, "failed", 0, None, Some(&why)).await;
             }
             return;
         }
@@ -281,28 +344,35 @@ async fn run_one(
     let rig_id = rig.info().id;
     let on_rig = rig.clone();
     let mut task = tokio::task::spawn_blocking(move || on_rig.pool().install(|| parsed.run(obs)));
-    // Every 100 ms: store the trials finished since (one transaction), write
-    // progress, and look for a cancel request or shutdown.
+    // Every 100 ms: store the trials finished since (one transaction) and
+    // look for shutdown; every heartbeat: renew the lease, write progress,
+    // and look for a cancel request (made by any API process).
     let mut rate_mark = (std::time::Instant::now(), 0usize);
     let mut interrupted = false;
     let mut unstored = Unstored::default();
+    let mut beat = std::time::Instant::now();
     let outcome = loop {
         tokio::select! {
             r = &mut task => break r,
             _ = tokio::time::sleep(Duration::from_millis(100)) => {
-                let _ = unstored.flush(store, &id, &observer).await;
+                let _ = unstored.flush(store, &lease, &observer).await;
                 let trials = observer.trials.load(Ordering::Relaxed) as i64;
                 let dt = rate_mark.0.elapsed().as_secs_f64();
                 if dt >= 1.0 {
                     TRIALS_PER_SECOND.store(((trials as usize).saturating_sub(rate_mark.1) as f64 / dt).round() as u64, Ordering::Relaxed);
                     rate_mark = (std::time::Instant::now(), trials as usize);
                 }
-                if let Err(e) = store.set_progress(&id, trials, observer.fraction()).await {
-                    tracing::debug!(error = %e, "progress write failed");
-                }
-                if let Ok(Some(state)) = store.state(&id).await {
-                    if state == "cancelled" {
-                        observer.cancel.store(true, Ordering::Relaxed);
+                if beat.elapsed() >= me.heartbeat() && !unstored.lost {
+                    beat = std::time::Instant::now();
+                    match store.heartbeat(&lease, trials, observer.fraction(), me.lease_ms).await {
+                        Ok(Held::Held) => {}
+                        Ok(Held::Cancelled) => observer.cancel.store(true, Ordering::Relaxed),
+                        Ok(Held::Lost) => {
+                            tracing::warn!("the run's lease was taken over: abandoning it");
+                            unstored.lost = true;
+                            observer.cancel.store(true, Ordering::Relaxed);
+                        }
+                        Err(e) => tracing::warn!(error = %e, "heartbeat failed"),
                     }
                 }
                 // Hardware moves only inside its window: an attached rig
@@ -325,7 +395,7 @@ async fn run_one(
     // experiment stays in `running` meanwhile, so its `held` reason shows).
     let mut wait = FIRST_RETRY;
     let stored_all = loop {
-        match unstored.flush(store, &id, &observer).await {
+        match unstored.flush(store, &lease, &observer).await {
             Ok(()) => break true,
             Err(Fault::Busy | Fault::Full) if !*shutdown.borrow() => {
                 tokio::time::sleep(wait).await;
@@ -341,6 +411,11 @@ async fn run_one(
             .unwrap_or_else(|e| e.into_inner())
             .remove(&id)
     };
+    if unstored.lost {
+        // Another worker holds the run now: nothing of ours is written.
+        forget();
+        return;
+    }
     if interrupted || !stored_all {
         // Shut down, or its trials cannot be stored: leave it to resume at
         // the next start from what is stored (never end it with trials lost).
@@ -349,7 +424,7 @@ async fn run_one(
             &shutdown,
             store,
             None,
-            || store.interrupt(&id, trials),
+            || store.interrupt(&lease, trials),
         )
         .await;
         forget();
@@ -364,14 +439,14 @@ async fn run_one(
     };
     let what = "recording the end of a run";
     let r = retrying(what, &shutdown, store, Some(&observer), || {
-        store.finish(&id, state, trials, result.as_deref(), error.as_deref())
+        store.finish(&lease, state, trials, result.as_deref(), error.as_deref())
     })
     .await;
     if let (Err(e), "succeeded") = (&r, state) {
         // A result the database refuses (e.g. too big): say so.
         let why = format!("the result could not be stored: {e}");
         let _ = retrying(what, &shutdown, store, Some(&observer), || {
-            store.finish(&id, "failed", trials, None, Some(&why))
+            store.finish(&lease, "failed", trials, None, Some(&why))
         })
         .await;
     }
@@ -482,7 +557,7 @@ mod tests {
     async fn claimed_behind_a_lock(
         tag: &str,
         id: &str,
-    ) -> (Store, TempStore, sqlx::SqliteConnection) {
+    ) -> (Store, TempStore, sqlx::SqliteConnection, Lease) {
         use sqlx::Connection;
         let (store, guard) = temp_store(tag).await;
         store
@@ -497,14 +572,19 @@ mod tests {
             })
             .await
             .unwrap();
-        assert_eq!(store.claim_next("sim").await.unwrap().unwrap().id, id);
+        let row = store.claim("sim", "w", LEASE_MS).await.unwrap().unwrap();
+        assert_eq!((row.id.as_str(), row.attempt), (id, 1));
+        let lease = Lease {
+            id: row.id,
+            attempt: row.attempt,
+        };
         let url = format!("sqlite://{}", guard.0.join("z.db").display());
         let mut lock = sqlx::SqliteConnection::connect(&url).await.unwrap();
         sqlx::query("BEGIN IMMEDIATE")
             .execute(&mut lock)
             .await
             .unwrap();
-        (store, guard, lock)
+        (store, guard, lock, lease)
     }
 
     #[tokio::test(flavor = "multi_thread")]
@@ -513,7 +593,7 @@ mod tests {
         // ends: its final store is busy (the store's busy timeout), retried
         // with back-off, and the run ends `succeeded` with its trial
         // stored, not `interrupted` (that is for shutdown only).
-        let (store, _guard, mut lock) = claimed_behind_a_lock("busy-end", "e1").await;
+        let (store, _guard, mut lock, lease) = claimed_behind_a_lock("busy-end", "e1").await;
         let release = tokio::spawn(async move {
             tokio::time::sleep(Duration::from_secs(6)).await;
             sqlx::query("ROLLBACK").execute(&mut lock).await.unwrap();
@@ -524,9 +604,10 @@ mod tests {
             &store,
             rig,
             &Running::default(),
-            "e1".into(),
+            lease,
             SMALL.into(),
             shutdown,
+            &Worker::new(LEASE_MS),
         )
         .await;
         release.await.unwrap();
@@ -541,7 +622,7 @@ mod tests {
         // final store is busy and not retried (the run is left to resume
         // from what is stored at the next start), so the runner returns
         // within a few busy timeouts instead of waiting for the lock.
-        let (store, _guard, mut lock) = claimed_behind_a_lock("busy-shutdown", "e2").await;
+        let (store, _guard, mut lock, lease) = claimed_behind_a_lock("busy-shutdown", "e2").await;
         let rig = Arc::new(crate::rig::SimulatedRig::new("sim", 1).unwrap());
         let (_tx, shutdown) = tokio::sync::watch::channel(true);
         let ended = tokio::time::timeout(
@@ -550,9 +631,10 @@ mod tests {
                 &store,
                 rig,
                 &Running::default(),
-                "e2".into(),
+                lease,
                 SMALL.into(),
                 shutdown,
+                &Worker::new(LEASE_MS),
             ),
         )
         .await;

@@ -7,6 +7,10 @@ use serde::Serialize;
 /// Prefix of the error a known-corrupt store answers writes with.
 pub const CORRUPT_PREFIX: &str = "the database is corrupt; writes are refused";
 
+/// Prefix of the error a write of a run answers when the run's lease was
+/// taken over (or the run ended): the writer must abandon the run.
+pub const LEASE_LOST_PREFIX: &str = "the lease on this run is lost";
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Fault {
     /// SQLITE_FULL, or an I/O error while writing (ENOSPC reaches SQLite as
@@ -17,6 +21,9 @@ pub enum Fault {
     Busy,
     /// SQLITE_CORRUPT or SQLITE_NOTADB, or a store that knows it is corrupt.
     Corrupt,
+    /// A write of a run whose lease another worker holds now (or whose run
+    /// ended): nothing was written, and the writer abandons the run.
+    Lost,
     Other,
 }
 
@@ -31,6 +38,18 @@ const SQLITE_NOTADB: i64 = 26;
 impl Fault {
     pub fn of(e: &sqlx::Error) -> Fault {
         match e {
+            sqlx::Error::Database(d)
+                if d.try_downcast_ref::<sqlx::postgres::PgDatabaseError>()
+                    .is_some() =>
+            {
+                // PostgreSQL's SQLSTATE (https://www.postgresql.org/docs/current/errcodes-appendix.html).
+                match d.code().as_deref() {
+                    Some("53100") => Fault::Full,
+                    Some("40001" | "40P01" | "55P03" | "57P01" | "57P03" | "53300") => Fault::Busy,
+                    Some("XX001" | "XX002") => Fault::Corrupt,
+                    _ => Fault::Other,
+                }
+            }
             sqlx::Error::Database(d) => {
                 // Extended codes carry the primary code in the low byte.
                 let code = d
@@ -44,8 +63,11 @@ impl Fault {
                     _ => Fault::Other,
                 }
             }
-            sqlx::Error::PoolTimedOut => Fault::Busy,
+            // No connection in time, or one lost (a database server
+            // restarting): try again.
+            sqlx::Error::PoolTimedOut | sqlx::Error::Io(_) => Fault::Busy,
             sqlx::Error::Protocol(m) if m.starts_with(CORRUPT_PREFIX) => Fault::Corrupt,
+            sqlx::Error::Protocol(m) if m.starts_with(LEASE_LOST_PREFIX) => Fault::Lost,
             _ => Fault::Other,
         }
     }

@@ -15,7 +15,9 @@
 
 pub mod agents;
 pub mod fault;
+pub mod leases;
 pub use fault::{Fault, Health};
+pub use leases::{Held, Lease, WorkerRow};
 
 pub mod location;
 pub use location::Location;
@@ -108,6 +110,12 @@ pub struct ExperimentRow {
     pub progress: f64,
     /// A tune's best so far (JSON).
     pub best: Option<String>,
+    /// Claims so far; the one holding the run now (see `leases`).
+    pub attempt: i64,
+    /// The worker holding the run, if running.
+    pub worker: Option<String>,
+    /// When its lease ends (database clock, unix ms).
+    pub lease_until_ms: Option<i64>,
 }
 
 /// What a submission stores.
@@ -351,6 +359,9 @@ impl Store {
                 rig: rig.into(),
                 progress: 0.0,
                 best: None,
+                attempt: 0,
+                worker: None,
+                lease_until_ms: None,
             }));
         }
         let row = on_pool!(self, p => sqlx::query_as::<_, ExperimentRow>(
@@ -393,7 +404,8 @@ impl Store {
              ORDER BY created_ms DESC, id DESC LIMIT $3"
         } else {
             "SELECT id, kind, '' AS spec, state, priority, created_ms, started_ms, finished_ms, trials_done,
-                    NULL AS result, error, idempotency_key, not_before_ms, rig, progress, best
+                    NULL AS result, error, idempotency_key, not_before_ms, rig, progress, best,
+                    attempt, worker, lease_until_ms
              FROM experiments
              WHERE $1 = '' OR created_ms < $2 OR (created_ms = $2 AND id < $1)
              ORDER BY created_ms DESC, id DESC LIMIT $3"
@@ -405,47 +417,6 @@ impl Store {
             .bind(limit)
             .fetch_all(p)
             .await)
-    }
-
-    /// Claim `rig`'s next experiment that may start now (highest priority,
-    /// oldest first), unless the queue is paused. Scheduled experiments whose
-    /// time has come count as queued.
-    pub async fn claim_next(&self, rig: &str) -> Result<Option<ExperimentRow>, sqlx::Error> {
-        self.writable()?;
-        let now = now_ms();
-        match &self.db {
-            Db::Sqlite(p) => sqlx::query_as::<_, ExperimentRow>(
-                "UPDATE experiments SET state = 'running', started_ms = $1
-                 WHERE id = (SELECT id FROM experiments
-                             WHERE rig = $2 AND state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= $1)
-                               AND (SELECT paused FROM queue_control WHERE id = 1) = 0
-                             ORDER BY priority DESC, created_ms, id LIMIT 1)
-                 RETURNING *",
-            )
-            .bind(now)
-            .bind(rig)
-            .fetch_all(p)
-            .await
-            .map(|mut rows| rows.pop()),
-            // Several processes claim at once: the row is locked by the
-            // claim that found it first, and the others skip it.
-            Db::Postgres(p) => sqlx::query_as::<_, ExperimentRow>(
-                "WITH next AS MATERIALIZED (
-                     SELECT id FROM experiments
-                     WHERE rig = $2 AND state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= $1)
-                       AND (SELECT paused FROM queue_control WHERE id = 1) = 0
-                     ORDER BY priority DESC, created_ms, id LIMIT 1
-                     FOR UPDATE SKIP LOCKED)
-                 UPDATE experiments e SET state = 'running', started_ms = $1
-                 FROM next WHERE e.id = next.id
-                 RETURNING e.*",
-            )
-            .bind(now)
-            .bind(rig)
-            .fetch_all(p)
-            .await
-            .map(|mut rows| rows.pop()),
-        }
     }
 
     /// The rig's window, if it has one.
@@ -477,19 +448,23 @@ impl Store {
         }
     }
 
-    /// Per rig: experiments waiting, and the one running (if any).
-    pub async fn rig_load(&self, rig: &str) -> Result<(i64, Option<String>), sqlx::Error> {
+    /// Per rig: experiments waiting, and those running with the worker
+    /// running each (oldest first).
+    pub async fn rig_load(
+        &self,
+        rig: &str,
+    ) -> Result<(i64, Vec<(String, Option<String>)>), sqlx::Error> {
         let waiting: i64 = on_pool!(self, p => sqlx::query_scalar(
             "SELECT COUNT(*) FROM experiments WHERE rig = $1 AND state IN ('queued', 'scheduled')",
         )
         .bind(rig)
         .fetch_one(p)
         .await)?;
-        let running: Option<String> = on_pool!(self, p => sqlx::query_scalar(
-            "SELECT id FROM experiments WHERE rig = $1 AND state = 'running' ORDER BY started_ms, id LIMIT 1",
+        let running: Vec<(String, Option<String>)> = on_pool!(self, p => sqlx::query_as(
+            "SELECT id, worker FROM experiments WHERE rig = $1 AND state = 'running' ORDER BY started_ms, id",
         )
         .bind(rig)
-        .fetch_optional(p)
+        .fetch_all(p)
         .await)?;
         Ok((waiting, running))
     }
@@ -524,51 +499,6 @@ impl Store {
         Ok((by_state, trials))
     }
 
-    pub async fn set_progress(
-        &self,
-        id: &str,
-        trials: i64,
-        fraction: f64,
-    ) -> Result<(), sqlx::Error> {
-        self.writable()?;
-        on_pool!(self, p => sqlx::query("UPDATE experiments SET trials_done = $1, progress = $2 WHERE id = $3 AND state = 'running'")
-            .bind(trials)
-            .bind(if fraction.is_finite() { fraction.clamp(0.0, 1.0) } else { 0.0 })
-            .bind(id)
-            .execute(p)
-            .await
-            .map(|_| ()))
-    }
-
-    /// Record the end of a run: `state` is succeeded, failed or cancelled.
-    /// Only a running experiment ends succeeded or failed; a cancelled one
-    /// stays cancelled (its trial count is still recorded). False when
-    /// nothing changed (it was cancelled, or is not running here).
-    pub async fn finish(
-        &self,
-        id: &str,
-        state: &str,
-        trials: i64,
-        result: Option<&str>,
-        error: Option<&str>,
-    ) -> Result<bool, sqlx::Error> {
-        self.writable()?;
-        let r = on_pool!(self, p => sqlx::query("UPDATE experiments SET state = $1, trials_done = $2, result = $3, error = $4,
-                     finished_ms = COALESCE(CASE WHEN state = 'cancelled' THEN finished_ms END, $5),
-                     progress = CASE WHEN $1 = 'succeeded' THEN 1 ELSE progress END
-                     WHERE id = $6 AND (state = 'running' OR (state = 'cancelled' AND $1 = 'cancelled'))")
-            .bind(state)
-            .bind(trials)
-            .bind(result)
-            .bind(error)
-            .bind(now_ms())
-            .bind(id)
-            .execute(p)
-            .await
-            .map(|r| r.rows_affected()))?;
-        Ok(r == 1)
-    }
-
     /// Ask a queued, scheduled, running or interrupted experiment to stop;
     /// true if it was one of those.
     pub async fn cancel(&self, id: &str) -> Result<bool, sqlx::Error> {
@@ -582,23 +512,12 @@ impl Store {
         Ok(r == 1)
     }
 
-    /// A running experiment stopped by shutdown (its trials are stored).
-    pub async fn interrupt(&self, id: &str, trials: i64) -> Result<(), sqlx::Error> {
-        self.writable()?;
-        on_pool!(self, p => sqlx::query("UPDATE experiments SET state = 'interrupted', trials_done = $1 WHERE id = $2 AND state = 'running'")
-            .bind(trials)
-            .bind(id)
-            .execute(p)
-            .await
-            .map(|_| ()))
-    }
-
     /// After a restart: anything left running (killed) or interrupted
     /// (shut down) is queued again; it resumes from its stored trials.
     pub async fn requeue_interrupted(&self) -> Result<u64, sqlx::Error> {
         self.writable()?;
         on_pool!(self, p => sqlx::query(
-            "UPDATE experiments SET state = 'queued', started_ms = NULL WHERE state IN ('running', 'interrupted')",
+            "UPDATE experiments SET state = 'queued', started_ms = NULL, lease_until_ms = NULL WHERE state IN ('running', 'interrupted')",
         )
         .execute(p)
         .await
@@ -612,72 +531,26 @@ impl Store {
             .await)
     }
 
-    /// Store finished trials in one transaction. A trial already stored
-    /// keeps its point and takes the place given here (the search that
-    /// asked for it knows it; an attached rig's result is stored first,
-    /// without one: [`Store::add_trial_unplaced`]).
-    pub async fn add_trials(&self, id: &str, trials: &[StoredTrial]) -> Result<(), sqlx::Error> {
-        self.insert_trials(id, trials, true).await
-    }
-
-    /// Store a trial whose place in its map is not known here; a trial
-    /// already stored is kept as it is.
-    pub async fn add_trial_unplaced(
-        &self,
-        id: &str,
-        trial: &StoredTrial,
-    ) -> Result<(), sqlx::Error> {
-        self.insert_trials(id, std::slice::from_ref(trial), false)
-            .await
-    }
-
-    async fn insert_trials(
-        &self,
-        id: &str,
-        trials: &[StoredTrial],
-        place: bool,
-    ) -> Result<(), sqlx::Error> {
+    /// Store a trial whose place in its map is not known here (an attached
+    /// rig's result, stored before the search takes it; the search's
+    /// [`Store::add_trials`] places it); a trial already stored is kept.
+    pub async fn add_trial_unplaced(&self, id: &str, t: &StoredTrial) -> Result<(), sqlx::Error> {
         self.writable()?;
-        if trials.is_empty() {
-            return Ok(());
-        }
-        let sql = if place {
+        let point = serde_json::to_string(&t.point).unwrap_or_default();
+        on_pool!(self, p => sqlx::query(
             "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES ($1, $2, $3, $4, $5, $6, $7)
-             ON CONFLICT (experiment_id, scope, k, b) DO UPDATE SET col = excluded.col, idx = excluded.idx"
-        } else {
-            "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES ($1, $2, $3, $4, $5, $6, $7)
-             ON CONFLICT (experiment_id, scope, k, b) DO NOTHING"
-        };
-        on_pool!(self, p => {
-            let mut tx = p.begin().await?;
-            for t in trials {
-                let point = serde_json::to_string(&t.point).unwrap_or_default();
-                sqlx::query(sql)
-                    .bind(id)
-                    .bind(t.scope as i64)
-                    .bind(t.point.k)
-                    .bind(t.point.b)
-                    .bind(point)
-                    .bind(t.column as i64)
-                    .bind(t.index as i64)
-                    .execute(&mut *tx)
-                    .await?;
-            }
-            tx.commit().await
-        })
-    }
-
-    /// Delete the stored trials of map `scope`'s columns from `column` on
-    /// (columns a search ran past the end of its map).
-    pub async fn drop_columns(&self, id: &str, scope: u32, column: u32) -> Result<(), sqlx::Error> {
-        self.writable()?;
-        on_pool!(self, p => sqlx::query("DELETE FROM trials WHERE experiment_id = $1 AND scope = $2 AND col >= $3")
-            .bind(id)
-            .bind(scope as i64)
-            .bind(column as i64)
-            .execute(p)
-            .await
-            .map(|_| ()))
+             ON CONFLICT (experiment_id, scope, k, b) DO NOTHING",
+        )
+        .bind(id)
+        .bind(t.scope as i64)
+        .bind(t.point.k)
+        .bind(t.point.b)
+        .bind(point)
+        .bind(t.column as i64)
+        .bind(t.index as i64)
+        .execute(p)
+        .await
+        .map(|_| ()))
     }
 
     /// Every stored trial of an experiment.
@@ -724,42 +597,6 @@ impl Store {
                 })
             })
             .collect())
-    }
-
-    /// Store finished evaluations (already stored ones are kept) and the best so far.
-    pub async fn add_evaluations(
-        &self,
-        id: &str,
-        evals: &[StoredEvaluation],
-        best: Option<serde_json::Value>,
-    ) -> Result<(), sqlx::Error> {
-        self.writable()?;
-        if evals.is_empty() {
-            return Ok(());
-        }
-        on_pool!(self, p => {
-            let mut tx = p.begin().await?;
-            for e in evals {
-                sqlx::query(
-                    "INSERT INTO evaluations (experiment_id, key, seq, record)
-                     VALUES ($1, $2, (SELECT COUNT(*) FROM evaluations WHERE experiment_id = $1), $3)
-                     ON CONFLICT (experiment_id, key) DO NOTHING",
-                )
-                .bind(id)
-                .bind(&e.key)
-                .bind(e.record.to_string())
-                .execute(&mut *tx)
-                .await?;
-            }
-            if let Some(b) = &best {
-                sqlx::query("UPDATE experiments SET best = $1 WHERE id = $2")
-                    .bind(b.to_string())
-                    .bind(id)
-                    .execute(&mut *tx)
-                    .await?;
-            }
-            tx.commit().await
-        })
     }
 
     /// Every stored evaluation of a tune, in the order stored.

@@ -170,3 +170,35 @@ pub fn wait_end(base: &str, id: &str, secs: u64) -> serde_json::Value {
     }
 }
 pub mod pg;
+
+/// Use `token` for writes to the server at `base` (one given, not made).
+pub fn register_token(base: &str, token: &str) {
+    TOKENS
+        .lock()
+        .unwrap()
+        .push((base.to_string(), token.to_string()));
+}
+
+/// Start `zwidth ARGS` with stderr in `dir/<log>`, and wait for the first
+/// line it prints on stdout (its "serving on …" or "zwidth worker …").
+pub fn spawn_ready(args: &[&str], dir: &std::path::Path, log: &str) -> (Child, String) {
+    let mut child = Command::new(bin())
+        .args(args)
+        .env("RUST_LOG", "info")
+        .env_remove("ZWIDTH_TOKENS")
+        .env_remove("ZWIDTH_DB")
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(dir.join(log)).unwrap())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert!(
+        !line.is_empty(),
+        "zwidth {args:?} printed nothing: {}",
+        std::fs::read_to_string(dir.join(log)).unwrap_or_default()
+    );
+    (child, line.trim().to_string())
+}

@@ -1,0 +1,386 @@
+//! Claiming experiments with leases (issue 14). A worker claims a runnable
+//! experiment and holds it until `lease_until_ms`, extending the lease with
+//! each heartbeat; every claim adds one to `attempt`, and every write of the
+//! run names the attempt it holds: a worker whose lease expired and was
+//! claimed by another changes nothing (its writes answer `Fault::Lost`) and
+//! abandons the run. An expired lease is claimed again by the next claim
+//! itself; after `MAX_LOST` expiries the experiment fails saying why. Time
+//! is the database's clock (PostgreSQL's `clock_timestamp()`; SQLite has
+//! one process on one machine, whose clock it is).
+
+use super::{now_ms, on_pool, Db, ExperimentRow, Store};
+use crate::zwidth::search::{StoredEvaluation, StoredTrial};
+
+/// A claimed run: the experiment and the attempt that holds it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Lease {
+    pub id: String,
+    pub attempt: i64,
+}
+
+/// What a heartbeat found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Held {
+    /// Still ours; the lease is extended.
+    Held,
+    /// Ours, but cancelled: stop between trials.
+    Cancelled,
+    /// Not ours any more (expired and claimed again, or ended): abandon it.
+    Lost,
+}
+
+/// Expired leases after which an experiment fails instead of being
+/// claimed again (its worker died or stalled this many times).
+pub const MAX_LOST: i64 = 3;
+
+/// A worker process as it last reported itself.
+#[derive(Debug, Clone, serde::Serialize, sqlx::FromRow, utoipa::ToSchema)]
+pub struct WorkerRow {
+    /// host:pid:random
+    pub id: String,
+    /// The rigs it runs, as given to `--rigs`.
+    pub rigs: String,
+    pub started_ms: i64,
+    /// Its last heartbeat (database clock, unix ms).
+    pub seen_ms: i64,
+    /// The experiment it runs, if any.
+    pub running: Option<String>,
+    /// Trials per second of that run, over its last second.
+    pub trials_per_s: f64,
+}
+
+fn lost(lease: &Lease) -> sqlx::Error {
+    sqlx::Error::Protocol(format!(
+        "{}: experiment {} attempt {} (another worker holds it now, or it ended)",
+        super::fault::LEASE_LOST_PREFIX,
+        lease.id,
+        lease.attempt
+    ))
+}
+
+impl Store {
+    /// The database's clock, unix ms.
+    pub async fn db_now_ms(&self) -> Result<i64, sqlx::Error> {
+        match &self.db {
+            Db::Sqlite(_) => Ok(now_ms()),
+            Db::Postgres(p) => {
+                sqlx::query_scalar(
+                    "SELECT CAST(EXTRACT(EPOCH FROM clock_timestamp()) * 1000 AS BIGINT)",
+                )
+                .fetch_one(p)
+                .await
+            }
+        }
+    }
+
+    /// Claim `rig`'s next runnable experiment for `worker`, holding it for
+    /// `lease_ms`: the highest priority, oldest first, of those queued,
+    /// scheduled and due, interrupted, or running under an expired lease;
+    /// none while the queue is paused. Experiments whose lease expired
+    /// `MAX_LOST` times fail first, with the reason.
+    pub async fn claim(
+        &self,
+        rig: &str,
+        worker: &str,
+        lease_ms: i64,
+    ) -> Result<Option<ExperimentRow>, sqlx::Error> {
+        self.writable()?;
+        let now = self.db_now_ms().await?;
+        on_pool!(self, p => sqlx::query(
+            "UPDATE experiments SET state = 'failed', finished_ms = $1, lease_until_ms = NULL,
+                    error = 'its worker stopped answering ' || (lost + 1) || ' times (last ' || COALESCE(worker, '?') || '); not run again'
+             WHERE rig = $2 AND state = 'running' AND lease_until_ms < $1 AND lost + 1 >= $3",
+        )
+        .bind(now)
+        .bind(rig)
+        .bind(MAX_LOST)
+        .execute(p)
+        .await
+        .map(|_| ()))?;
+        match &self.db {
+            Db::Sqlite(p) => sqlx::query_as::<_, ExperimentRow>(
+                "UPDATE experiments SET state = 'running', started_ms = COALESCE(started_ms, $1),
+                        attempt = attempt + 1, worker = $3, lease_until_ms = $1 + $4,
+                        lost = lost + CASE WHEN state = 'running' THEN 1 ELSE 0 END
+                 WHERE id = (SELECT id FROM experiments
+                             WHERE rig = $2 AND (SELECT paused FROM queue_control WHERE id = 1) = 0
+                               AND ((state IN ('queued', 'scheduled', 'interrupted') AND (not_before_ms IS NULL OR not_before_ms <= $1))
+                                    OR (state = 'running' AND lease_until_ms < $1))
+                             ORDER BY priority DESC, created_ms, id LIMIT 1)
+                 RETURNING *",
+            )
+            .bind(now)
+            .bind(rig)
+            .bind(worker)
+            .bind(lease_ms)
+            .fetch_all(p)
+            .await
+            .map(|mut rows| rows.pop()),
+            // Several workers claim at once: the row is locked by the
+            // claim that found it first, and the others skip it.
+            Db::Postgres(p) => sqlx::query_as::<_, ExperimentRow>(
+                "WITH next AS MATERIALIZED (
+                     SELECT id FROM experiments
+                     WHERE rig = $2 AND (SELECT paused FROM queue_control WHERE id = 1) = 0
+                       AND ((state IN ('queued', 'scheduled', 'interrupted') AND (not_before_ms IS NULL OR not_before_ms <= $1))
+                            OR (state = 'running' AND lease_until_ms < $1))
+                     ORDER BY priority DESC, created_ms, id LIMIT 1
+                     FOR UPDATE SKIP LOCKED)
+                 UPDATE experiments e SET state = 'running', started_ms = COALESCE(e.started_ms, $1),
+                        attempt = e.attempt + 1, worker = $3, lease_until_ms = $1 + $4,
+                        lost = e.lost + CASE WHEN e.state = 'running' THEN 1 ELSE 0 END
+                 FROM next WHERE e.id = next.id
+                 RETURNING e.*",
+            )
+            .bind(now)
+            .bind(rig)
+            .bind(worker)
+            .bind(lease_ms)
+            .fetch_all(p)
+            .await
+            .map(|mut rows| rows.pop()),
+        }
+    }
+
+    /// Extend the lease by `lease_ms` and record progress, if the run is
+    /// still ours; say whether it is (and whether it was cancelled).
+    pub async fn heartbeat(
+        &self,
+        lease: &Lease,
+        trials: i64,
+        fraction: f64,
+        lease_ms: i64,
+    ) -> Result<Held, sqlx::Error> {
+        self.writable()?;
+        let now = self.db_now_ms().await?;
+        let fraction = if fraction.is_finite() {
+            fraction.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let state: Vec<String> = on_pool!(self, p => sqlx::query_scalar(
+            "UPDATE experiments SET lease_until_ms = $1 + $2,
+                    trials_done = CASE WHEN state = 'running' THEN $3 ELSE trials_done END,
+                    progress = CASE WHEN state = 'running' THEN $4 ELSE progress END
+             WHERE id = $5 AND attempt = $6 AND state IN ('running', 'cancelled')
+             RETURNING state",
+        )
+        .bind(now)
+        .bind(lease_ms)
+        .bind(trials)
+        .bind(fraction)
+        .bind(&lease.id)
+        .bind(lease.attempt)
+        .fetch_all(p)
+        .await)?;
+        Ok(match state.first().map(String::as_str) {
+            Some("running") => Held::Held,
+            Some(_) => Held::Cancelled,
+            None => Held::Lost,
+        })
+    }
+
+    /// Store a run's finished trials and its progress (trials done, the
+    /// fraction done) in one transaction, and then drop the columns its
+    /// searches ran past (scope, first dropped column); nothing when the
+    /// lease is lost. A trial already stored keeps its point and takes the
+    /// place given here.
+    pub async fn add_trials(
+        &self,
+        lease: &Lease,
+        trials: &[StoredTrial],
+        dropped: &[(u32, u32)],
+        progress: (i64, f64),
+    ) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        if trials.is_empty() && dropped.is_empty() {
+            return Ok(());
+        }
+        let (done, fraction) = progress;
+        let fraction = if fraction.is_finite() {
+            fraction.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        on_pool!(self, p => {
+            let mut tx = p.begin().await?;
+            // The fence: this row stays locked until the commit, so no
+            // claim can take the run over in between.
+            let held = sqlx::query(
+                "UPDATE experiments SET trials_done = CASE WHEN state = 'running' THEN $3 ELSE trials_done END,
+                        progress = CASE WHEN state = 'running' THEN $4 ELSE progress END
+                 WHERE id = $1 AND attempt = $2 AND state IN ('running', 'cancelled')",
+            )
+            .bind(&lease.id)
+            .bind(lease.attempt)
+            .bind(done)
+            .bind(fraction)
+            .execute(&mut *tx)
+            .await?
+            .rows_affected();
+            if held != 1 {
+                tx.rollback().await?;
+                return Err(lost(lease));
+            }
+            for t in trials {
+                let point = serde_json::to_string(&t.point).unwrap_or_default();
+                sqlx::query(
+                    "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES ($1, $2, $3, $4, $5, $6, $7)
+                     ON CONFLICT (experiment_id, scope, k, b) DO UPDATE SET col = excluded.col, idx = excluded.idx",
+                )
+                .bind(&lease.id)
+                .bind(t.scope as i64)
+                .bind(t.point.k)
+                .bind(t.point.b)
+                .bind(point)
+                .bind(t.column as i64)
+                .bind(t.index as i64)
+                .execute(&mut *tx)
+                .await?;
+            }
+            for &(scope, column) in dropped {
+                sqlx::query("DELETE FROM trials WHERE experiment_id = $1 AND scope = $2 AND col >= $3")
+                    .bind(&lease.id)
+                    .bind(scope as i64)
+                    .bind(column as i64)
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            tx.commit().await
+        })
+    }
+
+    /// Store a run's finished evaluations (already stored ones are kept)
+    /// and the best so far; nothing when the lease is lost.
+    pub async fn add_evaluations(
+        &self,
+        lease: &Lease,
+        evals: &[StoredEvaluation],
+        best: Option<serde_json::Value>,
+    ) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        if evals.is_empty() {
+            return Ok(());
+        }
+        on_pool!(self, p => {
+            let mut tx = p.begin().await?;
+            let held = sqlx::query(
+                "UPDATE experiments SET best = COALESCE($3, best) WHERE id = $1 AND attempt = $2 AND state IN ('running', 'cancelled')",
+            )
+            .bind(&lease.id)
+            .bind(lease.attempt)
+            .bind(best.as_ref().map(|b| b.to_string()))
+            .execute(&mut *tx)
+            .await?
+            .rows_affected();
+            if held != 1 {
+                tx.rollback().await?;
+                return Err(lost(lease));
+            }
+            for e in evals {
+                sqlx::query(
+                    "INSERT INTO evaluations (experiment_id, key, seq, record)
+                     VALUES ($1, $2, (SELECT COUNT(*) FROM evaluations WHERE experiment_id = $1), $3)
+                     ON CONFLICT (experiment_id, key) DO NOTHING",
+                )
+                .bind(&lease.id)
+                .bind(&e.key)
+                .bind(e.record.to_string())
+                .execute(&mut *tx)
+                .await?;
+            }
+            tx.commit().await
+        })
+    }
+
+    /// Record the end of a run: `state` is succeeded, failed or cancelled.
+    /// Only a running experiment ends succeeded or failed; a cancelled one
+    /// stays cancelled (its trial count is still recorded). False when
+    /// nothing changed (it was cancelled, or the lease is not ours).
+    pub async fn finish(
+        &self,
+        lease: &Lease,
+        state: &str,
+        trials: i64,
+        result: Option<&str>,
+        error: Option<&str>,
+    ) -> Result<bool, sqlx::Error> {
+        self.writable()?;
+        let r = on_pool!(self, p => sqlx::query("UPDATE experiments SET state = $1, trials_done = $2, result = $3, error = $4,
+                     finished_ms = COALESCE(CASE WHEN state = 'cancelled' THEN finished_ms END, $5),
+                     progress = CASE WHEN $1 = 'succeeded' THEN 1 ELSE progress END,
+                     lease_until_ms = NULL
+                     WHERE id = $6 AND attempt = $7 AND (state = 'running' OR (state = 'cancelled' AND $1 = 'cancelled'))")
+            .bind(state)
+            .bind(trials)
+            .bind(result)
+            .bind(error)
+            .bind(now_ms())
+            .bind(&lease.id)
+            .bind(lease.attempt)
+            .execute(p)
+            .await
+            .map(|r| r.rows_affected()))?;
+        Ok(r == 1)
+    }
+
+    /// A running experiment stopped by shutdown (its trials are stored):
+    /// the next claim takes it at once, without waiting out the lease.
+    pub async fn interrupt(&self, lease: &Lease, trials: i64) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        on_pool!(self, p => sqlx::query("UPDATE experiments SET state = 'interrupted', trials_done = $1, lease_until_ms = NULL
+                     WHERE id = $2 AND attempt = $3 AND state = 'running'")
+            .bind(trials)
+            .bind(&lease.id)
+            .bind(lease.attempt)
+            .execute(p)
+            .await
+            .map(|_| ()))
+    }
+
+    /// Record this worker process and what it runs (at start and with
+    /// every heartbeat).
+    pub async fn worker_seen(
+        &self,
+        worker: &str,
+        rigs: &str,
+        running: Option<&str>,
+        trials_per_s: f64,
+    ) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        let now = self.db_now_ms().await?;
+        on_pool!(self, p => sqlx::query(
+            "INSERT INTO workers (id, rigs, started_ms, seen_ms, running, trials_per_s) VALUES ($1, $2, $3, $3, $4, $5)
+             ON CONFLICT (id) DO UPDATE SET seen_ms = excluded.seen_ms, running = excluded.running, trials_per_s = excluded.trials_per_s",
+        )
+        .bind(worker)
+        .bind(rigs)
+        .bind(now)
+        .bind(running)
+        .bind(if trials_per_s.is_finite() { trials_per_s.max(0.0) } else { 0.0 })
+        .execute(p)
+        .await
+        .map(|_| ()))
+    }
+
+    /// A worker that stops cleanly leaves the list.
+    pub async fn worker_gone(&self, worker: &str) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        on_pool!(self, p => sqlx::query("DELETE FROM workers WHERE id = $1")
+            .bind(worker)
+            .execute(p)
+            .await
+            .map(|_| ()))
+    }
+
+    /// Workers seen within the last `within_ms` (database clock), oldest first.
+    pub async fn workers(&self, within_ms: i64) -> Result<Vec<WorkerRow>, sqlx::Error> {
+        let now = self.db_now_ms().await?;
+        on_pool!(self, p => sqlx::query_as::<_, WorkerRow>(
+            "SELECT * FROM workers WHERE seen_ms >= $1 ORDER BY started_ms, id",
+        )
+        .bind(now - within_ms)
+        .fetch_all(p)
+        .await)
+    }
+}

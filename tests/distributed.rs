@@ -1,0 +1,358 @@
+//! Beyond one machine (issue 14): API processes and `zwidth worker`
+//! processes on one PostgreSQL database, started as a user starts them,
+//! against the single-process SQLite service. Needs `ZWIDTH_TEST_PG` (see
+//! tests/common/pg.rs); without it these tests are skipped, unless
+//! `ZWIDTH_REQUIRE_PG=1` (CI), where they fail.
+
+use std::process::Child;
+use std::time::{Duration, Instant};
+
+mod common;
+use common::*;
+
+const TOKEN: &str = "distributed-test-token";
+
+/// The 2011 boundary trace of the seed device (time domain, ~540 trials,
+/// ~1 s in a test build).
+const TRACE: &str = r#"{"kind":"map","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},
+  "estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","search":"trace"}"#;
+
+/// The same trace with a Kalman filter at reference accuracy (~1100
+/// trials, ~2.5 s in a test build): long enough to kill or stop a worker
+/// in the middle.
+const SLOW: &str = r#"{"kind":"map","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},
+  "estimator":{"kind":"kalman","q":1e6}},"method":"time","criterion":"stability","search":"trace","accuracy":"reference"}"#;
+
+/// Quick ones: an automatic-B bisection (columns dropped past its end), a
+/// compare of two estimators, a grid.
+const QUICK: [&str; 3] = [
+    r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},
+        "method":"analytic","b_max":5000,"k_max":1e6,"accuracy":{"preset":"draft","b_step":100}}"#,
+    r#"{"kind":"compare","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},
+        "estimators":[{"kind":"fdm"},{"kind":"butterworth","cutoff_hz":50}]}"#,
+    r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},
+        "method":"analytic","search":"grid","b":[0,20,40],"accuracy":{"k_step":2000},"k_max":20000}"#,
+];
+
+struct Procs {
+    children: Vec<Child>,
+    dir: std::path::PathBuf,
+}
+
+impl Drop for Procs {
+    fn drop(&mut self) {
+        for c in &mut self.children {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+fn fresh_dir(tag: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("zwidth-dist-{tag}-{}", uuid_like()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// An API process on `db` (no experiments of its own with `api_only`):
+/// its base URL.
+fn api(p: &mut Procs, db: &str, api_only: bool, log: &str) -> String {
+    let mut args = vec![
+        "serve",
+        "--db",
+        db,
+        "--bind",
+        "127.0.0.1:0",
+        "--token",
+        TOKEN,
+        "--rigs",
+        "sim:1",
+    ];
+    if api_only {
+        args.push("--api-only");
+    }
+    let (child, line) = spawn_ready(&args, &p.dir, log);
+    p.children.push(child);
+    let base = line.rsplit(' ').next().unwrap().to_string();
+    assert!(base.starts_with("http://127.0.0.1:"), "{line}");
+    register_token(&base, TOKEN);
+    base
+}
+
+/// A worker on `db` with one single-thread simulator: its id.
+fn worker(p: &mut Procs, db: &str, lease_ms: &str, log: &str) -> String {
+    let (child, line) = spawn_ready(
+        &[
+            "worker",
+            "--db",
+            db,
+            "--rigs",
+            "sim:1",
+            "--lease-ms",
+            lease_ms,
+        ],
+        &p.dir,
+        log,
+    );
+    p.children.push(child);
+    // "zwidth worker ID running rigs …"
+    line.split(' ').nth(2).unwrap().to_string()
+}
+
+fn submit(base: &str, spec: &str) -> String {
+    let (code, v, _) = post(&format!("{base}/v1/experiments"), &spec.replace('\n', ""));
+    assert_eq!(code, 202, "{v}");
+    v["id"].as_str().unwrap().to_string()
+}
+
+fn trials(base: &str, id: &str) -> serde_json::Value {
+    get(&format!("{base}/v1/experiments/{id}/trials?limit=10000"))
+}
+
+/// What must be equal between two runs of one spec: the result without
+/// its wall time, and every stored trial in order.
+fn outcome(
+    base: &str,
+    id: &str,
+    done: &serde_json::Value,
+) -> (serde_json::Value, serde_json::Value) {
+    assert_eq!(done["state"], "succeeded", "{done}");
+    let mut r = done["result"].clone();
+    strip_times(&mut r);
+    (r, trials(base, id))
+}
+
+fn strip_times(v: &mut serde_json::Value) {
+    match v {
+        serde_json::Value::Object(m) => {
+            m.remove("elapsed_s");
+            m.values_mut().for_each(strip_times);
+        }
+        serde_json::Value::Array(a) => a.iter_mut().for_each(strip_times),
+        _ => {}
+    }
+}
+
+/// The same campaign on one process with SQLite and on one API process
+/// and three workers with PostgreSQL: every result and every stored trial
+/// equal, the boundaries byte-equal, and the work spread over the workers.
+#[test]
+fn a_campaign_on_three_workers_equals_one_process() {
+    let Some(url) = pg::fresh_database_blocking("campaign") else {
+        return;
+    };
+    let specs: Vec<&str> = std::iter::once(TRACE).chain(QUICK).collect();
+    // One process, SQLite.
+    let mut one = Procs {
+        children: vec![],
+        dir: fresh_dir("one"),
+    };
+    let db = one.dir.join("one.db").display().to_string();
+    let base = api(&mut one, &db, false, "serve.err");
+    let ids: Vec<String> = specs.iter().map(|s| submit(&base, s)).collect();
+    let want: Vec<_> = ids
+        .iter()
+        .map(|id| outcome(&base, id, &wait_end(&base, id, 120)))
+        .collect();
+    drop(one);
+    // One API process and three workers, PostgreSQL.
+    let mut many = Procs {
+        children: vec![],
+        dir: fresh_dir("many"),
+    };
+    let base = api(&mut many, &url, true, "api.err");
+    let workers: Vec<String> = (0..3)
+        .map(|i| worker(&mut many, &url, "15000", &format!("w{i}.err")))
+        .collect();
+    let ids: Vec<String> = specs.iter().map(|s| submit(&base, s)).collect();
+    let mut ran_on = std::collections::BTreeSet::new();
+    for (i, id) in ids.iter().enumerate() {
+        let done = wait_end(&base, id, 120);
+        let got = outcome(&base, id, &done);
+        assert_eq!(got.0, want[i].0, "result of {}", specs[i]);
+        assert_eq!(
+            serde_json::to_string(&got.0["boundary"]).unwrap(),
+            serde_json::to_string(&want[i].0["boundary"]).unwrap()
+        );
+        assert_eq!(got.1, want[i].1, "stored trials of {}", specs[i]);
+        assert_eq!(done["attempt"], 1, "{done}");
+        let w = done["worker"].as_str().unwrap().to_string();
+        assert!(workers.contains(&w), "{w} not in {workers:?}");
+        ran_on.insert(w);
+    }
+    assert!(ran_on.len() >= 2, "one worker ran everything: {ran_on:?}");
+    // /metrics counts the workers (each reports itself every second).
+    wait_for("three idle workers in /metrics", 10, || {
+        let m = ureq::get(&format!("{base}/metrics"))
+            .call()
+            .unwrap()
+            .into_string()
+            .unwrap();
+        m.contains("zwidth_workers{busy=\"false\"} 3")
+    });
+}
+
+/// Wait until `id` has at least `n` trials stored.
+fn wait_trials(base: &str, id: &str, n: usize) {
+    wait_for(&format!("{n} trials stored"), 60, || {
+        trials(base, id).as_array().unwrap().len() >= n
+    });
+}
+
+/// SLOW's result from the library in this process.
+fn slow_by_the_library() -> zwidth::zwidth::search::MapResult {
+    let spec: zwidth::experiment::ExperimentSpec = serde_json::from_str(SLOW).unwrap();
+    let zwidth::experiment::ExperimentSpec::Map(m) = spec else {
+        unreachable!()
+    };
+    zwidth::zwidth::search::map(&m).unwrap()
+}
+
+fn assert_is_slow_s_result(done: &serde_json::Value, stored: &serde_json::Value) {
+    let want = slow_by_the_library();
+    let got = &done["result"];
+    assert_eq!(got["trials"].as_u64().unwrap() as usize, want.trials);
+    assert_eq!(got["k_width"].as_f64().unwrap(), want.k_width);
+    assert_eq!(got["b_width"].as_f64().unwrap(), want.b_width);
+    assert_eq!(
+        got["boundary"],
+        serde_json::to_value(&want.boundary).unwrap(),
+        "the boundary"
+    );
+    // Every trial stored once: as many as the result has, all distinct.
+    let stored = stored.as_array().unwrap();
+    assert_eq!(stored.len(), want.trials, "one stored trial per trial");
+    let keys: std::collections::BTreeSet<(u64, u64)> = stored
+        .iter()
+        .map(|t| {
+            (
+                t["point"]["k"].as_f64().unwrap().to_bits(),
+                t["point"]["b"].as_f64().unwrap().to_bits(),
+            )
+        })
+        .collect();
+    assert_eq!(keys.len(), want.trials);
+}
+
+/// SIGKILL a worker while its run has stored trials: another worker claims
+/// it when the lease ends (attempt 2), replays what is stored, and the
+/// result is the library's; no trial is stored twice.
+#[test]
+fn a_killed_worker_s_run_is_claimed_again_with_the_same_result() {
+    let Some(url) = pg::fresh_database_blocking("killed") else {
+        return;
+    };
+    let mut p = Procs {
+        children: vec![],
+        dir: fresh_dir("killed"),
+    };
+    let base = api(&mut p, &url, true, "api.err");
+    let first = worker(&mut p, &url, "1000", "w1.err");
+    let id = submit(&base, SLOW);
+    wait_trials(&base, &id, 60);
+    let v = get(&format!("{base}/v1/experiments/{id}"));
+    assert_eq!(
+        (v["worker"].as_str(), v["attempt"].as_i64()),
+        (Some(first.as_str()), Some(1))
+    );
+    p.children[1].kill().unwrap(); // SIGKILL
+    p.children[1].wait().unwrap();
+    let second = worker(&mut p, &url, "1000", "w2.err");
+    let done = wait_end(&base, &id, 120);
+    assert_eq!(done["state"], "succeeded", "{done}");
+    assert_eq!(done["attempt"], 2, "{done}");
+    assert_eq!(done["worker"], second.as_str());
+    assert_is_slow_s_result(&done, &trials(&base, &id));
+    let log = std::fs::read_to_string(p.dir.join("w2.err")).unwrap();
+    assert!(log.contains("stored_trials="), "{log}");
+}
+
+/// SIGSTOP a worker past its lease, then SIGCONT: another worker has
+/// claimed the run; the stopped one's heartbeat and writes change nothing,
+/// it abandons the run, and the result is the library's.
+#[test]
+fn a_stopped_worker_past_its_lease_changes_nothing_and_abandons_the_run() {
+    let Some(url) = pg::fresh_database_blocking("stopped") else {
+        return;
+    };
+    let mut p = Procs {
+        children: vec![],
+        dir: fresh_dir("stopped"),
+    };
+    let base = api(&mut p, &url, true, "api.err");
+    let _first = worker(&mut p, &url, "1000", "w1.err");
+    let id = submit(&base, SLOW);
+    wait_trials(&base, &id, 30);
+    let pid = p.children[1].id().to_string();
+    let signal = |s: &str| {
+        assert!(std::process::Command::new("kill")
+            .args([s, &pid])
+            .status()
+            .unwrap()
+            .success())
+    };
+    signal("-STOP");
+    let second = worker(&mut p, &url, "1000", "w2.err");
+    wait_for("the run claimed by the second worker", 30, || {
+        get(&format!("{base}/v1/experiments/{id}"))["worker"] == second.as_str()
+    });
+    signal("-CONT");
+    let done = wait_end(&base, &id, 120);
+    assert_eq!(done["state"], "succeeded", "{done}");
+    assert_eq!(
+        (done["attempt"].as_i64(), done["worker"].as_str()),
+        (Some(2), Some(second.as_str()))
+    );
+    assert_is_slow_s_result(&done, &trials(&base, &id));
+    wait_for("the first worker to abandon the run", 10, || {
+        std::fs::read_to_string(p.dir.join("w1.err"))
+            .unwrap()
+            .contains("lease was taken over: abandoning")
+    });
+    // And it goes on serving: alive, idle.
+    assert!(p.children[1].try_wait().unwrap().is_none());
+}
+
+/// Kill the API process mid-campaign: the workers go on; an API process
+/// started again serves the same state, the runs finished meanwhile.
+#[test]
+fn killing_the_api_leaves_the_workers_going() {
+    let Some(url) = pg::fresh_database_blocking("api") else {
+        return;
+    };
+    let mut p = Procs {
+        children: vec![],
+        dir: fresh_dir("api"),
+    };
+    let base = api(&mut p, &url, true, "api1.err");
+    let _w = worker(&mut p, &url, "15000", "w1.err");
+    let ids: Vec<String> = [SLOW, QUICK[0], QUICK[1]]
+        .iter()
+        .map(|s| submit(&base, s))
+        .collect();
+    wait_trials(&base, &ids[0], 30);
+    p.children[0].kill().unwrap();
+    p.children[0].wait().unwrap();
+    let killed = Instant::now();
+    // Meanwhile, straight from the database: the worker finishes them.
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let store = rt
+        .block_on(zwidth::store::Store::connect(
+            &zwidth::store::Location::Postgres(url.clone()),
+        ))
+        .unwrap();
+    wait_for("every run finished without an API process", 120, || {
+        ids.iter()
+            .all(|id| rt.block_on(store.get(id)).unwrap().unwrap().state == "succeeded")
+    });
+    assert!(killed.elapsed() < Duration::from_secs(120));
+    let base2 = api(&mut p, &url, true, "api2.err");
+    for id in &ids {
+        let v = get(&format!("{base2}/v1/experiments/{id}"));
+        assert_eq!(v["state"], "succeeded", "{v}");
+        assert_eq!(v["attempt"], 1, "never taken over: {v}");
+    }
+    let done = get(&format!("{base2}/v1/experiments/{}", ids[0]));
+    assert_is_slow_s_result(&done, &trials(&base2, &ids[0]));
+}
