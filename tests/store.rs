@@ -171,7 +171,10 @@ async fn dropped_columns_lose_their_trials_and_nothing_else() {
         ];
         let run = claim(st).await;
         st.add_trials(&run, &all, &[], (0, 0.0)).await.unwrap();
-        st.add_trials(&run, &[], &[(0, 2)], (0, 0.0)).await.unwrap();
+        // Column c is at B = 10 c: dropping from B = 20 drops columns 2, 3.
+        st.add_trials(&run, &[], &[(0, 20.0)], (0, 0.0))
+            .await
+            .unwrap();
         assert_eq!(
             st.trials("e1").await.unwrap(),
             [all[0].clone(), all[1].clone(), all[4].clone()]
@@ -251,7 +254,7 @@ async fn an_expired_lease_is_taken_over_and_the_old_holder_is_fenced() {
             .finish(&old, "succeeded", 99, Some("{}"), None)
             .await
             .unwrap());
-        st.interrupt(&old, 99).await.unwrap();
+        st.interrupt(&old, 99, 0).await.unwrap();
         let row = st.get("e1").await.unwrap().unwrap();
         // (3: its last heartbeat while it held the lease; nothing since.)
         assert_eq!((row.state.as_str(), row.trials_done), ("running", 3));
@@ -310,12 +313,22 @@ async fn interrupted_runs_are_claimed_again_and_pause_holds_everything() {
     for (store, _dir) in stores("resume").await {
         let st = &store;
         let run = claim(st).await;
-        st.interrupt(&run, 5).await.unwrap();
+        st.interrupt(&run, 5, 0).await.unwrap();
         st.set_paused(true).await.unwrap();
         assert!(st.claim("sim", "w2", 60_000).await.unwrap().is_none());
         st.set_paused(false).await.unwrap();
         let again = st.claim("sim", "w2", 60_000).await.unwrap().unwrap();
         assert_eq!((again.attempt, again.trials_done), (2, 5));
+        // Interrupted because its trials could not be stored: claimed
+        // again only after the wait asked for, not at once in a loop.
+        let again = Lease {
+            id: again.id,
+            attempt: again.attempt,
+        };
+        st.interrupt(&again, 6, 60_000).await.unwrap();
+        assert!(st.claim("sim", "w2", 60_000).await.unwrap().is_none());
+        st.interrupt(&again, 6, 0).await.unwrap(); // not running: no change
+        assert!(st.claim("sim", "w2", 60_000).await.unwrap().is_none());
         // Another rig's queue is its own.
         assert!(st.claim("bench", "w3", 60_000).await.unwrap().is_none());
     }

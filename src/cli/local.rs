@@ -360,6 +360,35 @@ pub(super) fn run(
             write_either(stdout, json, &study, || study.table())
         }
         Command::Bench {
+            what:
+                BenchCommand::Scale {
+                    db,
+                    maps,
+                    claims,
+                    json,
+                },
+        } => {
+            if !(2..=1000).contains(&maps) || !(10..=1_000_000).contains(&claims) {
+                return Err(CliError::Input(
+                    "bench scale: --maps must be 2 to 1000, --claims 10 to 1000000".into(),
+                ));
+            }
+            let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
+            if db.sqlite_path().is_some() {
+                return Err(CliError::Input(format!(
+                    "--db {db}: bench scale measures a PostgreSQL database (postgres://…)"
+                )));
+            }
+            let rt = tokio::runtime::Builder::new_multi_thread()
+                .enable_all()
+                .build()
+                .map_err(|e| CliError::Failure(format!("cannot start the runtime: {e}")))?;
+            let r = rt
+                .block_on(crate::jobs::bench::run(&db, maps, claims))
+                .map_err(CliError::Failure)?;
+            write_either(stdout, json, &r, || r.table())
+        }
+        Command::Bench {
             what: BenchCommand::Tradeoff { json },
         } => {
             let rows = tradeoff::run()?;

@@ -507,6 +507,22 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Scaling out: a campaign of maps on 1 and 2 workers (PostgreSQL) and
+    /// 1 (SQLite), then the claim rate and latency with 1, 8 and 32
+    /// claimers. Needs a PostgreSQL database; it deletes what it stores.
+    Scale {
+        /// The PostgreSQL database to measure (postgres://…).
+        #[arg(long, env = "ZWIDTH_DB")]
+        db: String,
+        /// Maps in each campaign.
+        #[arg(long, default_value_t = 16)]
+        maps: usize,
+        /// Empty experiments claimed in each claim-rate run.
+        #[arg(long, default_value_t = 2000)]
+        claims: usize,
+        #[arg(long)]
+        json: bool,
+    },
     /// Wall time and K/B-width error against `reference` for each accuracy preset, on the example scenes.
     Tradeoff {
         #[arg(long)]

@@ -160,15 +160,16 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             writeln!(stdout, "{doc}").map_err(io)
         }
         Command::Backup { db, out } => {
-            match crate::store::Location::parse(&db.to_string_lossy()) {
-                Ok(crate::store::Location::Sqlite(_)) => {}
+            // `sqlite://PATH` names the same file as PATH.
+            let db = match crate::store::Location::parse(&db.to_string_lossy()) {
+                Ok(crate::store::Location::Sqlite(path)) => path,
                 Ok(pg) => {
                     return Err(CliError::Input(format!(
                         "--db {pg}: backup copies a SQLite file; a PostgreSQL database is copied with pg_dump"
                     )))
                 }
                 Err(e) => return Err(CliError::Input(e)),
-            }
+            };
             if !db.is_file() {
                 return Err(CliError::Input(format!(
                     "--db {} is not a database file",

@@ -7,6 +7,7 @@ use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::Duration;
 
+pub mod bench;
 pub mod worker;
 
 use crate::experiment::ExperimentSpec;
@@ -96,6 +97,15 @@ pub async fn runner(
             Ok(None) => {}
             Err(e) => tracing::warn!(error = %e, rig = %id, "reading the rig window failed"),
         }
+        // With several API processes (PostgreSQL), an attached rig's
+        // experiments are claimed by the process its agent is connected
+        // to, never by one that could only wait for it.
+        if let Some(a) = rig.attached() {
+            if store.backend() == "postgres" && !a.view().connected {
+                tokio::time::sleep(Duration::from_millis(200)).await;
+                continue;
+            }
+        }
         match store.claim(&id, &me.id, me.lease_ms).await {
             Ok(Some(row)) => {
                 let lease = Lease {
@@ -148,8 +158,8 @@ struct Unstored {
     /// The run's lease was taken over: nothing more is written.
     lost: bool,
     trials: Vec<StoredTrial>,
-    /// Columns dropped from a map: (scope, first dropped column).
-    dropped: Vec<(u32, u32)>,
+    /// Columns dropped from a map: (scope, B of the first dropped column).
+    dropped: Vec<(u32, f64)>,
     evals: Vec<StoredEvaluation>,
     failing_since: Option<std::time::Instant>,
 }
@@ -351,6 +361,7 @@ async fn run_one(
     let mut interrupted = false;
     let mut unstored = Unstored::default();
     let mut beat = std::time::Instant::now();
+    let mut held_at = std::time::Instant::now();
     let outcome = loop {
         tokio::select! {
             r = &mut task => break r,
@@ -365,14 +376,28 @@ async fn run_one(
                 if beat.elapsed() >= me.heartbeat() && !unstored.lost {
                     beat = std::time::Instant::now();
                     match store.heartbeat(&lease, trials, observer.fraction(), me.lease_ms).await {
-                        Ok(Held::Held) => {}
-                        Ok(Held::Cancelled) => observer.cancel.store(true, Ordering::Relaxed),
+                        Ok(Held::Held) => held_at = std::time::Instant::now(),
+                        Ok(Held::Cancelled) => {
+                            held_at = std::time::Instant::now();
+                            observer.cancel.store(true, Ordering::Relaxed);
+                        }
                         Ok(Held::Lost) => {
                             tracing::warn!("the run's lease was taken over: abandoning it");
                             unstored.lost = true;
                             observer.cancel.store(true, Ordering::Relaxed);
                         }
                         Err(e) => tracing::warn!(error = %e, "heartbeat failed"),
+                    }
+                    // Unheard for a whole lease, the run may be another
+                    // worker's by now: stop computing (and moving a rig).
+                    // (SQLite has one process: nobody else can take it.)
+                    if !unstored.lost
+                        && store.backend() == "postgres"
+                        && held_at.elapsed().as_millis() as i64 > me.lease_ms
+                    {
+                        tracing::warn!(lease_ms = me.lease_ms, "no heartbeat went through for a whole lease: abandoning the run");
+                        unstored.lost = true;
+                        observer.cancel.store(true, Ordering::Relaxed);
                     }
                 }
                 // Hardware moves only inside its window: an attached rig
@@ -424,7 +449,9 @@ async fn run_one(
             &shutdown,
             store,
             None,
-            || store.interrupt(&lease, trials),
+            // Its trials could not be stored: another try in a minute, not
+            // at once in a loop.
+            || store.interrupt(&lease, trials, if interrupted { 0 } else { 60_000 }),
         )
         .await;
         forget();

@@ -74,6 +74,8 @@ pub async fn announce(
     running: Running,
     mut stop: tokio::sync::watch::Receiver<bool>,
 ) {
+    // Killed workers never leave the table: forget those unseen for a day.
+    let _ = store.prune_workers(86_400_000).await;
     while !*stop.borrow() {
         let ids: Vec<String> = {
             let r = running.lock().unwrap_or_else(|e| e.into_inner());

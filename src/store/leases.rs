@@ -104,7 +104,8 @@ impl Store {
                         lost = lost + CASE WHEN state = 'running' THEN 1 ELSE 0 END
                  WHERE id = (SELECT id FROM experiments
                              WHERE rig = $2 AND (SELECT paused FROM queue_control WHERE id = 1) = 0
-                               AND ((state IN ('queued', 'scheduled', 'interrupted') AND (not_before_ms IS NULL OR not_before_ms <= $1))
+                               AND ((state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= $1))
+                            OR (state = 'interrupted' AND (lease_until_ms IS NULL OR lease_until_ms < $1))
                                     OR (state = 'running' AND lease_until_ms < $1))
                              ORDER BY priority DESC, created_ms, id LIMIT 1)
                  RETURNING *",
@@ -122,7 +123,8 @@ impl Store {
                 "WITH next AS MATERIALIZED (
                      SELECT id FROM experiments
                      WHERE rig = $2 AND (SELECT paused FROM queue_control WHERE id = 1) = 0
-                       AND ((state IN ('queued', 'scheduled', 'interrupted') AND (not_before_ms IS NULL OR not_before_ms <= $1))
+                       AND ((state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= $1))
+                            OR (state = 'interrupted' AND (lease_until_ms IS NULL OR lease_until_ms < $1))
                             OR (state = 'running' AND lease_until_ms < $1))
                      ORDER BY priority DESC, created_ms, id LIMIT 1
                      FOR UPDATE SKIP LOCKED)
@@ -182,14 +184,14 @@ impl Store {
 
     /// Store a run's finished trials and its progress (trials done, the
     /// fraction done) in one transaction, and then drop the columns its
-    /// searches ran past (scope, first dropped column); nothing when the
-    /// lease is lost. A trial already stored keeps its point and takes the
+    /// searches ran past (scope, and the B from which an automatic range's
+    /// columns are dropped); nothing when the lease is lost. A trial already stored keeps its point and takes the
     /// place given here.
     pub async fn add_trials(
         &self,
         lease: &Lease,
         trials: &[StoredTrial],
-        dropped: &[(u32, u32)],
+        dropped: &[(u32, f64)],
         progress: (i64, f64),
     ) -> Result<(), sqlx::Error> {
         self.writable()?;
@@ -238,11 +240,11 @@ impl Store {
                 .execute(&mut *tx)
                 .await?;
             }
-            for &(scope, column) in dropped {
-                sqlx::query("DELETE FROM trials WHERE experiment_id = $1 AND scope = $2 AND col >= $3")
+            for &(scope, b) in dropped {
+                sqlx::query("DELETE FROM trials WHERE experiment_id = $1 AND scope = $2 AND b >= $3")
                     .bind(&lease.id)
                     .bind(scope as i64)
-                    .bind(column as i64)
+                    .bind(b)
                     .execute(&mut *tx)
                     .await?;
             }
@@ -324,15 +326,26 @@ impl Store {
         Ok(r == 1)
     }
 
-    /// A running experiment stopped by shutdown (its trials are stored):
-    /// the next claim takes it at once, without waiting out the lease.
-    pub async fn interrupt(&self, lease: &Lease, trials: i64) -> Result<(), sqlx::Error> {
+    /// A running experiment stopped with its stored trials: by shutdown
+    /// (`retry_in_ms` 0: the next claim takes it at once), or because its
+    /// trials could not be stored (claimed again only after `retry_in_ms`,
+    /// not in a loop).
+    pub async fn interrupt(
+        &self,
+        lease: &Lease,
+        trials: i64,
+        retry_in_ms: i64,
+    ) -> Result<(), sqlx::Error> {
         self.writable()?;
-        on_pool!(self, p => sqlx::query("UPDATE experiments SET state = 'interrupted', trials_done = $1, lease_until_ms = NULL
+        let now = self.db_now_ms().await?;
+        on_pool!(self, p => sqlx::query("UPDATE experiments SET state = 'interrupted', trials_done = $1,
+                        lease_until_ms = CASE WHEN $4 > 0 THEN $5 + $4 END
                      WHERE id = $2 AND attempt = $3 AND state = 'running'")
             .bind(trials)
             .bind(&lease.id)
             .bind(lease.attempt)
+            .bind(retry_in_ms)
+            .bind(now)
             .execute(p)
             .await
             .map(|_| ()))
@@ -363,6 +376,18 @@ impl Store {
         .map(|_| ()))
     }
 
+    /// Forget workers not seen for `older_than_ms` (killed ones never say
+    /// goodbye).
+    pub async fn prune_workers(&self, older_than_ms: i64) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        let now = self.db_now_ms().await?;
+        on_pool!(self, p => sqlx::query("DELETE FROM workers WHERE seen_ms < $1")
+            .bind(now - older_than_ms)
+            .execute(p)
+            .await
+            .map(|_| ()))
+    }
+
     /// A worker that stops cleanly leaves the list.
     pub async fn worker_gone(&self, worker: &str) -> Result<(), sqlx::Error> {
         self.writable()?;
@@ -382,5 +407,16 @@ impl Store {
         .bind(now - within_ms)
         .fetch_all(p)
         .await)
+    }
+
+    /// Delete every experiment of `rig` (with their trials): for the
+    /// benchmarks' own rigs.
+    pub async fn purge_rig(&self, rig: &str) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        on_pool!(self, p => sqlx::query("DELETE FROM experiments WHERE rig = $1")
+            .bind(rig)
+            .execute(p)
+            .await
+            .map(|_| ()))
     }
 }

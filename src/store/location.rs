@@ -50,19 +50,23 @@ impl Location {
     }
 }
 
-/// `scheme://user:secret@host…` with the secret replaced by `***`.
+/// A URL as shown in logs and errors: never its password. A PostgreSQL URL
+/// is rebuilt from what libpq's syntax parses out of it (user, host or
+/// socket directory, port, database), so a password given any way (in the
+/// user part, as `?password=`, with characters that confuse a reader) is
+/// left out; one that does not parse shows only its scheme.
 fn hide_password(url: &str) -> String {
-    let Some((scheme, rest)) = url.split_once("://") else {
-        return url.to_string();
-    };
-    // The user info ends at the last '@' before the path or query.
-    let authority_end = rest.find(['/', '?']).unwrap_or(rest.len());
-    match rest[..authority_end].rfind('@') {
-        Some(at) => match rest[..at].split_once(':') {
-            Some((user, _)) => format!("{scheme}://{user}:***{}", &rest[at..]),
-            None => url.to_string(),
-        },
-        None => url.to_string(),
+    let scheme = url.split_once("://").map_or("postgres", |(s, _)| s);
+    match url.parse::<sqlx::postgres::PgConnectOptions>() {
+        Ok(o) => {
+            let db = o.get_database().unwrap_or("");
+            let place = match o.get_socket() {
+                Some(dir) => format!("/{db}?host={}", dir.display()),
+                None => format!("{}:{}/{db}", o.get_host(), o.get_port()),
+            };
+            format!("{scheme}://{}@{place}", o.get_username())
+        }
+        Err(_) => format!("{scheme}://… (not shown: it may hold a password)"),
     }
 }
 
@@ -96,6 +100,7 @@ mod tests {
             Location::Postgres(_)
         ));
         let e = Location::parse("mysql://root:hunter2@db/z").unwrap_err();
+        assert!(!e.contains("hunter2"), "{e}");
         assert!(e.contains("unknown scheme `mysql://`"), "{e}");
         assert!(e.contains("postgres://"), "names what is allowed: {e}");
         assert!(!e.contains("hunter2"), "no password in errors: {e}");
@@ -109,14 +114,25 @@ mod tests {
     #[test]
     fn passwords_are_hidden_when_shown() {
         for (url, shown) in [
-            ("postgres://u:s3cret@h/db", "postgres://u:***@h/db"),
-            ("postgres://u:a@b@h/db?x=1", "postgres://u:***@h/db?x=1"),
-            ("postgres://u@h/db", "postgres://u@h/db"),
-            ("postgres:///db?host=/tmp/x", "postgres:///db?host=/tmp/x"),
-            ("postgres://h/db?user=a@b", "postgres://h/db?user=a@b"),
+            ("postgres://u:s3cret@h/db", "postgres://u@h:5432/db"),
+            (
+                "postgres://u:s3cret@h:6543/db?sslmode=disable",
+                "postgres://u@h:6543/db",
+            ),
+            (
+                "postgres://u@h/db?password=s3cret",
+                "postgres://u@h:5432/db",
+            ),
+            (
+                "postgresql://u:s3cret@localhost/db?host=/tmp/pg",
+                "postgresql://u@/db?host=/tmp/pg",
+            ),
         ] {
-            assert_eq!(hide_password(url), shown);
+            assert_eq!(hide_password(url), shown, "{url}");
             assert_eq!(Location::Postgres(url.into()).to_string(), shown);
         }
+        // Unparseable: nothing of it is shown.
+        let shown = hide_password("postgres://u:p?w@h:x/db");
+        assert!(!shown.contains("p?w") && !shown.contains("u:"), "{shown}");
     }
 }

@@ -179,6 +179,14 @@ impl Store {
                 let opts: sqlx::postgres::PgConnectOptions = url
                     .parse()
                     .map_err(|e| OpenError::Refused(format!("--db {shown}: {e}")))?;
+                // Our transactions are short: one left open by a stopped
+                // or cut-off worker is ended by the server, not held (with
+                // its row locks) until TCP notices; a statement waits at
+                // most 5 s for a lock.
+                let opts = opts.options([
+                    ("idle_in_transaction_session_timeout", "10s"),
+                    ("lock_timeout", "5s"),
+                ]);
                 // One connection first: its error says why (refused,
                 // password, no such database), where a pool only times out.
                 {

@@ -37,9 +37,10 @@ pub struct Observer {
     /// the next trial's `index`.
     asked: std::sync::Mutex<std::collections::HashMap<(u32, u32), u32>>,
     /// Columns dropped from a map after they ran (an automatic B range
-    /// searched past its end): (scope, first dropped column), for whoever
-    /// stored their trials to delete them.
-    dropped: std::sync::Mutex<Vec<(u32, u32)>>,
+    /// searched past its end): (scope, B of the first dropped column; the
+    /// automatic range grows with B), for whoever stored their trials to
+    /// delete them.
+    dropped: std::sync::Mutex<Vec<(u32, f64)>>,
     /// Maps expected in the experiment (0 counts as 1) and each one's
     /// fraction done, for the progress and ETA.
     scopes: std::sync::atomic::AtomicUsize,
@@ -256,23 +257,26 @@ impl Observer {
             .push(trial);
     }
 
-    /// Drop columns `from` onwards of map `scope`: their trials not yet
-    /// taken are forgotten, and [`Observer::take_dropped`] tells whoever
-    /// stored the others.
-    pub(super) fn drop_columns(&self, scope: u32, from: u32) {
+    /// Drop the columns of map `scope` from B = `from_b` on (an automatic
+    /// range, whose B grows with the column): their trials not yet taken
+    /// are forgotten, and [`Observer::take_dropped`] tells whoever stored
+    /// the others (by B, so also trials stored before their place was
+    /// known, and by an earlier attempt).
+    pub(super) fn drop_columns(&self, scope: u32, from_b: f64) {
         self.new
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .retain(|t| t.scope != scope || t.column < from);
+            .retain(|t| t.scope != scope || t.point.b < from_b);
         self.dropped
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .push((scope, from));
+            .push((scope, from_b));
     }
 
-    /// Columns dropped since the last call: (scope, first dropped column).
-    /// Delete their stored trials after storing [`Observer::take_new`]'s.
-    pub fn take_dropped(&self) -> Vec<(u32, u32)> {
+    /// Columns dropped since the last call: (scope, B of the first dropped
+    /// column). Delete their stored trials after storing
+    /// [`Observer::take_new`]'s.
+    pub fn take_dropped(&self) -> Vec<(u32, f64)> {
         std::mem::take(&mut *self.dropped.lock().unwrap_or_else(|e| e.into_inner()))
     }
 }
@@ -347,20 +351,24 @@ mod tests {
         assert_eq!(o.next_index(0, 1), 0);
         assert_eq!(o.next_index(1, 0), 0);
         assert_eq!(o.next_index(0, 0), 2);
-        let t = |scope, column| StoredTrial {
+        // Column c at B = 10 c.
+        let t = |scope, column: u32| StoredTrial {
             scope,
             column,
             index: 0,
-            point: Point::default(),
+            point: Point {
+                b: 10.0 * f64::from(column),
+                ..Point::default()
+            },
         };
         for (s, c) in [(0, 1), (0, 2), (0, 3), (1, 3)] {
             o.record(t(s, c));
         }
-        // Dropping scope 0 from column 2: its columns 2 and 3 go, column 1
+        // Dropping scope 0 from B = 20: its columns 2 and 3 go, column 1
         // and the other scope's column 3 stay; the drop is told once.
-        o.drop_columns(0, 2);
+        o.drop_columns(0, 20.0);
         assert_eq!(o.take_new(), [t(0, 1), t(1, 3)]);
-        assert_eq!(o.take_dropped(), [(0, 2)]);
+        assert_eq!(o.take_dropped(), [(0, 20.0)]);
         assert!(o.take_dropped().is_empty());
     }
 

@@ -822,12 +822,18 @@ fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPo
     for chunk in b_auto.chunks(batch) {
         let from = columns.len();
         columns.extend(chunk.par_iter().map(|&b| one(b)).collect::<Vec<_>>());
+        // A cancelled run answers every trial "not passive": its columns
+        // say nothing about where the map ends (and nothing is dropped).
+        if ev.observer.as_ref().is_some_and(|o| o.cancelled()) {
+            break;
+        }
         if let Some(end) = end_of_auto_range(&columns, from, k_floor) {
-            if end < columns.len() {
-                columns.truncate(end);
-                if let Some(o) = &ev.observer {
-                    o.drop_columns(ev.scope, end as u32);
-                }
+            columns.truncate(end);
+            // Everything from the column after the end on is not the map's:
+            // this run's batch past it, and whatever an earlier attempt (on
+            // more threads) stored there.
+            if let (Some(o), Some(&b)) = (&ev.observer, b_auto.get(end)) {
+                o.drop_columns(ev.scope, b);
             }
             break;
         }
@@ -1069,11 +1075,15 @@ mod tests {
                 .unwrap();
             // What a store would hold: every trial recorded, less the
             // dropped columns, in (column, index) order.
+            // Always from the column after the end (B = 100 · n_columns),
+            // whether or not this run's batches reached it: an earlier
+            // attempt may have.
             let dropped = o.take_dropped();
+            assert_eq!(dropped, [(4, step * n_columns as f64)], "{threads} threads");
             let mut stored: Vec<StoredTrial> = o
                 .take_new()
                 .into_iter()
-                .filter(|t| dropped.iter().all(|&(s, c)| t.scope != s || t.column < c))
+                .filter(|t| dropped.iter().all(|&(s, b)| t.scope != s || t.point.b < b))
                 .collect();
             stored.sort_by_key(|t| (t.column, t.index));
             assert!(stored.iter().all(|t| t.scope == 4));
@@ -1096,6 +1106,17 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_cancelled_automatic_map_drops_no_column() {
+        // Cancelled, every trial answers "not passive": the first two
+        // columns look empty, but they say nothing about the map's end, so
+        // no stored trial may be dropped for them.
+        let o = std::sync::Arc::new(Observer::default());
+        o.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+        map_observed(&auto_b_map(SearchKind::Bisect), Some(o.clone()), 0).unwrap();
+        assert!(o.take_dropped().is_empty());
     }
 
     #[test]

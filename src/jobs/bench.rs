@@ -1,0 +1,239 @@
+//! `zwidth bench scale`: what more workers buy (issue 14). A campaign of
+//! time-domain maps run by 1 and 2 workers on PostgreSQL and by one on
+//! SQLite (the embedded default), all in this process (each worker is a
+//! runner with its own single-thread simulator and its own lease id, the
+//! code path of a `zwidth worker` process); then the claim rate the
+//! database sustains with many claimers on empty experiments, and the
+//! latency of one claim. Everything it stores is under rig names of its
+//! own and deleted at the end.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+
+use super::{runner, Running, Worker};
+use crate::store::{Lease, Location, NewExperiment, Store};
+
+/// The 2011 boundary trace of the seed device (time domain, 537 trials):
+/// one map of real work, a few tenths of a second in a release build.
+const MAP: &str = r#"{"kind":"map","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","search":"trace"}"#;
+
+#[derive(Debug, Serialize)]
+pub struct CampaignRow {
+    pub store: &'static str,
+    pub workers: usize,
+    pub maps: usize,
+    pub wall_s: f64,
+    pub maps_per_s: f64,
+    /// Against one PostgreSQL worker in the same run.
+    pub speedup: f64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct ClaimRow {
+    pub claimers: usize,
+    pub claims: usize,
+    pub claims_per_s: f64,
+    pub p50_ms: f64,
+    pub p99_ms: f64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct ScaleReport {
+    pub campaign: Vec<CampaignRow>,
+    pub claims: Vec<ClaimRow>,
+    /// Seconds of one map on one worker, and the workers one database's
+    /// claim rate would keep busy (see docs/service.md, "Scaling out").
+    pub map_s: f64,
+    pub workers_at_claim_limit: f64,
+}
+
+fn tag() -> String {
+    use rand::Rng;
+    format!("{:08x}", rand::rng().random::<u32>())
+}
+
+async fn insert(store: &Store, rig: &str, n: usize, spec: &str) -> Result<Vec<String>, String> {
+    let mut ids = Vec::new();
+    for i in 0..n {
+        let id = format!("{rig}-{i:05}");
+        store
+            .insert(NewExperiment {
+                id: &id,
+                kind: "map",
+                spec,
+                priority: 0,
+                key: None,
+                not_before_ms: None,
+                rig,
+            })
+            .await
+            .map_err(|e| e.to_string())?;
+        ids.push(id);
+    }
+    Ok(ids)
+}
+
+/// Run `maps` copies of MAP with `workers` runners on `store`: wall seconds.
+async fn campaign(store: &Store, workers: usize, maps: usize) -> Result<f64, String> {
+    let rig = format!("bench-{}", tag());
+    let ids = insert(store, &rig, maps, MAP).await?;
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let start = Instant::now();
+    let mut tasks = Vec::new();
+    for _ in 0..workers {
+        let sim = crate::rig::SimulatedRig::new(&rig, 1).map_err(|e| e.to_string())?;
+        tasks.push(tokio::spawn(runner(
+            store.clone(),
+            Arc::new(sim),
+            Running::default(),
+            stop_rx.clone(),
+            Arc::new(Worker::new(super::LEASE_MS)),
+        )));
+    }
+    loop {
+        let mut left = 0;
+        for id in &ids {
+            match store.get(id).await.map_err(|e| e.to_string())? {
+                Some(r) if r.state == "succeeded" => {}
+                Some(r) if r.state == "failed" => {
+                    return Err(format!("a bench map failed: {:?}", r.error))
+                }
+                _ => left += 1,
+            }
+        }
+        if left == 0 {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let wall = start.elapsed().as_secs_f64();
+    let _ = stop_tx.send(true);
+    for t in tasks {
+        let _ = t.await;
+    }
+    store.purge_rig(&rig).await.map_err(|e| e.to_string())?;
+    Ok(wall)
+}
+
+/// `claims` empty experiments claimed and ended by `claimers` concurrent
+/// claimers, as fast as they go.
+async fn claim_rate(store: &Store, claimers: usize, claims: usize) -> Result<ClaimRow, String> {
+    let rig = format!("claims-{}", tag());
+    insert(store, &rig, claims, "{}").await?;
+    let start = Instant::now();
+    let mut tasks = Vec::new();
+    for c in 0..claimers {
+        let (store, rig) = (store.clone(), rig.clone());
+        tasks.push(tokio::spawn(async move {
+            let me = format!("claimer-{c}");
+            let mut lat = Vec::new();
+            loop {
+                let t0 = Instant::now();
+                let row = store
+                    .claim(&rig, &me, 60_000)
+                    .await
+                    .map_err(|e| e.to_string())?;
+                lat.push(t0.elapsed().as_secs_f64() * 1e3);
+                let Some(r) = row else { break };
+                let lease = Lease {
+                    id: r.id,
+                    attempt: r.attempt,
+                };
+                store
+                    .finish(&lease, "succeeded", 0, None, None)
+                    .await
+                    .map_err(|e| e.to_string())?;
+            }
+            Ok::<_, String>(lat)
+        }));
+    }
+    let mut lat = Vec::new();
+    for t in tasks {
+        lat.extend(t.await.map_err(|e| e.to_string())??);
+    }
+    let wall = start.elapsed().as_secs_f64();
+    store.purge_rig(&rig).await.map_err(|e| e.to_string())?;
+    lat.sort_by(f64::total_cmp);
+    let q = |p: f64| lat[((lat.len() - 1) as f64 * p).round() as usize];
+    Ok(ClaimRow {
+        claimers,
+        claims,
+        claims_per_s: claims as f64 / wall,
+        p50_ms: q(0.5),
+        p99_ms: q(0.99),
+    })
+}
+
+pub async fn run(pg: &Location, maps: usize, claims: usize) -> Result<ScaleReport, String> {
+    let pg_store = Store::connect(pg).await.map_err(|e| e.to_string())?;
+    if pg_store.backend() != "postgres" {
+        return Err(format!(
+            "--db {pg}: bench scale measures a PostgreSQL database (postgres://…)"
+        ));
+    }
+    let dir = std::env::temp_dir().join(format!("zwidth-bench-scale-{}", tag()));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let sqlite = Store::open(&dir.join("bench.db"))
+        .await
+        .map_err(|e| e.to_string())?;
+    // Warm up (page cache, prepared statements), then measure; the one
+    // PostgreSQL worker is the baseline, measured in the same run.
+    campaign(&pg_store, 1, 2).await?;
+    let pg1 = campaign(&pg_store, 1, maps).await?;
+    let lite1 = campaign(&sqlite, 1, maps).await?;
+    let pg2 = campaign(&pg_store, 2, maps).await?;
+    let _ = sqlite.close().await;
+    let _ = std::fs::remove_dir_all(&dir);
+    let row = |store, workers, wall: f64| CampaignRow {
+        store,
+        workers,
+        maps,
+        wall_s: wall,
+        maps_per_s: maps as f64 / wall,
+        speedup: pg1 / wall,
+    };
+    let campaign = vec![
+        row("sqlite", 1, lite1),
+        row("postgres", 1, pg1),
+        row("postgres", 2, pg2),
+    ];
+    let mut rows = Vec::new();
+    for c in [1, 8, 32] {
+        rows.push(claim_rate(&pg_store, c, claims).await?);
+    }
+    let best = rows.iter().map(|r| r.claims_per_s).fold(0.0, f64::max);
+    let map_s = pg1 / maps as f64;
+    Ok(ScaleReport {
+        campaign,
+        claims: rows,
+        map_s,
+        // Each worker claims one map every `map_s` seconds.
+        workers_at_claim_limit: best * map_s,
+    })
+}
+
+impl ScaleReport {
+    pub fn table(&self) -> String {
+        let mut s = String::from("store     workers  maps  wall (s)  maps/s  speedup\n");
+        for r in &self.campaign {
+            s.push_str(&format!(
+                "{:<9} {:>7}  {:>4}  {:>8.2}  {:>6.2}  {:>6.2}×\n",
+                r.store, r.workers, r.maps, r.wall_s, r.maps_per_s, r.speedup
+            ));
+        }
+        s.push_str("\nclaimers  claims  claims/s  p50 (ms)  p99 (ms)\n");
+        for r in &self.claims {
+            s.push_str(&format!(
+                "{:>8}  {:>6}  {:>8.0}  {:>8.2}  {:>8.2}\n",
+                r.claimers, r.claims, r.claims_per_s, r.p50_ms, r.p99_ms
+            ));
+        }
+        s.push_str(&format!(
+            "\none map: {:.3} s on one worker; the best claim rate keeps {:.0} such workers busy\n",
+            self.map_s, self.workers_at_claim_limit
+        ));
+        s
+    }
+}
