@@ -118,13 +118,23 @@ async fn campaign(store: &Store, workers: usize, maps: usize) -> Result<f64, Str
 }
 
 /// `claims` empty experiments claimed and ended by `claimers` concurrent
-/// claimers, as fast as they go.
-async fn claim_rate(store: &Store, claimers: usize, claims: usize) -> Result<ClaimRow, String> {
+/// claimers, as fast as they go. Each claimer has a connection pool of its
+/// own, as a worker process has.
+async fn claim_rate(
+    at: &Location,
+    store: &Store,
+    claimers: usize,
+    claims: usize,
+) -> Result<ClaimRow, String> {
     let rig = format!("claims-{}", tag());
     insert(store, &rig, claims, "{}").await?;
+    let mut own = Vec::new();
+    for _ in 0..claimers {
+        own.push(Store::connect(at).await.map_err(|e| e.to_string())?);
+    }
     let start = Instant::now();
     let mut tasks = Vec::new();
-    for c in 0..claimers {
+    for (c, store) in own.iter().enumerate() {
         let (store, rig) = (store.clone(), rig.clone());
         tasks.push(tokio::spawn(async move {
             let me = format!("claimer-{c}");
@@ -154,6 +164,9 @@ async fn claim_rate(store: &Store, claimers: usize, claims: usize) -> Result<Cla
         lat.extend(t.await.map_err(|e| e.to_string())??);
     }
     let wall = start.elapsed().as_secs_f64();
+    for s in own {
+        let _ = s.close().await;
+    }
     store.purge_rig(&rig).await.map_err(|e| e.to_string())?;
     lat.sort_by(f64::total_cmp);
     let q = |p: f64| lat[((lat.len() - 1) as f64 * p).round() as usize];
@@ -201,7 +214,7 @@ pub async fn run(pg: &Location, maps: usize, claims: usize) -> Result<ScaleRepor
     ];
     let mut rows = Vec::new();
     for c in [1, 8, 32] {
-        rows.push(claim_rate(&pg_store, c, claims).await?);
+        rows.push(claim_rate(pg, &pg_store, c, claims).await?);
     }
     let best = rows.iter().map(|r| r.claims_per_s).fold(0.0, f64::max);
     let map_s = pg1 / maps as f64;

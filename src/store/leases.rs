@@ -11,6 +11,42 @@
 use super::{now_ms, on_pool, Db, ExperimentRow, Store};
 use crate::zwidth::search::{StoredEvaluation, StoredTrial};
 
+/// The rows a claim may take, with `$now` the time (unix ms): `$2` is the
+/// rig. (The first line is the `experiments_claimable` index's predicate,
+/// so the claim reads that index, not every finished run.) (A macro: sqlx takes only fixed SQL, so the statement is built at
+/// compile time.)
+macro_rules! claimable {
+    ($now:literal) => {
+        concat!(
+            "rig = $2 AND state IN ('queued', 'scheduled', 'interrupted', 'running')
+             AND (SELECT paused FROM queue_control WHERE id = 1) = 0
+             AND ((state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= ", $now, "))
+                  OR (state = 'interrupted' AND (lease_until_ms IS NULL OR lease_until_ms < ", $now, "))
+                  OR (state = 'running' AND lease_until_ms < ", $now, "))"
+        )
+    };
+}
+
+/// What a claim writes: the lease to worker `$3` for `$4` ms, or, for a
+/// run whose lease expired for the `$5`-th time, its failure with the
+/// reason. (Every SET expression reads the row as it was.)
+macro_rules! claim_set {
+    ($now:literal) => {
+        concat!(
+            "state = CASE WHEN state = 'running' AND lost + 1 >= $5 THEN 'failed' ELSE 'running' END,
+             error = CASE WHEN state = 'running' AND lost + 1 >= $5
+                          THEN 'its worker stopped answering ' || CAST(lost + 1 AS TEXT) || ' times (last ' || COALESCE(worker, '?') || '); not run again'
+                          ELSE error END,
+             finished_ms = CASE WHEN state = 'running' AND lost + 1 >= $5 THEN ", $now, " ELSE finished_ms END,
+             started_ms = COALESCE(started_ms, ", $now, "),
+             attempt = CASE WHEN state = 'running' AND lost + 1 >= $5 THEN attempt ELSE attempt + 1 END,
+             worker = CASE WHEN state = 'running' AND lost + 1 >= $5 THEN worker ELSE $3 END,
+             lease_until_ms = CASE WHEN state = 'running' AND lost + 1 >= $5 THEN NULL ELSE ", $now, " + $4 END,
+             lost = lost + CASE WHEN state = 'running' THEN 1 ELSE 0 END"
+        )
+    };
+}
+
 /// A claimed run: the experiment and the attempt that holds it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Lease {
@@ -75,9 +111,13 @@ impl Store {
 
     /// Claim `rig`'s next runnable experiment for `worker`, holding it for
     /// `lease_ms`: the highest priority, oldest first, of those queued,
-    /// scheduled and due, interrupted, or running under an expired lease;
-    /// none while the queue is paused. Experiments whose lease expired
-    /// `MAX_LOST` times fail first, with the reason.
+    /// scheduled and due, interrupted (and due), or running under an
+    /// expired lease; none while the queue is paused. A run whose lease
+    /// expires for the `MAX_LOST`-th time is failed with the reason instead
+    /// (and the next one claimed). One statement: on PostgreSQL the row is
+    /// locked by the claim that found it first (`FOR UPDATE SKIP LOCKED` in
+    /// a materialized CTE: the others skip it) and the time is the
+    /// server's `clock_timestamp()`.
     pub async fn claim(
         &self,
         rig: &str,
@@ -85,62 +125,47 @@ impl Store {
         lease_ms: i64,
     ) -> Result<Option<ExperimentRow>, sqlx::Error> {
         self.writable()?;
-        let now = self.db_now_ms().await?;
-        on_pool!(self, p => sqlx::query(
-            "UPDATE experiments SET state = 'failed', finished_ms = $1, lease_until_ms = NULL,
-                    error = 'its worker stopped answering ' || (lost + 1) || ' times (last ' || COALESCE(worker, '?') || '); not run again'
-             WHERE rig = $2 AND state = 'running' AND lease_until_ms < $1 AND lost + 1 >= $3",
-        )
-        .bind(now)
-        .bind(rig)
-        .bind(MAX_LOST)
-        .execute(p)
-        .await
-        .map(|_| ()))?;
-        match &self.db {
-            Db::Sqlite(p) => sqlx::query_as::<_, ExperimentRow>(
-                "UPDATE experiments SET state = 'running', started_ms = COALESCE(started_ms, $1),
-                        attempt = attempt + 1, worker = $3, lease_until_ms = $1 + $4,
-                        lost = lost + CASE WHEN state = 'running' THEN 1 ELSE 0 END
-                 WHERE id = (SELECT id FROM experiments
-                             WHERE rig = $2 AND (SELECT paused FROM queue_control WHERE id = 1) = 0
-                               AND ((state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= $1))
-                            OR (state = 'interrupted' AND (lease_until_ms IS NULL OR lease_until_ms < $1))
-                                    OR (state = 'running' AND lease_until_ms < $1))
-                             ORDER BY priority DESC, created_ms, id LIMIT 1)
-                 RETURNING *",
-            )
-            .bind(now)
-            .bind(rig)
-            .bind(worker)
-            .bind(lease_ms)
-            .fetch_all(p)
-            .await
-            .map(|mut rows| rows.pop()),
-            // Several workers claim at once: the row is locked by the
-            // claim that found it first, and the others skip it.
-            Db::Postgres(p) => sqlx::query_as::<_, ExperimentRow>(
-                "WITH next AS MATERIALIZED (
-                     SELECT id FROM experiments
-                     WHERE rig = $2 AND (SELECT paused FROM queue_control WHERE id = 1) = 0
-                       AND ((state IN ('queued', 'scheduled') AND (not_before_ms IS NULL OR not_before_ms <= $1))
-                            OR (state = 'interrupted' AND (lease_until_ms IS NULL OR lease_until_ms < $1))
-                            OR (state = 'running' AND lease_until_ms < $1))
-                     ORDER BY priority DESC, created_ms, id LIMIT 1
-                     FOR UPDATE SKIP LOCKED)
-                 UPDATE experiments e SET state = 'running', started_ms = COALESCE(e.started_ms, $1),
-                        attempt = e.attempt + 1, worker = $3, lease_until_ms = $1 + $4,
-                        lost = e.lost + CASE WHEN e.state = 'running' THEN 1 ELSE 0 END
-                 FROM next WHERE e.id = next.id
-                 RETURNING e.*",
-            )
-            .bind(now)
-            .bind(rig)
-            .bind(worker)
-            .bind(lease_ms)
-            .fetch_all(p)
-            .await
-            .map(|mut rows| rows.pop()),
+        // Each pass claims one row or fails one run at its last life.
+        loop {
+            let row = match &self.db {
+                Db::Sqlite(p) => sqlx::query_as::<_, ExperimentRow>(concat!(
+                    "UPDATE experiments SET ",
+                    claim_set!("$1"),
+                    " WHERE id = (SELECT id FROM experiments WHERE ",
+                    claimable!("$1"),
+                    " ORDER BY priority DESC, created_ms, id LIMIT 1) RETURNING *"
+                ))
+                .bind(now_ms())
+                .bind(rig)
+                .bind(worker)
+                .bind(lease_ms)
+                .bind(MAX_LOST)
+                .fetch_all(p)
+                .await?
+                .pop(),
+                Db::Postgres(p) => sqlx::query_as::<_, ExperimentRow>(concat!(
+                    "WITH clock AS (SELECT CAST(EXTRACT(EPOCH FROM clock_timestamp()) * 1000 AS BIGINT) AS now),
+                     next AS MATERIALIZED (
+                         SELECT id FROM experiments, clock WHERE ",
+                    claimable!("clock.now"),
+                    " ORDER BY priority DESC, created_ms, id LIMIT 1 FOR UPDATE OF experiments SKIP LOCKED)
+                     UPDATE experiments SET ",
+                    claim_set!("clock.now"),
+                    " FROM next, clock WHERE experiments.id = next.id RETURNING experiments.*"
+                ))
+                .bind(0_i64)
+                .bind(rig)
+                .bind(worker)
+                .bind(lease_ms)
+                .bind(MAX_LOST)
+                .fetch_all(p)
+                .await?
+                .pop(),
+            };
+            match row {
+                Some(r) if r.state == "failed" => continue,
+                other => return Ok(other),
+            }
         }
     }
 
