@@ -96,7 +96,12 @@ fn worker(p: &mut Procs, db: &str, lease_ms: &str, log: &str) -> String {
         log,
     );
     p.children.push(child);
-    // "zwidth worker ID running rigs …"
+    // "zwidth worker ID running rigs sim:1 from postgres://…" (no password)
+    assert!(
+        line.contains(" running rigs sim:1 from postgres://"),
+        "{line}"
+    );
+    assert!(!line.contains(":zwidth-ci-"), "the password shows: {line}");
     line.split(' ').nth(2).unwrap().to_string()
 }
 
