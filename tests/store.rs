@@ -22,19 +22,24 @@ async fn stores(name: &str) -> Vec<(Store, Option<tempdir::Dir>)> {
         ));
     }
     for (st, _) in &v {
-        st.insert(NewExperiment {
-            id: "e1",
-            kind: "map",
-            spec: "{}",
-            priority: 0,
-            key: None,
-            not_before_ms: None,
-            rig: "sim",
-        })
-        .await
-        .unwrap();
+        queue(st, "e1").await;
     }
     v
+}
+
+/// Queue an (empty) map `id` on rig "sim".
+async fn queue(st: &Store, id: &str) {
+    st.insert(NewExperiment {
+        id,
+        kind: "map",
+        spec: "{}",
+        priority: 0,
+        key: None,
+        not_before_ms: None,
+        rig: "sim",
+    })
+    .await
+    .unwrap();
 }
 
 mod tempdir {
@@ -382,17 +387,7 @@ fn no_experiment_is_done_twice_or_lost_whatever_the_interleaving() {
                     .await
                     .unwrap();
                 for id in ids {
-                    st.insert(NewExperiment {
-                        id,
-                        kind: "map",
-                        spec: "{}",
-                        priority: 0,
-                        key: None,
-                        not_before_ms: None,
-                        rig: "sim",
-                    })
-                    .await
-                    .unwrap();
+                    queue(&st, id).await;
                 }
                 let mut held: [Option<Lease>; 4] = Default::default();
                 let mut completed: std::collections::BTreeMap<String, u32> = Default::default();

@@ -181,7 +181,7 @@ async fn claim_rate(
 
 pub async fn run(pg: &Location, maps: usize, claims: usize) -> Result<ScaleReport, String> {
     let pg_store = Store::connect(pg).await.map_err(|e| e.to_string())?;
-    if pg_store.backend() != "postgres" {
+    if !pg_store.shared() {
         return Err(format!(
             "--db {pg}: bench scale measures a PostgreSQL database (postgres://…)"
         ));

@@ -101,7 +101,7 @@ pub async fn runner(
         // experiments are claimed by the process its agent is connected
         // to, never by one that could only wait for it.
         if let Some(a) = rig.attached() {
-            if store.backend() == "postgres" && !a.view().connected {
+            if store.shared() && !a.connected() {
                 tokio::time::sleep(Duration::from_millis(200)).await;
                 continue;
             }
@@ -392,7 +392,7 @@ async fn run_one(
                     // worker's by now: stop computing (and moving a rig).
                     // (SQLite has one process: nobody else can take it.)
                     if !unstored.lost
-                        && store.backend() == "postgres"
+                        && store.shared()
                         && held_at.elapsed().as_millis() as i64 > me.lease_ms
                     {
                         tracing::warn!(lease_ms = me.lease_ms, "no heartbeat went through for a whole lease: abandoning the run");

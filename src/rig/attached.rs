@@ -320,6 +320,12 @@ impl AttachedRig {
         }
     }
 
+    /// Whether its agent's session is live (what `view().connected` says,
+    /// without building the view).
+    pub fn connected(&self) -> bool {
+        self.lock().lease.connected(now_ms())
+    }
+
     pub fn view(&self) -> AttachedView {
         let g = self.lock();
         let now = now_ms();

@@ -85,6 +85,15 @@ pub struct WorkerRow {
     pub trials_per_s: f64,
 }
 
+/// A fraction done as stored: 0 to 1, 0 when not finite.
+fn fraction_done(f: f64) -> f64 {
+    if f.is_finite() {
+        f.clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
 fn lost(lease: &Lease) -> sqlx::Error {
     sqlx::Error::Protocol(format!(
         "{}: experiment {} attempt {} (another worker holds it now, or it ended)",
@@ -180,11 +189,7 @@ impl Store {
     ) -> Result<Held, sqlx::Error> {
         self.writable()?;
         let now = self.db_now_ms().await?;
-        let fraction = if fraction.is_finite() {
-            fraction.clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
+        let fraction = fraction_done(fraction);
         let state: Vec<String> = on_pool!(self, p => sqlx::query_scalar(
             "UPDATE experiments SET lease_until_ms = $1 + $2,
                     trials_done = CASE WHEN state = 'running' THEN $3 ELSE trials_done END,
@@ -224,11 +229,7 @@ impl Store {
             return Ok(());
         }
         let (done, fraction) = progress;
-        let fraction = if fraction.is_finite() {
-            fraction.clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
+        let fraction = fraction_done(fraction);
         on_pool!(self, p => {
             let mut tx = p.begin().await?;
             // The fence: this row stays locked until the commit, so no

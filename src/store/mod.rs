@@ -223,6 +223,13 @@ impl Store {
         Ok(store)
     }
 
+    /// Whether several processes may share this database (PostgreSQL):
+    /// then a run may be taken over by another worker, and an attached
+    /// rig's agent may be connected to another API process.
+    pub fn shared(&self) -> bool {
+        matches!(self.db, Db::Postgres(_))
+    }
+
     /// Which database this is: "sqlite" or "postgres".
     pub fn backend(&self) -> &'static str {
         match self.db {
