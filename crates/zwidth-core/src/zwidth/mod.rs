@@ -7,6 +7,7 @@ pub mod bla;
 pub mod compare;
 pub mod controller;
 pub mod cost;
+pub mod farm;
 pub mod hit;
 pub mod observer;
 pub mod poly;

@@ -31,7 +31,7 @@ pub struct StoredTrial {
 pub struct Observer {
     pub trials: std::sync::atomic::AtomicUsize,
     pub cancel: std::sync::atomic::AtomicBool,
-    done: std::collections::HashMap<(u32, u64, u64), StoredTrial>,
+    done: std::sync::RwLock<std::collections::HashMap<(u32, u64, u64), StoredTrial>>,
     new: std::sync::Mutex<Vec<StoredTrial>>,
     /// Trials asked so far per (scope, column), replayed ones included:
     /// the next trial's `index`.
@@ -61,6 +61,17 @@ pub struct Observer {
     waiting: std::sync::Mutex<Option<String>>,
     /// Where trials run when not in this process (an attached rig).
     backend: Option<std::sync::Arc<dyn super::trial::TrialBackend>>,
+    /// Where a map's units are computed when not in this process (other
+    /// workers), and the trials they have done so far, by map, not yet
+    /// replayed here (counted in [`Observer::trials_done`]).
+    farm: Option<std::sync::Arc<dyn super::farm::Farm>>,
+    elsewhere: std::sync::Mutex<std::collections::HashMap<u32, usize>>,
+}
+
+impl std::fmt::Debug for dyn super::farm::Farm {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Farm")
+    }
 }
 
 impl std::fmt::Debug for dyn super::trial::TrialBackend {
@@ -80,13 +91,48 @@ pub struct StoredEvaluation {
 impl Observer {
     /// An observer that replays `done` instead of recomputing those trials.
     pub fn resuming(done: Vec<StoredTrial>) -> Self {
-        Self {
-            done: done
-                .into_iter()
-                .map(|t| ((t.scope, t.point.k.to_bits(), t.point.b.to_bits()), t))
-                .collect(),
-            ..Self::default()
+        let o = Self::default();
+        o.add_done(done);
+        o
+    }
+
+    /// Replay `trials` too (computed elsewhere since: a farm's units).
+    pub fn add_done(&self, trials: Vec<StoredTrial>) {
+        let mut d = self.done.write().unwrap_or_else(|e| e.into_inner());
+        for t in trials {
+            d.insert((t.scope, t.point.k.to_bits(), t.point.b.to_bits()), t);
         }
+    }
+
+    /// Hand maps' units to `farm` instead of computing them here.
+    pub fn with_farm(mut self, farm: std::sync::Arc<dyn super::farm::Farm>) -> Self {
+        self.farm = Some(farm);
+        self
+    }
+
+    pub(super) fn farm(&self) -> Option<&std::sync::Arc<dyn super::farm::Farm>> {
+        self.farm.as_ref()
+    }
+
+    /// Map `scope` has `n` trials done elsewhere, not yet replayed here.
+    pub fn set_elsewhere(&self, scope: u32, n: usize) {
+        let mut e = self.elsewhere.lock().unwrap_or_else(|e| e.into_inner());
+        if n == 0 {
+            e.remove(&scope);
+        } else {
+            e.insert(scope, n);
+        }
+    }
+
+    /// Trials done so far: here (replayed ones included) and elsewhere.
+    pub fn trials_done(&self) -> usize {
+        let elsewhere: usize = self
+            .elsewhere
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .values()
+            .sum();
+        self.trials.load(std::sync::atomic::Ordering::Relaxed) + elsewhere
     }
 
     /// Also replay the evaluations `evals` (a resumed tune).
@@ -246,8 +292,12 @@ impl Observer {
     }
 
     /// The stored trial at exactly (scope, K, B), if an earlier run did it.
-    pub(super) fn replay(&self, scope: u32, k: f64, b: f64) -> Option<&StoredTrial> {
-        self.done.get(&(scope, k.to_bits(), b.to_bits()))
+    pub(super) fn replay(&self, scope: u32, k: f64, b: f64) -> Option<StoredTrial> {
+        self.done
+            .read()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&(scope, k.to_bits(), b.to_bits()))
+            .cloned()
     }
 
     pub(super) fn record(&self, trial: StoredTrial) {
@@ -328,7 +378,7 @@ mod tests {
         assert_eq!(new, std::slice::from_ref(&t));
         assert!(o.take_new().is_empty(), "taken once");
         let r = Observer::resuming(new);
-        assert_eq!(r.replay(3, 1500.0, 20.0), Some(&t));
+        assert_eq!(r.replay(3, 1500.0, 20.0), Some(t.clone()));
         // The key is the exact bits of K and B, and the map's scope.
         assert_eq!(r.replay(2, 1500.0, 20.0), None);
         assert_eq!(r.replay(3, 1500.0, 20.000_001), None);

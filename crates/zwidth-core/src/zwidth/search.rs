@@ -355,7 +355,7 @@ impl Evaluator {
                 if (done.column, done.index) != (column, index) {
                     o.record(trial(done.point.clone()));
                 }
-                return done.point.clone();
+                return done.point;
             }
             let p = match (o.backend(), &self.accuracy) {
                 (Some(backend), Some(accuracy)) => {
@@ -454,6 +454,36 @@ impl Evaluator {
     fn nonlinear_probe(&self) -> bool {
         let d = &self.scene.spec.device;
         self.method == Method::Frequency && (d.coulomb > 0.0 || d.quantization > 0.0)
+    }
+
+    /// The farm this map's units go to, if any.
+    fn farm(&self) -> Option<&std::sync::Arc<dyn super::farm::Farm>> {
+        self.observer.as_ref().and_then(|o| o.farm())
+    }
+
+    /// With a farm: have `units` of this map computed elsewhere, their
+    /// trials then replayed here. A unit that cannot be computed stops the
+    /// map, failed with the reason. Without a farm: nothing (the map
+    /// computes them itself).
+    fn farm_units(
+        &self,
+        spec: &MapSpec,
+        units: &[super::farm::Unit],
+        done: &(dyn Fn(usize) + Sync),
+    ) {
+        let (Some(o), Some(farm)) = (&self.observer, self.farm()) else {
+            return;
+        };
+        // A whole-map unit's columns came with it.
+        let columns = units
+            .iter()
+            .any(|u| matches!(u, super::farm::Unit::Column { .. }));
+        if o.cancelled() || (columns && whole_map_unit(spec, self)) {
+            return;
+        }
+        if let Err(why) = farm.run(self.scope, spec, units, o, done) {
+            o.fail(why);
+        }
     }
 
     /// Tell the observer (if any) this map is `fraction` done.
@@ -626,23 +656,13 @@ pub fn map_observed(
     scope: u32,
 ) -> Result<MapResult, SpecError> {
     let start = Instant::now();
-    let (mut ev, _) = prepare(spec)?;
-    ev.accuracy = Some(spec.accuracy.clone());
-    ev.observer = observer;
-    ev.scope = scope;
+    let (ev, b_auto) = map_evaluator(spec, observer, scope)?;
     let res = ev.res;
-    // The automatic B range, only when no list is given (its length was
-    // checked against the limits in `prepare`).
-    let b_auto: Vec<f64> = match spec.b {
-        Some(_) => Vec::new(),
-        None => (0..)
-            .map(|i| i as f64 * res.b_step)
-            .take_while(|&b| b <= spec.b_max + 1e-9)
-            .collect(),
-    };
-    // Each B's column: its first place in the list.
-    for (i, b) in spec.b.as_deref().unwrap_or(&b_auto).iter().enumerate() {
-        ev.columns.entry(b.to_bits()).or_insert(i as u32);
+    // A trace (each B starts from the last) and the analytic engine (closed
+    // forms) are one unit of work each: with a farm, the whole map is
+    // computed elsewhere and replayed here.
+    if whole_map_unit(spec, &ev) {
+        ev.farm_units(spec, &[super::farm::Unit::Map], &|_| {});
     }
     let (boundary, points) = match (spec.search, ev.criterion, &ev.model) {
         (_, Criterion::StrictPassivity, Some(m)) => {
@@ -722,6 +742,72 @@ pub fn map_observed(
     })
 }
 
+/// The evaluator of map `scope` reporting to `observer`, and the automatic
+/// B range (empty when the spec gives a list).
+fn map_evaluator(
+    spec: &MapSpec,
+    observer: Option<std::sync::Arc<Observer>>,
+    scope: u32,
+) -> Result<(Evaluator, Vec<f64>), SpecError> {
+    let (mut ev, _) = prepare(spec)?;
+    ev.accuracy = Some(spec.accuracy.clone());
+    ev.observer = observer;
+    ev.scope = scope;
+    // The automatic B range, only when no list is given (its length was
+    // checked against the limits in `prepare`).
+    let b_auto: Vec<f64> = match spec.b {
+        Some(_) => Vec::new(),
+        None => (0..)
+            .map(|i| i as f64 * ev.res.b_step)
+            .take_while(|&b| b <= spec.b_max + 1e-9)
+            .collect(),
+    };
+    // Each B's column: its first place in the list.
+    for (i, b) in spec.b.as_deref().unwrap_or(&b_auto).iter().enumerate() {
+        ev.columns.entry(b.to_bits()).or_insert(i as u32);
+    }
+    Ok((ev, b_auto))
+}
+
+/// Whether a map is one unit of work (a trace, the analytic engine), not
+/// one per column.
+fn whole_map_unit(spec: &MapSpec, ev: &Evaluator) -> bool {
+    spec.search == SearchKind::Trace || ev.model.is_some()
+}
+
+/// Compute one column of map `scope` (a farmed unit, see `farm.rs`): the
+/// bisection of `b` (with its interval on a noisy scene), or the grid's K
+/// values at `b`, trials going to `observer`. The trials, and their
+/// places, are those the whole map computes for that column.
+pub fn column_observed(
+    spec: &MapSpec,
+    b: f64,
+    observer: std::sync::Arc<Observer>,
+    scope: u32,
+) -> Result<(), SpecError> {
+    let (ev, b_auto) = map_evaluator(spec, Some(observer), scope)?;
+    let in_map = spec.b.as_deref().unwrap_or(&b_auto);
+    if whole_map_unit(spec, &ev) || !in_map.iter().any(|x| x.to_bits() == b.to_bits()) {
+        return Err(SpecError::new(
+            "b",
+            b,
+            "is not a column of this map that is computed on its own (a bisection or grid column of its B list)",
+        ));
+    }
+    match spec.search {
+        SearchKind::Grid => {
+            for k in grid_ks(&ev, spec) {
+                ev.classify(k, b);
+            }
+        }
+        _ => {
+            bisect_column(&ev, spec, b);
+        }
+    }
+    ev.report(1.0);
+    Ok(())
+}
+
 /// The K-width and B-width intervals from the boundary's: K-width lies
 /// between the largest lower and the largest upper bound; B-width between
 /// the largest B whose lower bound renders and the largest B that is not
@@ -785,18 +871,37 @@ fn planned_b(boundary: &[BoundaryPoint], n_auto: usize, b_step: f64) -> usize {
     n_auto.max(done + 1)
 }
 
+/// One column of a bisection map: the largest K that renders at `b`, with
+/// its interval on a noisy scene, and the trials that found it.
+fn bisect_column(ev: &Evaluator, spec: &MapSpec, b: f64) -> (BoundaryPoint, Vec<Point>) {
+    let mut pts = Vec::new();
+    let robust = spec.search == SearchKind::RobustBisect;
+    let k = ev.bisect_k(b, ev.res.k_step, spec.k_max, robust, &mut pts);
+    let mut bp = BoundaryPoint::new(b, k.unwrap_or(0.0));
+    if ev.noisy() {
+        ev.interval(&mut bp, ev.res.k_step, spec.k_max, &mut pts);
+    }
+    (bp, pts)
+}
+
+/// The units of the columns at `bs` (each B's place in the map's list).
+fn column_units(ev: &Evaluator, bs: &[f64]) -> Vec<super::farm::Unit> {
+    bs.iter()
+        .map(|&b| super::farm::Unit::Column {
+            column: ev.columns.get(&b.to_bits()).copied().unwrap_or(0),
+            b,
+        })
+        .collect()
+}
+
 fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
-    let one = |b: f64| {
-        let mut pts = Vec::new();
-        let robust = spec.search == SearchKind::RobustBisect;
-        let k = ev.bisect_k(b, ev.res.k_step, spec.k_max, robust, &mut pts);
-        let mut bp = BoundaryPoint::new(b, k.unwrap_or(0.0));
-        if ev.noisy() {
-            ev.interval(&mut bp, ev.res.k_step, spec.k_max, &mut pts);
-        }
-        (bp, pts)
-    };
+    let one = |b: f64| bisect_column(ev, spec, b);
     if let Some(bs) = &spec.b {
+        // With a farm, every column is computed elsewhere first (in
+        // parallel), then replayed here.
+        ev.farm_units(spec, &column_units(ev, bs), &|n| {
+            ev.report(n as f64 / bs.len() as f64)
+        });
         let finished = std::sync::atomic::AtomicUsize::new(0);
         let r: Vec<_> = bs
             .par_iter()
@@ -817,10 +922,20 @@ fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPo
     // columns past that end: they are dropped, trials and all, so the map
     // is the same on any number of threads (issue 14).
     let k_floor = ev.res.k_step;
-    let batch = rayon::current_num_threads().max(2);
+    let batch = match ev.farm() {
+        Some(f) => f.batch().max(2),
+        None => rayon::current_num_threads().max(2),
+    };
     let mut columns: Vec<(BoundaryPoint, Vec<Point>)> = Vec::new();
     for chunk in b_auto.chunks(batch) {
         let from = columns.len();
+        let planned = {
+            let boundary: Vec<BoundaryPoint> = columns.iter().map(|(bp, _)| *bp).collect();
+            planned_b(&boundary, b_auto.len(), ev.res.b_step)
+        };
+        ev.farm_units(spec, &column_units(ev, chunk), &|n| {
+            ev.report((from + n) as f64 / planned as f64)
+        });
         columns.extend(chunk.par_iter().map(|&b| one(b)).collect::<Vec<_>>());
         // A cancelled run answers every trial "not passive": its columns
         // say nothing about where the map ends (and nothing is dropped).
@@ -912,14 +1027,22 @@ fn trace(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>,
     (boundary, points)
 }
 
-fn grid(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
+/// The K values of a grid map's columns: up to 60 steps of `k_step`.
+fn grid_ks(ev: &Evaluator, spec: &MapSpec) -> Vec<f64> {
     let step = ev.res.k_step;
     let nk = ((spec.k_max / step).floor() as usize).clamp(1, 60);
-    let ks: Vec<f64> = (1..=nk).map(|i| i as f64 * step).collect();
+    (1..=nk).map(|i| i as f64 * step).collect()
+}
+
+fn grid(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
+    let ks = grid_ks(ev, spec);
     let bs = spec
         .b
         .clone()
         .unwrap_or_else(|| b_auto.iter().copied().take(60).collect());
+    ev.farm_units(spec, &column_units(ev, &bs), &|n| {
+        ev.report(n as f64 / bs.len() as f64)
+    });
     let total = (bs.len() * ks.len()).max(1);
     let finished = std::sync::atomic::AtomicUsize::new(0);
     let points: Vec<Point> = bs
