@@ -65,10 +65,7 @@ mod tempdir {
 async fn claim(st: &Store) -> Lease {
     let row = st.claim("sim", "w1", 60_000).await.unwrap().unwrap();
     assert_eq!(row.id, "e1");
-    Lease {
-        id: row.id,
-        attempt: row.attempt,
-    }
+    Lease::of(row.id, row.attempt)
 }
 
 fn trial(scope: u32, column: u32, index: u32, k: f64, passive: bool) -> StoredTrial {
@@ -225,10 +222,7 @@ async fn an_expired_lease_is_taken_over_and_the_old_holder_is_fenced() {
         let st = &store;
         let first = st.claim("sim", "w1", 300).await.unwrap().unwrap();
         assert_eq!((first.attempt, first.worker.as_deref()), (1, Some("w1")));
-        let old = Lease {
-            id: "e1".into(),
-            attempt: 1,
-        };
+        let old = Lease::of("e1", 1);
         // Held: nobody else can claim it, and its heartbeat holds it.
         assert!(st.claim("sim", "w2", 300).await.unwrap().is_none());
         assert_eq!(st.heartbeat(&old, 3, 0.1, 300).await.unwrap(), Held::Held);
@@ -240,10 +234,7 @@ async fn an_expired_lease_is_taken_over_and_the_old_holder_is_fenced() {
             "{}",
             st.backend()
         );
-        let new = Lease {
-            id: "e1".into(),
-            attempt: 2,
-        };
+        let new = Lease::of("e1", 2);
         // The old holder: heartbeat lost, trials refused, end refused.
         assert_eq!(st.heartbeat(&old, 99, 0.9, 300).await.unwrap(), Held::Lost);
         let e = st
@@ -326,10 +317,7 @@ async fn interrupted_runs_are_claimed_again_and_pause_holds_everything() {
         assert_eq!((again.attempt, again.trials_done), (2, 5));
         // Interrupted because its trials could not be stored: claimed
         // again only after the wait asked for, not at once in a loop.
-        let again = Lease {
-            id: again.id,
-            attempt: again.attempt,
-        };
+        let again = Lease::of(again.id, again.attempt);
         st.interrupt(&again, 6, 60_000).await.unwrap();
         assert!(st.claim("sim", "w2", 60_000).await.unwrap().is_none());
         st.interrupt(&again, 6, 0).await.unwrap(); // not running: no change
@@ -411,10 +399,7 @@ fn no_experiment_is_done_twice_or_lost_whatever_the_interleaving() {
                             if let Some(r) =
                                 st.claim("sim", &format!("w{w}"), 60_000).await.unwrap()
                             {
-                                held[w] = Some(Lease {
-                                    id: r.id,
-                                    attempt: r.attempt,
-                                });
+                                held[w] = Some(Lease::of(r.id, r.attempt));
                             }
                         }
                         Step::Beat(w) => {
@@ -454,14 +439,7 @@ fn no_experiment_is_done_twice_or_lost_whatever_the_interleaving() {
                 }
                 let mut rounds = 0;
                 while let Some(r) = st.claim("sim", "drain", 60_000).await.unwrap() {
-                    let (id, ended) = complete(
-                        &st,
-                        Lease {
-                            id: r.id,
-                            attempt: r.attempt,
-                        },
-                    )
-                    .await;
+                    let (id, ended) = complete(&st, Lease::of(r.id, r.attempt)).await;
                     prop_assert!(ended);
                     *completed.entry(id).or_default() += 1;
                     rounds += 1;
@@ -487,4 +465,162 @@ fn no_experiment_is_done_twice_or_lost_whatever_the_interleaving() {
             })
         })
         .unwrap();
+}
+
+/// Issue 14, work units: planned by the experiment's holder (again:
+/// nothing changes), claimed in map and column order, fenced by their own
+/// attempt, failed at their `MAX_LOST`-th expiry, and never claimed once
+/// their experiment stops running.
+#[tokio::test]
+async fn work_units_are_planned_once_claimed_in_order_and_fenced() {
+    use zwidth::store::Fault;
+    use zwidth::zwidth::farm::Unit;
+    for (store, _dir) in stores("units").await {
+        let st = &store;
+        let driver = claim(st).await;
+        let cols = [
+            Unit::Column { column: 0, b: 0.0 },
+            Unit::Column { column: 1, b: 10.0 },
+        ];
+        st.plan_units(&driver, 0, "{\"m\":0}", &cols).await.unwrap();
+        // Planned again (a driver taken over), with one more: the first
+        // two stay as they were.
+        st.plan_units(&driver, 0, "{\"m\":\"other\"}", &cols[..1])
+            .await
+            .unwrap();
+        st.plan_units(&driver, 3, "{\"m\":3}", &[Unit::Map])
+            .await
+            .unwrap();
+        // A driver whose lease is not the experiment's plans nothing.
+        let e = st
+            .plan_units(&Lease::of("e1", 7), 5, "{}", &[Unit::Map])
+            .await
+            .unwrap_err();
+        assert_eq!(Fault::of(&e), Fault::Lost, "{e}");
+        let all = st.units("e1").await.unwrap();
+        let shape: Vec<(i64, i64, Option<f64>, &str, &str, i64)> = all
+            .iter()
+            .map(|u| {
+                (
+                    u.scope,
+                    u.col,
+                    u.b,
+                    u.spec.as_str(),
+                    u.state.as_str(),
+                    u.attempt,
+                )
+            })
+            .collect();
+        assert_eq!(
+            shape,
+            [
+                (0, 0, Some(0.0), "{\"m\":0}", "queued", 0),
+                (0, 1, Some(10.0), "{\"m\":0}", "queued", 0),
+                (3, -1, None, "{\"m\":3}", "queued", 0),
+            ],
+            "{}",
+            st.backend()
+        );
+        assert_eq!(all[1].unit(), cols[1]);
+        assert_eq!(all[2].unit(), Unit::Map);
+        // Claimed by map and column: column 0 (expiring at once), then 1,
+        // then the whole map 3; then nothing but expired leases.
+        let a = st.claim_unit("sim", "w2", 300).await.unwrap().unwrap();
+        assert_eq!(
+            (a.scope, a.col, a.attempt, a.worker.as_deref()),
+            (0, 0, 1, Some("w2"))
+        );
+        let b = st.claim_unit("sim", "w3", 60_000).await.unwrap().unwrap();
+        assert_eq!((b.scope, b.col), (0, 1));
+        let m = st.claim_unit("sim", "w3", 60_000).await.unwrap().unwrap();
+        assert_eq!((m.scope, m.col, m.state.as_str()), (3, -1, "running"));
+        assert!(st.claim_unit("sim", "w4", 300).await.unwrap().is_none());
+        // Other rigs' workers never see them.
+        assert!(st.claim_unit("other", "w4", 300).await.unwrap().is_none());
+        // The holder stores its column's trials; the heartbeat holds.
+        let old = a.lease();
+        st.add_trials(&old, &[trial(0, 0, 0, 100.0, true)], &[], (1, 0.0))
+            .await
+            .unwrap();
+        assert_eq!(st.heartbeat(&old, 1, 0.0, 300).await.unwrap(), Held::Held);
+        // Expired: taken over (attempt 2), the old holder fenced off.
+        tokio::time::sleep(std::time::Duration::from_millis(400)).await;
+        let a2 = st.claim_unit("sim", "w4", 60_000).await.unwrap().unwrap();
+        assert_eq!((a2.scope, a2.col, a2.attempt, a2.lost), (0, 0, 2, 1));
+        assert_eq!(st.heartbeat(&old, 5, 0.0, 300).await.unwrap(), Held::Lost);
+        let e = st
+            .add_trials(&old, &[trial(0, 0, 1, 200.0, false)], &[], (2, 0.0))
+            .await
+            .unwrap_err();
+        assert_eq!(Fault::of(&e), Fault::Lost, "{e}");
+        assert!(!st.finish(&old, "succeeded", 2, None, None).await.unwrap());
+        // The new holder resumes from the stored trial of its column only.
+        st.add_trials(&b.lease(), &[trial(0, 1, 0, 300.0, true)], &[], (1, 0.0))
+            .await
+            .unwrap();
+        let resumed = st.unit_trials(&a2).await.unwrap();
+        assert_eq!(resumed, [trial(0, 0, 0, 100.0, true)]);
+        assert_eq!(st.unit_trials(&m).await.unwrap(), []);
+        // Ends: done (as `succeeded` says it), and interrupted: queued again.
+        assert!(st
+            .finish(&a2.lease(), "succeeded", 1, Some("null"), None)
+            .await
+            .unwrap());
+        st.interrupt(&b.lease(), 1, 0).await.unwrap();
+        let states: Vec<(i64, String, i64)> = st
+            .units_of("e1", 0)
+            .await
+            .unwrap()
+            .into_iter()
+            .map(|u| (u.col, u.state, u.trials))
+            .collect();
+        assert_eq!(states, [(0, "done".into(), 1), (1, "queued".into(), 1)]);
+        let b2 = st.claim_unit("sim", "w5", 60_000).await.unwrap().unwrap();
+        assert_eq!((b2.col, b2.attempt), (1, 2));
+        // The experiment cancelled: its units' heartbeats say so, and no
+        // unit of it is claimed, even with its lease expired.
+        st.cancel("e1").await.unwrap();
+        assert_eq!(
+            st.heartbeat(&b2.lease(), 1, 0.0, -1).await.unwrap(),
+            Held::Cancelled
+        );
+        assert!(st.claim_unit("sim", "w6", 300).await.unwrap().is_none());
+        assert!(st
+            .finish(&b2.lease(), "cancelled", 1, None, None)
+            .await
+            .unwrap());
+        assert_eq!(st.units_of("e1", 0).await.unwrap()[1].state, "cancelled");
+    }
+}
+
+/// Issue 14: a unit whose workers keep dying fails at its `MAX_LOST`-th
+/// expired lease, saying why; its driver fails the experiment with that.
+#[tokio::test]
+async fn a_unit_whose_lease_expires_max_lost_times_fails_with_the_reason() {
+    use zwidth::zwidth::farm::Unit;
+    for (store, _dir) in stores("unit-lost").await {
+        let st = &store;
+        let driver = claim(st).await;
+        st.plan_units(&driver, 2, "{}", &[Unit::Column { column: 4, b: 40.0 }])
+            .await
+            .unwrap();
+        for n in 1..=zwidth::store::leases::MAX_LOST {
+            let u = st
+                .claim_unit("sim", &format!("w{n}"), 300)
+                .await
+                .unwrap()
+                .unwrap();
+            assert_eq!(u.attempt, n);
+            tokio::time::sleep(std::time::Duration::from_millis(400)).await;
+        }
+        assert!(st.claim_unit("sim", "w-next", 300).await.unwrap().is_none());
+        let u = &st.units("e1").await.unwrap()[0];
+        assert_eq!(u.state, "failed", "{}", st.backend());
+        let why = u.error.clone().unwrap();
+        assert!(
+            why.contains("stopped answering 3 times") && why.contains("w3"),
+            "{why}"
+        );
+        assert_eq!(u.describe(), "map 2, column 4 (B = 40 N·s/m)");
+    }
 }

@@ -346,14 +346,11 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
                 return;
             }
             tracing::info!(rig = %r.info().id, parallelism = r.info().parallelism, "rig ready");
-            let task = tokio::spawn(crate::jobs::runner(
-                store.clone(),
-                r,
-                running.clone(),
-                stop_rx.clone(),
-                me.clone(),
-            ));
-            runners.lock().unwrap_or_else(|e| e.into_inner()).push(task);
+            let tasks = crate::jobs::spawn_rig(&store, r, &running, &stop_rx, &me);
+            runners
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .extend(tasks);
         })
     };
     for r in &rigs {

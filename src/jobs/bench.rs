@@ -147,10 +147,7 @@ async fn claim_rate(
                     .map_err(|e| e.to_string())?;
                 lat.push(t0.elapsed().as_secs_f64() * 1e3);
                 let Some(r) = row else { break };
-                let lease = Lease {
-                    id: r.id,
-                    attempt: r.attempt,
-                };
+                let lease = Lease::of(r.id, r.attempt);
                 store
                     .finish(&lease, "succeeded", 0, None, None)
                     .await

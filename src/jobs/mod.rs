@@ -8,31 +8,81 @@ use std::sync::Arc;
 use std::time::Duration;
 
 pub mod bench;
+pub mod farm;
 pub mod worker;
 
 use crate::experiment::ExperimentSpec;
 use crate::rig::Rig;
-use crate::store::{Fault, Held, Lease, Store};
+use crate::store::{Fault, Held, Lease, Store, UnitRow};
+use crate::zwidth::farm::{run_unit, Unit};
 use crate::zwidth::search::{Observer, StoredEvaluation, StoredTrial};
+use crate::zwidth::settings::MapSpec;
 
 /// The observers of running experiments by id, so a cancel request reaches
 /// the simulation at once (not at the runner's next 100 ms look).
 pub type Running = Arc<std::sync::Mutex<std::collections::HashMap<String, Arc<Observer>>>>;
 
-/// Stop a running experiment's simulation now (false if it is not running here).
+/// Stop a running experiment's simulation now, and its units running in
+/// this process (false if none of it runs here).
 pub fn cancel_running(running: &Running, id: &str) -> bool {
     let map = running.lock().unwrap_or_else(|e| e.into_inner());
-    match map.get(id) {
-        Some(o) => {
+    let unit_of = format!("{id}/");
+    let mut found = false;
+    for (key, o) in map.iter() {
+        if key == id || key.starts_with(&unit_of) {
             o.cancel.store(true, Ordering::Relaxed);
-            true
+            found = true;
         }
-        None => false,
     }
+    found
 }
 
-/// Trials per second of the running experiment over the last second (for /metrics).
-pub static TRIALS_PER_SECOND: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+/// Trials computed and stored by this process so far (its trials per
+/// second, for /metrics, come from this count).
+pub static TRIALS_STORED: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// Run `rig`'s work until `shutdown`: its experiments one at a time, and,
+/// on a shared store (PostgreSQL) with a simulated rig, also its work
+/// units, one per thread of the rig (an experiment's run then only plans
+/// its units and replays them: it has its own slot, and drivers never
+/// starve the units of their threads).
+pub fn spawn_rig(
+    store: &Store,
+    rig: Arc<dyn Rig>,
+    running: &Running,
+    shutdown: &tokio::sync::watch::Receiver<bool>,
+    me: &Arc<Worker>,
+) -> Vec<tokio::task::JoinHandle<()>> {
+    let mut tasks = vec![tokio::spawn(runner(
+        store.clone(),
+        rig.clone(),
+        running.clone(),
+        shutdown.clone(),
+        me.clone(),
+    ))];
+    if farmed(store, rig.as_ref()) {
+        for _ in 0..rig.info().parallelism.max(1) {
+            tasks.push(tokio::spawn(unit_runner(
+                store.clone(),
+                rig.clone(),
+                running.clone(),
+                shutdown.clone(),
+                me.clone(),
+            )));
+        }
+    }
+    tasks
+}
+
+/// Whether `rig`'s experiments hand their units to workers: on a shared
+/// store, for a simulated rig (an attached rig runs its trials itself).
+fn farmed(store: &Store, rig: &dyn Rig) -> bool {
+    store.shared() && rig.attached().is_none()
+}
+
+/// Threads of the pool an experiment's run (a driver) waits on: enough for
+/// a comparison's maps to queue their units at once.
+const DRIVER_THREADS: usize = 4;
 
 /// This process as a worker: its id in the `workers` table and on the
 /// leases it holds, and how long a lease lasts without a heartbeat.
@@ -80,22 +130,24 @@ pub async fn runner(
     me: Arc<Worker>,
 ) {
     let id = rig.info().id.clone();
-    while !*shutdown.borrow() {
-        if store.health().corrupt.is_some() {
-            tokio::time::sleep(Duration::from_secs(1)).await;
-            continue;
-        }
-        match store.rig_window(&id).await {
-            Ok(Some(w)) => {
-                if let Ok(hours) = w.validate() {
-                    if !hours.is_open(jiff::Timestamp::now()) {
-                        tokio::time::sleep(Duration::from_millis(500)).await;
-                        continue;
-                    }
-                }
+    let driver = if farmed(&store, rig.as_ref()) {
+        match rayon::ThreadPoolBuilder::new()
+            .num_threads(DRIVER_THREADS)
+            .thread_name(|i| format!("zwidth-driver-{i}"))
+            .build()
+        {
+            Ok(p) => Some(Arc::new(p)),
+            Err(e) => {
+                tracing::error!(error = %e, "no threads for the experiments' runs");
+                return;
             }
-            Ok(None) => {}
-            Err(e) => tracing::warn!(error = %e, rig = %id, "reading the rig window failed"),
+        }
+    } else {
+        None
+    };
+    while !*shutdown.borrow() {
+        if !may_start(&store, &id).await {
+            continue;
         }
         // With several API processes (PostgreSQL), an attached rig's
         // experiments are claimed by the process its agent is connected
@@ -108,24 +160,82 @@ pub async fn runner(
         }
         match store.claim(&id, &me.id, me.lease_ms).await {
             Ok(Some(row)) => {
-                let lease = Lease {
-                    id: row.id,
-                    attempt: row.attempt,
-                };
+                let lease = Lease::of(row.id, row.attempt);
                 run_one(
                     &store,
                     rig.clone(),
                     &running,
                     lease,
-                    row.spec,
+                    Work::Experiment(row.spec),
                     shutdown.clone(),
                     &me,
+                    driver.clone(),
                 )
                 .await
             }
             Ok(None) => tokio::time::sleep(Duration::from_millis(100)).await,
             Err(e) => {
                 tracing::error!(error = %e, "claiming the next experiment failed");
+                tokio::time::sleep(Duration::from_secs(1)).await;
+            }
+        }
+    }
+}
+
+/// Whether `rig` may start something now: the store is sound and the
+/// rig's window (if any) is open. When not, this waits a little first.
+async fn may_start(store: &Store, rig: &str) -> bool {
+    if store.health().corrupt.is_some() {
+        tokio::time::sleep(Duration::from_secs(1)).await;
+        return false;
+    }
+    match store.rig_window(rig).await {
+        Ok(Some(w)) => {
+            if let Ok(hours) = w.validate() {
+                if !hours.is_open(jiff::Timestamp::now()) {
+                    tokio::time::sleep(Duration::from_millis(500)).await;
+                    return false;
+                }
+            }
+        }
+        Ok(None) => {}
+        Err(e) => tracing::warn!(error = %e, rig, "reading the rig window failed"),
+    }
+    true
+}
+
+/// Claim and compute `rig`'s work units (`zwidth::farm`) until `shutdown`:
+/// one at a time, on the rig's threads, inside its window.
+pub async fn unit_runner(
+    store: Store,
+    rig: Arc<dyn Rig>,
+    running: Running,
+    shutdown: tokio::sync::watch::Receiver<bool>,
+    me: Arc<Worker>,
+) {
+    let id = rig.info().id.clone();
+    while !*shutdown.borrow() {
+        if !may_start(&store, &id).await {
+            continue;
+        }
+        match store.claim_unit(&id, &me.id, me.lease_ms).await {
+            Ok(Some(row)) => {
+                let lease = row.lease();
+                run_one(
+                    &store,
+                    rig.clone(),
+                    &running,
+                    lease,
+                    Work::Unit(Box::new(row)),
+                    shutdown.clone(),
+                    &me,
+                    None,
+                )
+                .await
+            }
+            Ok(None) => tokio::time::sleep(Duration::from_millis(100)).await,
+            Err(e) => {
+                tracing::error!(error = %e, "claiming the next unit failed");
                 tokio::time::sleep(Duration::from_secs(1)).await;
             }
         }
@@ -176,16 +286,15 @@ impl Unstored {
         if self.lost {
             return Err(Fault::Lost);
         }
-        self.trials.extend(observer.take_new());
+        let new = observer.take_new();
+        TRIALS_STORED.fetch_add(new.len() as u64, Ordering::Relaxed);
+        self.trials.extend(new);
         self.evals.extend(observer.take_new_evaluations());
         self.dropped.extend(observer.take_dropped());
         let r = async {
             // Dropped columns after the trials, in the same transaction: a
             // dropped column may have had some in this batch.
-            let progress = (
-                observer.trials.load(Ordering::Relaxed) as i64,
-                observer.fraction(),
-            );
+            let progress = (observer.trials_done() as i64, observer.fraction());
             store
                 .add_trials(lease, &self.trials, &self.dropped, progress)
                 .await?;
@@ -282,25 +391,72 @@ where
     }
 }
 
-#[tracing::instrument(skip(store, rig, running, spec, shutdown, me), fields(rig = %rig.info().id, id = %lease.id, attempt = lease.attempt))]
+/// What a runner claimed: an experiment (its stored spec) or a unit.
+enum Work {
+    Experiment(String),
+    Unit(Box<UnitRow>),
+}
+
+/// What runs: an experiment, or one unit of one of its maps.
+enum Job {
+    Experiment(ExperimentSpec),
+    Unit(MapSpec, u32, Unit),
+}
+
+impl Job {
+    fn run(&self, observer: Arc<Observer>) -> Result<serde_json::Value, crate::error::SpecError> {
+        match self {
+            Job::Experiment(spec) => spec.run(observer),
+            Job::Unit(spec, scope, unit) => {
+                run_unit(spec, *scope, *unit, observer).map(|()| serde_json::Value::Null)
+            }
+        }
+    }
+}
+
+/// Run an experiment (with `driver`, its units go to the workers and it
+/// waits on the driver's threads) or a unit, under `lease`: store its
+/// trials as they finish, renew the lease, honour cancel and shutdown, and
+/// record its end.
+#[allow(clippy::too_many_arguments)]
+#[tracing::instrument(skip(store, rig, running, work, shutdown, me, driver), fields(rig = %rig.info().id, id = %lease.id, unit = ?lease.unit, attempt = lease.attempt))]
 async fn run_one(
     store: &Store,
     rig: Arc<dyn Rig>,
     running: &Running,
     lease: Lease,
-    spec: String,
+    work: Work,
     shutdown: tokio::sync::watch::Receiver<bool>,
     me: &Worker,
+    driver: Option<Arc<rayon::ThreadPool>>,
 ) {
     let id = lease.id.clone();
+    let key = match lease.unit {
+        None => id.clone(),
+        Some(u) => format!("{id}/{}/{}", u.scope, u.col),
+    };
     // A stored spec is checked again: one stored by an older version may
     // not pass today's limits, and must fail here, not take the server down.
-    let checked = serde_json::from_str::<ExperimentSpec>(&spec)
-        .map_err(|e| format!("stored spec unreadable: {e}"))
-        .and_then(|s| match s.validate() {
-            Ok(cost) => Ok((s, cost)),
-            Err(e) => Err(e.to_string()),
-        });
+    let (checked, unit) = match work {
+        Work::Experiment(spec) => (
+            serde_json::from_str::<ExperimentSpec>(&spec)
+                .map_err(|e| format!("stored spec unreadable: {e}"))
+                .and_then(|s| match s.validate() {
+                    Ok(cost) => Ok((Job::Experiment(s), cost)),
+                    Err(e) => Err(e.to_string()),
+                }),
+            None,
+        ),
+        Work::Unit(row) => (
+            serde_json::from_str::<MapSpec>(&row.spec)
+                .map_err(|e| format!("stored unit spec unreadable: {e}"))
+                .and_then(|m| match crate::zwidth::search::validate(&m) {
+                    Ok(cost) => Ok((Job::Unit(m, row.scope as u32, row.unit()), cost)),
+                    Err(e) => Err(e.to_string()),
+                }),
+            Some(row),
+        ),
+    };
     let (parsed, cost) = match checked {
         Ok(x) => x,
         Err(e) => {
@@ -315,14 +471,22 @@ async fn run_one(
     // They are read (retrying while the database is busy) before anything
     // runs; an experiment whose stored work cannot be read fails saying so.
     let stored = async {
-        let t = retrying("reading stored trials", &shutdown, store, None, || {
-            store.trials(&id)
+        let t = retrying("reading stored trials", &shutdown, store, None, || async {
+            match &unit {
+                Some(row) => store.unit_trials(row).await,
+                None => store.trials(&id).await,
+            }
         })
         .await?;
-        let e = retrying("reading stored evaluations", &shutdown, store, None, || {
-            store.evaluations(&id)
-        })
-        .await?;
+        let e = match unit {
+            Some(_) => Vec::new(),
+            None => {
+                retrying("reading stored evaluations", &shutdown, store, None, || {
+                    store.evaluations(&id)
+                })
+                .await?
+            }
+        };
         Ok::<_, sqlx::Error>((t, e))
     };
     let (done, evals) = match stored.await {
@@ -344,20 +508,29 @@ async fn run_one(
     if let Some(backend) = rig.backend(&id) {
         observer = observer.with_backend(backend);
     }
+    if driver.is_some() {
+        observer = observer.with_farm(Arc::new(farm::DbFarm {
+            store: store.clone(),
+            lease: lease.clone(),
+            handle: tokio::runtime::Handle::current(),
+        }));
+    }
     let observer = Arc::new(observer);
     observer.limit_trials(usize::try_from(cost.trial_limit()).unwrap_or(usize::MAX));
     running
         .lock()
         .unwrap_or_else(|e| e.into_inner())
-        .insert(id.clone(), observer.clone());
+        .insert(key.clone(), observer.clone());
     let obs = observer.clone();
     let rig_id = rig.info().id;
     let on_rig = rig.clone();
-    let mut task = tokio::task::spawn_blocking(move || on_rig.pool().install(|| parsed.run(obs)));
+    let mut task = tokio::task::spawn_blocking(move || match driver {
+        Some(pool) => pool.install(|| parsed.run(obs)),
+        None => on_rig.pool().install(|| parsed.run(obs)),
+    });
     // Every 100 ms: store the trials finished since (one transaction) and
     // look for shutdown; every heartbeat: renew the lease, write progress,
     // and look for a cancel request (made by any API process).
-    let mut rate_mark = (std::time::Instant::now(), 0usize);
     let mut interrupted = false;
     let mut unstored = Unstored::default();
     let mut beat = std::time::Instant::now();
@@ -367,12 +540,7 @@ async fn run_one(
             r = &mut task => break r,
             _ = tokio::time::sleep(Duration::from_millis(100)) => {
                 let _ = unstored.flush(store, &lease, &observer).await;
-                let trials = observer.trials.load(Ordering::Relaxed) as i64;
-                let dt = rate_mark.0.elapsed().as_secs_f64();
-                if dt >= 1.0 {
-                    TRIALS_PER_SECOND.store(((trials as usize).saturating_sub(rate_mark.1) as f64 / dt).round() as u64, Ordering::Relaxed);
-                    rate_mark = (std::time::Instant::now(), trials as usize);
-                }
+                let trials = observer.trials_done() as i64;
                 if beat.elapsed() >= me.heartbeat() && !unstored.lost {
                     beat = std::time::Instant::now();
                     match store.heartbeat(&lease, trials, observer.fraction(), me.lease_ms).await {
@@ -415,7 +583,6 @@ async fn run_one(
             }
         }
     };
-    TRIALS_PER_SECOND.store(0, Ordering::Relaxed);
     // Every finished trial is stored before the end is recorded (the
     // experiment stays in `running` meanwhile, so its `held` reason shows).
     let mut wait = FIRST_RETRY;
@@ -434,7 +601,7 @@ async fn run_one(
         running
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .remove(&id)
+            .remove(&key)
     };
     if unstored.lost {
         // Another worker holds the run now: nothing of ours is written.
@@ -601,10 +768,7 @@ mod tests {
             .unwrap();
         let row = store.claim("sim", "w", LEASE_MS).await.unwrap().unwrap();
         assert_eq!((row.id.as_str(), row.attempt), (id, 1));
-        let lease = Lease {
-            id: row.id,
-            attempt: row.attempt,
-        };
+        let lease = Lease::of(row.id, row.attempt);
         let url = format!("sqlite://{}", guard.0.join("z.db").display());
         let mut lock = sqlx::SqliteConnection::connect(&url).await.unwrap();
         sqlx::query("BEGIN IMMEDIATE")
@@ -632,9 +796,10 @@ mod tests {
             rig,
             &Running::default(),
             lease,
-            SMALL.into(),
+            Work::Experiment(SMALL.into()),
             shutdown,
             &Worker::new(LEASE_MS),
+            None,
         )
         .await;
         release.await.unwrap();
@@ -659,9 +824,10 @@ mod tests {
                 rig,
                 &Running::default(),
                 lease,
-                SMALL.into(),
+                Work::Experiment(SMALL.into()),
                 shutdown,
                 &Worker::new(LEASE_MS),
+                None,
             ),
         )
         .await;

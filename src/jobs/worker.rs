@@ -5,7 +5,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use super::{runner, Running, Worker, TRIALS_PER_SECOND};
+use super::{spawn_rig, Running, Worker, TRIALS_STORED};
 use crate::rig::Rig;
 use crate::store::{Location, OpenError, Store};
 
@@ -25,13 +25,7 @@ pub async fn run(db: Location, rigs: Vec<Arc<dyn Rig>>, me: Worker) -> Result<()
     let mut tasks = Vec::new();
     for r in &rigs {
         tracing::info!(rig = %r.info().id, parallelism = r.info().parallelism, "rig ready");
-        tasks.push(tokio::spawn(runner(
-            store.clone(),
-            r.clone(),
-            running.clone(),
-            stop_rx.clone(),
-            me.clone(),
-        )));
+        tasks.extend(spawn_rig(&store, r.clone(), &running, &stop_rx, &me));
     }
     let seen = tokio::spawn(announce(
         store.clone(),
@@ -76,6 +70,8 @@ pub async fn announce(
 ) {
     // Killed workers never leave the table: forget those unseen for a day.
     let _ = store.prune_workers(86_400_000).await;
+    let load = || TRIALS_STORED.load(std::sync::atomic::Ordering::Relaxed);
+    let mut mark = (std::time::Instant::now(), load());
     while !*stop.borrow() {
         let ids: Vec<String> = {
             let r = running.lock().unwrap_or_else(|e| e.into_inner());
@@ -84,7 +80,15 @@ pub async fn announce(
             ids
         };
         let runs = (!ids.is_empty()).then(|| ids.join(","));
-        let rate = TRIALS_PER_SECOND.load(std::sync::atomic::Ordering::Relaxed) as f64;
+        // Trials stored per second since the last report (every thread's).
+        let now = (std::time::Instant::now(), load());
+        let dt = now.0.duration_since(mark.0).as_secs_f64();
+        let rate = if dt > 0.0 {
+            now.1.saturating_sub(mark.1) as f64 / dt
+        } else {
+            0.0
+        };
+        mark = now;
         if let Err(e) = store
             .worker_seen(&me.id, &rigs, runs.as_deref(), rate)
             .await

@@ -47,12 +47,50 @@ macro_rules! claim_set {
     };
 }
 
-/// A claimed run: the experiment and the attempt that holds it.
+/// A claimed run: the experiment and the attempt that holds it; or, with
+/// `unit`, one of its work units (`units.rs`) and the unit's attempt.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Lease {
     pub id: String,
     pub attempt: i64,
+    pub unit: Option<super::units::UnitPlace>,
 }
+
+impl Lease {
+    /// The lease of experiment `id` at `attempt`.
+    pub fn of(id: impl Into<String>, attempt: i64) -> Self {
+        Self {
+            id: id.into(),
+            attempt,
+            unit: None,
+        }
+    }
+}
+
+/// Insert `trials` of experiment `id` in transaction `tx`: a trial already
+/// stored keeps its point and takes the place given here. (A macro: the
+/// transaction's type is each backend's.)
+macro_rules! insert_trials {
+    ($tx:ident, $id:expr, $trials:expr) => {
+        for t in $trials {
+            let point = serde_json::to_string(&t.point).unwrap_or_default();
+            sqlx::query(
+                "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES ($1, $2, $3, $4, $5, $6, $7)
+                 ON CONFLICT (experiment_id, scope, k, b) DO UPDATE SET col = excluded.col, idx = excluded.idx",
+            )
+            .bind($id)
+            .bind(t.scope as i64)
+            .bind(t.point.k)
+            .bind(t.point.b)
+            .bind(point)
+            .bind(t.column as i64)
+            .bind(t.index as i64)
+            .execute(&mut *$tx)
+            .await?;
+        }
+    };
+}
+pub(super) use insert_trials;
 
 /// What a heartbeat found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -94,9 +132,13 @@ fn fraction_done(f: f64) -> f64 {
     }
 }
 
-fn lost(lease: &Lease) -> sqlx::Error {
+pub(super) fn lost(lease: &Lease) -> sqlx::Error {
+    let unit = lease
+        .unit
+        .map(|u| format!(" unit {}/{}", u.scope, u.col))
+        .unwrap_or_default();
     sqlx::Error::Protocol(format!(
-        "{}: experiment {} attempt {} (another worker holds it now, or it ended)",
+        "{}: experiment {}{unit} attempt {} (another worker holds it now, or it ended)",
         super::fault::LEASE_LOST_PREFIX,
         lease.id,
         lease.attempt
@@ -188,6 +230,9 @@ impl Store {
         lease_ms: i64,
     ) -> Result<Held, sqlx::Error> {
         self.writable()?;
+        if let Some(at) = lease.unit {
+            return self.unit_heartbeat(lease, at, trials, lease_ms).await;
+        }
         let now = self.db_now_ms().await?;
         let fraction = fraction_done(fraction);
         let state: Vec<String> = on_pool!(self, p => sqlx::query_scalar(
@@ -229,6 +274,11 @@ impl Store {
             return Ok(());
         }
         let (done, fraction) = progress;
+        if let Some(at) = lease.unit {
+            // A unit's columns are never dropped by the unit: its map's
+            // driver drops them.
+            return self.add_unit_trials(lease, at, trials, done).await;
+        }
         let fraction = fraction_done(fraction);
         on_pool!(self, p => {
             let mut tx = p.begin().await?;
@@ -250,22 +300,7 @@ impl Store {
                 tx.rollback().await?;
                 return Err(lost(lease));
             }
-            for t in trials {
-                let point = serde_json::to_string(&t.point).unwrap_or_default();
-                sqlx::query(
-                    "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES ($1, $2, $3, $4, $5, $6, $7)
-                     ON CONFLICT (experiment_id, scope, k, b) DO UPDATE SET col = excluded.col, idx = excluded.idx",
-                )
-                .bind(&lease.id)
-                .bind(t.scope as i64)
-                .bind(t.point.k)
-                .bind(t.point.b)
-                .bind(point)
-                .bind(t.column as i64)
-                .bind(t.index as i64)
-                .execute(&mut *tx)
-                .await?;
-            }
+            insert_trials!(tx, &lease.id, trials);
             for &(scope, b) in dropped {
                 sqlx::query("DELETE FROM trials WHERE experiment_id = $1 AND scope = $2 AND b >= $3")
                     .bind(&lease.id)
@@ -334,6 +369,9 @@ impl Store {
         error: Option<&str>,
     ) -> Result<bool, sqlx::Error> {
         self.writable()?;
+        if let Some(at) = lease.unit {
+            return self.finish_unit(lease, at, state, trials, error).await;
+        }
         let r = on_pool!(self, p => sqlx::query("UPDATE experiments SET state = $1, trials_done = $2, result = $3, error = $4,
                      finished_ms = COALESCE(CASE WHEN state = 'cancelled' THEN finished_ms END, $5),
                      progress = CASE WHEN $1 = 'succeeded' THEN 1 ELSE progress END,
@@ -363,6 +401,9 @@ impl Store {
         retry_in_ms: i64,
     ) -> Result<(), sqlx::Error> {
         self.writable()?;
+        if let Some(at) = lease.unit {
+            return self.interrupt_unit(lease, at, trials, retry_in_ms).await;
+        }
         let now = self.db_now_ms().await?;
         on_pool!(self, p => sqlx::query("UPDATE experiments SET state = 'interrupted', trials_done = $1,
                         lease_until_ms = CASE WHEN $4 > 0 THEN $5 + $4 END

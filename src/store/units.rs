@@ -1,0 +1,401 @@
+//! Work units (issue 14; `zwidth::farm`): the columns of a bisection or
+//! grid map, or a whole map, planned by an experiment's run (its driver)
+//! and claimed by any worker serving the experiment's rig. Leases as for
+//! experiments (`leases.rs`): a claim takes a queued unit or one whose lease
+//! expired, adds one to `attempt`, and every write of the unit names that
+//! attempt; after `MAX_LOST` expiries the unit fails, and with it its
+//! experiment (its driver reads the reason). Only units of running
+//! experiments are claimed: a cancelled or failed experiment's units wait
+//! for nothing.
+
+use super::leases::{lost, Held, Lease, MAX_LOST};
+use super::{now_ms, on_pool, Db, Store};
+use crate::zwidth::farm::{Unit, WHOLE_MAP};
+use crate::zwidth::search::StoredTrial;
+
+/// Which unit of its experiment a lease holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct UnitPlace {
+    pub scope: i64,
+    pub col: i64,
+}
+
+/// A unit as stored.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, sqlx::FromRow, utoipa::ToSchema)]
+pub struct UnitRow {
+    pub experiment_id: String,
+    /// The map within the experiment.
+    pub scope: i64,
+    /// The column's place in the map's B list; -1: the whole map.
+    #[serde(rename = "column")]
+    pub col: i64,
+    /// The column's damping (N·s/m); none for a whole map.
+    pub b: Option<f64>,
+    #[serde(skip)]
+    pub spec: String,
+    pub rig: String,
+    #[serde(skip)]
+    pub priority: i64,
+    #[serde(skip)]
+    pub created_ms: i64,
+    /// queued, running, done, failed or cancelled.
+    pub state: String,
+    /// Claims so far (2 or more: a worker's lease ran out).
+    pub attempt: i64,
+    /// The worker that holds (or last held) it.
+    pub worker: Option<String>,
+    /// The lease's end (database clock, unix ms).
+    pub lease_until_ms: Option<i64>,
+    #[serde(skip)]
+    pub lost: i64,
+    /// Trials done so far.
+    pub trials: i64,
+    pub error: Option<String>,
+}
+
+impl UnitRow {
+    /// The unit, as `zwidth::farm` names it.
+    pub fn unit(&self) -> Unit {
+        match (self.col, self.b) {
+            (c, Some(b)) if c >= 0 => Unit::Column {
+                column: c as u32,
+                b,
+            },
+            _ => Unit::Map,
+        }
+    }
+
+    /// The lease a claim returned.
+    pub fn lease(&self) -> Lease {
+        Lease {
+            id: self.experiment_id.clone(),
+            attempt: self.attempt,
+            unit: Some(UnitPlace {
+                scope: self.scope,
+                col: self.col,
+            }),
+        }
+    }
+
+    /// "map 2, column 5 (B = 40 N·s/m)" or "map 2".
+    pub fn describe(&self) -> String {
+        match self.unit() {
+            Unit::Column { column, b } => {
+                format!("map {}, column {column} (B = {b} N·s/m)", self.scope)
+            }
+            Unit::Map => format!("map {}", self.scope),
+        }
+    }
+}
+
+/// The units a claim may take, with `$now` the time: `$2` is the rig.
+macro_rules! claimable_unit {
+    ($now:literal) => {
+        concat!(
+            "rig = $2 AND state IN ('queued', 'running')
+             AND ((state = 'queued' AND (lease_until_ms IS NULL OR lease_until_ms < ", $now, "))
+                  OR (state = 'running' AND lease_until_ms < ", $now, "))
+             AND EXISTS (SELECT 1 FROM experiments e WHERE e.id = units.experiment_id AND e.state = 'running')"
+        )
+    };
+}
+
+/// What a unit claim writes (as `claim_set!` for experiments).
+macro_rules! claim_unit_set {
+    ($now:literal) => {
+        concat!(
+            "state = CASE WHEN state = 'running' AND lost + 1 >= $5 THEN 'failed' ELSE 'running' END,
+             error = CASE WHEN state = 'running' AND lost + 1 >= $5
+                          THEN 'its worker stopped answering ' || CAST(lost + 1 AS TEXT) || ' times (last ' || COALESCE(worker, '?') || '); not run again'
+                          ELSE error END,
+             attempt = CASE WHEN state = 'running' AND lost + 1 >= $5 THEN attempt ELSE attempt + 1 END,
+             worker = CASE WHEN state = 'running' AND lost + 1 >= $5 THEN worker ELSE $3 END,
+             lease_until_ms = CASE WHEN state = 'running' AND lost + 1 >= $5 THEN NULL ELSE ", $now, " + $4 END,
+             lost = lost + CASE WHEN state = 'running' THEN 1 ELSE 0 END"
+        )
+    };
+}
+
+/// A unit's state as its heartbeat and writes name it.
+fn unit_state(state: &str) -> &'static str {
+    match state {
+        "succeeded" => "done",
+        "cancelled" => "cancelled",
+        _ => "failed",
+    }
+}
+
+impl Store {
+    /// Queue `units` of map `scope` of the experiment `lease` holds, whose
+    /// spec is `spec` (JSON); units planned before are left as they are.
+    /// Nothing when the lease is lost.
+    pub async fn plan_units(
+        &self,
+        lease: &Lease,
+        scope: u32,
+        spec: &str,
+        units: &[Unit],
+    ) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        on_pool!(self, p => {
+            let mut tx = p.begin().await?;
+            // The fence, as for trials: the experiment row stays locked
+            // until the commit.
+            let held = sqlx::query(
+                "UPDATE experiments SET lease_until_ms = lease_until_ms WHERE id = $1 AND attempt = $2 AND state = 'running'",
+            )
+            .bind(&lease.id)
+            .bind(lease.attempt)
+            .execute(&mut *tx)
+            .await?
+            .rows_affected();
+            if held != 1 {
+                tx.rollback().await?;
+                return Err(lost(lease));
+            }
+            for u in units {
+                let b = match u {
+                    Unit::Column { b, .. } => Some(*b),
+                    Unit::Map => None,
+                };
+                sqlx::query(
+                    "INSERT INTO units (experiment_id, scope, col, b, spec, rig, priority, created_ms, state)
+                     SELECT id, $2, $3, $4, $5, rig, priority, created_ms, 'queued' FROM experiments WHERE id = $1
+                     ON CONFLICT (experiment_id, scope, col) DO NOTHING",
+                )
+                .bind(&lease.id)
+                .bind(i64::from(scope))
+                .bind(u.column_key())
+                .bind(b)
+                .bind(spec)
+                .execute(&mut *tx)
+                .await?;
+            }
+            tx.commit().await
+        })
+    }
+
+    /// The units of map `scope` of experiment `id`, by column (a whole
+    /// map's first).
+    pub async fn units_of(&self, id: &str, scope: u32) -> Result<Vec<UnitRow>, sqlx::Error> {
+        on_pool!(self, p => sqlx::query_as::<_, UnitRow>(
+            "SELECT * FROM units WHERE experiment_id = $1 AND scope = $2 ORDER BY col",
+        )
+        .bind(id)
+        .bind(i64::from(scope))
+        .fetch_all(p)
+        .await)
+    }
+
+    /// Every unit of experiment `id`, by map and column.
+    pub async fn units(&self, id: &str) -> Result<Vec<UnitRow>, sqlx::Error> {
+        on_pool!(self, p => sqlx::query_as::<_, UnitRow>(
+            "SELECT * FROM units WHERE experiment_id = $1 ORDER BY scope, col",
+        )
+        .bind(id)
+        .fetch_all(p)
+        .await)
+    }
+
+    /// The units running on `rig`, oldest experiment first.
+    pub async fn running_units(&self, rig: &str) -> Result<Vec<UnitRow>, sqlx::Error> {
+        on_pool!(self, p => sqlx::query_as::<_, UnitRow>(
+            "SELECT * FROM units WHERE rig = $1 AND state = 'running' ORDER BY created_ms, experiment_id, scope, col",
+        )
+        .bind(rig)
+        .fetch_all(p)
+        .await)
+    }
+
+    /// The stored trials of a unit: its column's, or its whole map's.
+    pub async fn unit_trials(&self, unit: &UnitRow) -> Result<Vec<StoredTrial>, sqlx::Error> {
+        let all = self
+            .trials_page(&unit.experiment_id, Some(unit.scope as u32), 0, i64::MAX)
+            .await?;
+        Ok(match unit.col {
+            WHOLE_MAP => all,
+            c => all
+                .into_iter()
+                .filter(|t| i64::from(t.column) == c)
+                .collect(),
+        })
+    }
+
+    /// Claim `rig`'s next unit for `worker`, holding it for `lease_ms`:
+    /// of running experiments, the highest priority, the oldest experiment,
+    /// then by map and column; a unit queued, or running under an expired
+    /// lease (failed instead at its `MAX_LOST`-th expiry). One statement,
+    /// as [`Store::claim`].
+    pub async fn claim_unit(
+        &self,
+        rig: &str,
+        worker: &str,
+        lease_ms: i64,
+    ) -> Result<Option<UnitRow>, sqlx::Error> {
+        self.writable()?;
+        loop {
+            let row = match &self.db {
+                Db::Sqlite(p) => sqlx::query_as::<_, UnitRow>(concat!(
+                    "UPDATE units SET ",
+                    claim_unit_set!("$1"),
+                    " WHERE (experiment_id, scope, col) = (SELECT experiment_id, scope, col FROM units WHERE ",
+                    claimable_unit!("$1"),
+                    " ORDER BY priority DESC, created_ms, experiment_id, scope, col LIMIT 1) RETURNING *"
+                ))
+                .bind(now_ms())
+                .bind(rig)
+                .bind(worker)
+                .bind(lease_ms)
+                .bind(MAX_LOST)
+                .fetch_all(p)
+                .await?
+                .pop(),
+                Db::Postgres(p) => sqlx::query_as::<_, UnitRow>(concat!(
+                    "WITH clock AS (SELECT CAST(EXTRACT(EPOCH FROM clock_timestamp()) * 1000 AS BIGINT) AS now),
+                     next AS MATERIALIZED (
+                         SELECT experiment_id, scope, col FROM units, clock WHERE ",
+                    claimable_unit!("clock.now"),
+                    " ORDER BY priority DESC, created_ms, experiment_id, scope, col LIMIT 1 FOR UPDATE OF units SKIP LOCKED)
+                     UPDATE units SET ",
+                    claim_unit_set!("clock.now"),
+                    " FROM next, clock WHERE units.experiment_id = next.experiment_id AND units.scope = next.scope AND units.col = next.col
+                     RETURNING units.*"
+                ))
+                .bind(0_i64)
+                .bind(rig)
+                .bind(worker)
+                .bind(lease_ms)
+                .bind(MAX_LOST)
+                .fetch_all(p)
+                .await?
+                .pop(),
+            };
+            match row {
+                Some(r) if r.state == "failed" => continue,
+                other => return Ok(other),
+            }
+        }
+    }
+
+    /// [`Store::heartbeat`] of a unit: extend its lease and record its
+    /// trials; `Cancelled` once its experiment is not running any more.
+    pub(super) async fn unit_heartbeat(
+        &self,
+        lease: &Lease,
+        at: UnitPlace,
+        trials: i64,
+        lease_ms: i64,
+    ) -> Result<Held, sqlx::Error> {
+        let now = self.db_now_ms().await?;
+        let held: Vec<String> = on_pool!(self, p => sqlx::query_scalar(
+            "UPDATE units SET lease_until_ms = $1 + $2, trials = $3
+             WHERE experiment_id = $4 AND scope = $5 AND col = $6 AND attempt = $7 AND state = 'running'
+             RETURNING experiment_id",
+        )
+        .bind(now)
+        .bind(lease_ms)
+        .bind(trials)
+        .bind(&lease.id)
+        .bind(at.scope)
+        .bind(at.col)
+        .bind(lease.attempt)
+        .fetch_all(p)
+        .await)?;
+        if held.is_empty() {
+            return Ok(Held::Lost);
+        }
+        let state: Option<String> = on_pool!(self, p => sqlx::query_scalar(
+            "SELECT state FROM experiments WHERE id = $1",
+        )
+        .bind(&lease.id)
+        .fetch_optional(p)
+        .await)?;
+        Ok(match state.as_deref() {
+            Some("running") => Held::Held,
+            _ => Held::Cancelled,
+        })
+    }
+
+    /// [`Store::add_trials`] of a unit: its trials, fenced by its lease.
+    pub(super) async fn add_unit_trials(
+        &self,
+        lease: &Lease,
+        at: UnitPlace,
+        trials: &[StoredTrial],
+        done: i64,
+    ) -> Result<(), sqlx::Error> {
+        on_pool!(self, p => {
+            let mut tx = p.begin().await?;
+            let held = sqlx::query(
+                "UPDATE units SET trials = $1
+                 WHERE experiment_id = $2 AND scope = $3 AND col = $4 AND attempt = $5 AND state = 'running'",
+            )
+            .bind(done)
+            .bind(&lease.id)
+            .bind(at.scope)
+            .bind(at.col)
+            .bind(lease.attempt)
+            .execute(&mut *tx)
+            .await?
+            .rows_affected();
+            if held != 1 {
+                tx.rollback().await?;
+                return Err(lost(lease));
+            }
+            super::leases::insert_trials!(tx, &lease.id, trials);
+            tx.commit().await
+        })
+    }
+
+    /// [`Store::finish`] of a unit: `succeeded` is stored as `done`.
+    pub(super) async fn finish_unit(
+        &self,
+        lease: &Lease,
+        at: UnitPlace,
+        state: &str,
+        trials: i64,
+        error: Option<&str>,
+    ) -> Result<bool, sqlx::Error> {
+        let r = on_pool!(self, p => sqlx::query(
+            "UPDATE units SET state = $1, trials = $2, error = $3, lease_until_ms = NULL
+             WHERE experiment_id = $4 AND scope = $5 AND col = $6 AND attempt = $7 AND state = 'running'",
+        )
+        .bind(unit_state(state))
+        .bind(trials)
+        .bind(error)
+        .bind(&lease.id)
+        .bind(at.scope)
+        .bind(at.col)
+        .bind(lease.attempt)
+        .execute(p)
+        .await
+        .map(|r| r.rows_affected()))?;
+        Ok(r == 1)
+    }
+
+    /// [`Store::interrupt`] of a unit: queued again, at once or after
+    /// `retry_in_ms`.
+    pub(super) async fn interrupt_unit(
+        &self,
+        lease: &Lease,
+        at: UnitPlace,
+        trials: i64,
+        retry_in_ms: i64,
+    ) -> Result<(), sqlx::Error> {
+        let now = self.db_now_ms().await?;
+        on_pool!(self, p => sqlx::query(
+            "UPDATE units SET state = 'queued', trials = $1, lease_until_ms = CASE WHEN $2 > 0 THEN $3 + $2 END
+             WHERE experiment_id = $4 AND scope = $5 AND col = $6 AND attempt = $7 AND state = 'running'",
+        )
+        .bind(trials)
+        .bind(retry_in_ms)
+        .bind(now)
+        .bind(&lease.id)
+        .bind(at.scope)
+        .bind(at.col)
+        .bind(lease.attempt)
+        .execute(p)
+        .await
+        .map(|_| ()))
+    }
+}
