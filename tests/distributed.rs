@@ -34,6 +34,24 @@ const QUICK: [&str; 3] = [
         "method":"analytic","search":"grid","b":[0,20,40],"accuracy":{"k_step":2000},"k_max":20000}"#,
 ];
 
+/// Column-heavy ones (issue 14's work units: one per B column): a
+/// time-domain bisection over a B list, and one over an automatic B range
+/// (queued in batches; the columns past its end dropped).
+const COLUMNS: [&str; 2] = [
+    r#"{"kind":"map","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},
+        "estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","b":[0,10,20,30,40,50]}"#,
+    r#"{"kind":"map","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},
+        "estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability",
+        "b_max":400,"accuracy":{"preset":"draft","b_step":40}}"#,
+];
+
+fn units(base: &str, id: &str) -> Vec<serde_json::Value> {
+    get(&format!("{base}/v1/experiments/{id}/units"))
+        .as_array()
+        .unwrap()
+        .clone()
+}
+
 struct Procs {
     children: Vec<Child>,
     dir: std::path::PathBuf,
@@ -147,7 +165,7 @@ fn a_campaign_on_three_workers_equals_one_process() {
     let Some(url) = pg::fresh_database_blocking("campaign") else {
         return;
     };
-    let specs: Vec<&str> = std::iter::once(TRACE).chain(QUICK).collect();
+    let specs: Vec<&str> = std::iter::once(TRACE).chain(QUICK).chain(COLUMNS).collect();
     // One process, SQLite.
     let mut one = Procs {
         children: vec![],
@@ -160,6 +178,8 @@ fn a_campaign_on_three_workers_equals_one_process() {
         .iter()
         .map(|id| outcome(&base, id, &wait_end(&base, id, 120)))
         .collect();
+    // One process computes its maps itself: no units.
+    assert!(ids.iter().all(|id| units(&base, id).is_empty()));
     drop(one);
     // One API process and three workers, PostgreSQL.
     let mut many = Procs {
@@ -187,6 +207,38 @@ fn a_campaign_on_three_workers_equals_one_process() {
         ran_on.insert(w);
     }
     assert!(ran_on.len() >= 2, "one worker ran everything: {ran_on:?}");
+    // Every map went out as units: a trace or an analytic map whole
+    // (column -1), a bisection one unit per B column; each done once, on
+    // the first attempt; the columns spread over the workers.
+    let mut column_workers = std::collections::BTreeSet::new();
+    for (i, id) in ids.iter().enumerate() {
+        let us = units(&base, id);
+        assert!(!us.is_empty(), "no units for {}", specs[i]);
+        for u in &us {
+            assert_eq!(
+                (u["state"].as_str(), u["attempt"].as_i64()),
+                (Some("done"), Some(1)),
+                "{u}"
+            );
+            assert!(workers.iter().any(|w| u["worker"] == w.as_str()), "{u}");
+        }
+        if COLUMNS.contains(&specs[i]) {
+            let cols: Vec<i64> = us.iter().map(|u| u["column"].as_i64().unwrap()).collect();
+            assert_eq!(
+                cols,
+                (0..us.len() as i64).collect::<Vec<_>>(),
+                "one unit per column"
+            );
+            assert!(cols.len() >= 6, "{cols:?}");
+            column_workers.extend(us.iter().map(|u| u["worker"].as_str().unwrap().to_string()));
+        } else {
+            assert!(us.iter().all(|u| u["column"] == -1), "{us:?}");
+        }
+    }
+    assert!(
+        column_workers.len() >= 2,
+        "one worker ran every column: {column_workers:?}"
+    );
     // /metrics counts the workers (each reports itself every second).
     wait_for("three idle workers in /metrics", 10, || {
         let m = ureq::get(&format!("{base}/metrics"))
@@ -269,6 +321,18 @@ fn a_killed_worker_s_run_is_claimed_again_with_the_same_result() {
     assert_eq!(done["attempt"], 2, "{done}");
     assert_eq!(done["worker"], second.as_str());
     assert_is_slow_s_result(&done, &trials(&base, &id));
+    // Its one unit (the whole trace) was claimed again too, and finished
+    // by the second worker.
+    let us = units(&base, &id);
+    assert_eq!(us.len(), 1, "{us:?}");
+    assert_eq!(
+        (
+            us[0]["state"].as_str(),
+            us[0]["attempt"].as_i64(),
+            us[0]["worker"].as_str()
+        ),
+        (Some("done"), Some(2), Some(second.as_str()))
+    );
     let log = std::fs::read_to_string(p.dir.join("w2.err")).unwrap();
     assert!(log.contains("stored_trials="), "{log}");
 }
@@ -299,8 +363,13 @@ fn a_stopped_worker_past_its_lease_changes_nothing_and_abandons_the_run() {
     };
     signal("-STOP");
     let second = worker(&mut p, &url, "1000", "w2.err");
-    wait_for("the run claimed by the second worker", 30, || {
+    // The run (its driver) and its unit (the whole trace): both claimed
+    // by the second worker before the first wakes up.
+    wait_for("the run and its unit claimed by the second worker", 30, || {
         get(&format!("{base}/v1/experiments/{id}"))["worker"] == second.as_str()
+            && units(&base, &id)
+                .first()
+                .is_some_and(|u| u["worker"] == second.as_str())
     });
     signal("-CONT");
     let done = wait_end(&base, &id, 120);
@@ -310,6 +379,15 @@ fn a_stopped_worker_past_its_lease_changes_nothing_and_abandons_the_run() {
         (Some(2), Some(second.as_str()))
     );
     assert_is_slow_s_result(&done, &trials(&base, &id));
+    let us = units(&base, &id);
+    assert_eq!(
+        (
+            us[0]["state"].as_str(),
+            us[0]["attempt"].as_i64(),
+            us[0]["worker"].as_str()
+        ),
+        (Some("done"), Some(2), Some(second.as_str()))
+    );
     wait_for("the first worker to abandon the run", 10, || {
         std::fs::read_to_string(p.dir.join("w1.err"))
             .unwrap()

@@ -498,7 +498,7 @@ async fn work_units_are_planned_once_claimed_in_order_and_fenced() {
             .unwrap_err();
         assert_eq!(Fault::of(&e), Fault::Lost, "{e}");
         let all = st.units("e1").await.unwrap();
-        let shape: Vec<(i64, i64, Option<f64>, &str, &str, i64)> = all
+        let shape: Vec<_> = all
             .iter()
             .map(|u| {
                 (

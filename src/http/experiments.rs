@@ -16,6 +16,7 @@ use super::AppState;
 use crate::error::SpecError;
 use crate::experiment::ExperimentSpec;
 use crate::report::{self, MapSummary};
+use crate::store::UnitRow;
 use crate::store::{now_ms, ExperimentRow, Inserted, NewExperiment};
 use crate::zwidth::cost::Cost;
 use crate::zwidth::search::{StoredEvaluation, StoredTrial};
@@ -447,6 +448,17 @@ pub async fn evaluations(
     Ok(Json(
         st.store.evaluations(&id).await.map_err(|e| st.fail(e))?,
     ))
+}
+
+#[utoipa::path(get, path = "/v1/experiments/{id}/units", params(("id" = String, Path, description = "experiment id")),
+    responses((status = 200, description = "the experiment's work units, by map and column: with PostgreSQL and workers, each B column of a bisection or grid map, or a whole map (a trace, the analytic engine; column -1), is computed by whichever worker claims it; shows where each ran, its attempts and trials. Empty for an experiment run in one process (SQLite)", body = Vec<UnitRow>),
+              (status = 404, description = "no such experiment", body = ProblemBody, content_type = "application/problem+json")))]
+pub async fn units(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<Vec<UnitRow>>, Problem> {
+    st.exists(&id).await?;
+    Ok(Json(st.store.units(&id).await.map_err(|e| st.fail(e))?))
 }
 
 impl AppState {

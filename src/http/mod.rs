@@ -180,6 +180,7 @@ pub fn router(state: AppState, timeout: Duration) -> Router {
         .route("/v1/experiments/{id}", get(experiments::show))
         .route("/v1/experiments/{id}/cancel", post(experiments::cancel))
         .route("/v1/experiments/{id}/trials", get(experiments::trials))
+        .route("/v1/experiments/{id}/units", get(experiments::units))
         .route(
             "/v1/experiments/{id}/evaluations",
             get(experiments::evaluations),
