@@ -364,13 +364,19 @@ fn a_stopped_worker_past_its_lease_changes_nothing_and_abandons_the_run() {
     signal("-STOP");
     let second = worker(&mut p, &url, "1000", "w2.err");
     // The run (its driver) and its unit (the whole trace): both claimed
-    // by the second worker before the first wakes up.
-    wait_for("the run and its unit claimed by the second worker", 30, || {
-        get(&format!("{base}/v1/experiments/{id}"))["worker"] == second.as_str()
-            && units(&base, &id)
-                .first()
-                .is_some_and(|u| u["worker"] == second.as_str())
-    });
+    // by the second worker before the first wakes up; /v1/rigs shows the
+    // unit computing there.
+    let on_second =
+        |u: &serde_json::Value| u["experiment_id"] == id.as_str() && u["worker"] == second.as_str();
+    wait_for(
+        "the run and its unit claimed by the second worker",
+        30,
+        || {
+            let rigs = get(&format!("{base}/v1/rigs"));
+            get(&format!("{base}/v1/experiments/{id}"))["worker"] == second.as_str()
+                && rigs[0]["units"].as_array().unwrap().iter().any(on_second)
+        },
+    );
     signal("-CONT");
     let done = wait_end(&base, &id, 120);
     assert_eq!(done["state"], "succeeded", "{done}");

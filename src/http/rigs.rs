@@ -29,8 +29,12 @@ pub struct RigView {
     /// The experiment it is running, if any (the oldest, when several
     /// workers run it: see `runs`).
     pub running: Option<String>,
-    /// Every experiment running on it, and the worker process running each.
+    /// Every experiment running on it, and the worker process running each
+    /// (with workers: the run that plans its units and replays them).
     pub runs: Vec<RunningOn>,
+    /// The work units computing now (with PostgreSQL and workers): which
+    /// map and column of which experiment, on which worker.
+    pub units: Vec<crate::store::UnitRow>,
     /// An attached rig: its agent's session, state and capabilities.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub attached: Option<crate::rig::attached::AttachedView>,
@@ -54,6 +58,7 @@ pub async fn rig_view(st: &AppState, rig: &Arc<dyn Rig>) -> Result<RigView, Prob
         None => now,
     };
     let (waiting, running) = st.store.rig_load(id).await.map_err(|e| st.fail(e))?;
+    let units = st.store.running_units(id).await.map_err(|e| st.fail(e))?;
     Ok(RigView {
         attached: rig.attached().map(|a| a.view()),
         info,
@@ -66,6 +71,7 @@ pub async fn rig_view(st: &AppState, rig: &Arc<dyn Rig>) -> Result<RigView, Prob
             .into_iter()
             .map(|(id, worker)| RunningOn { id, worker })
             .collect(),
+        units,
     })
 }
 
