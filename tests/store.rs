@@ -624,3 +624,47 @@ async fn a_unit_whose_lease_expires_max_lost_times_fails_with_the_reason() {
         assert_eq!(u.describe(), "map 2, column 4 (B = 40 N·s/m)");
     }
 }
+
+/// Trials are inserted many to a statement: a trial asked twice in one
+/// batch is stored once, as one-at-a-time inserts would store it (the
+/// first answer, the last place), and so is one asked again in a later
+/// batch.
+#[tokio::test]
+async fn a_trial_repeated_in_one_batch_is_stored_once_with_its_last_place() {
+    for (store, _dir) in stores("repeats").await {
+        let st = &store;
+        let run = claim(st).await;
+        let first = trial(0, 1, 0, 700.0, true);
+        let again = StoredTrial {
+            index: 4,
+            point: Point {
+                passive: Some(false),
+                ..first.point.clone()
+            },
+            ..first.clone()
+        };
+        let other = trial(0, 1, 1, 900.0, false);
+        st.add_trials(
+            &run,
+            &[first.clone(), other.clone(), again.clone()],
+            &[],
+            (3, 0.0),
+        )
+        .await
+        .unwrap();
+        let got = st.trials("e1").await.unwrap();
+        let want_first = StoredTrial {
+            index: 4,
+            ..first.clone()
+        };
+        assert_eq!(got, [other.clone(), want_first.clone()], "{}", st.backend());
+        // The same in a later batch: its place again, its point kept.
+        let later = StoredTrial {
+            index: 9,
+            ..again.clone()
+        };
+        st.add_trials(&run, &[later], &[], (4, 0.0)).await.unwrap();
+        let got = st.trials("e1").await.unwrap();
+        assert_eq!(got, [other, StoredTrial { index: 9, ..first }]);
+    }
+}

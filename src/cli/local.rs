@@ -364,14 +364,18 @@ pub(super) fn run(
                 BenchCommand::Scale {
                     db,
                     maps,
+                    sweeps,
                     claims,
                     json,
                 },
         } => {
-            if !(2..=1000).contains(&maps) || !(10..=1_000_000).contains(&claims) {
-                return Err(CliError::Input(
-                    "bench scale: --maps must be 2 to 1000, --claims 10 to 1000000".into(),
-                ));
+            if !(2..=1000).contains(&maps)
+                || !(1..=100).contains(&sweeps)
+                || !(10..=1_000_000).contains(&claims)
+            {
+                return Err(CliError::Input(format!(
+                    "bench scale: --maps must be 2 to 1000 (got {maps}), --sweeps 1 to 100 (got {sweeps}), --claims 10 to 1000000 (got {claims})"
+                )));
             }
             let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
             if db.sqlite_path().is_some() {
@@ -384,7 +388,7 @@ pub(super) fn run(
                 .build()
                 .map_err(|e| CliError::Failure(format!("cannot start the runtime: {e}")))?;
             let r = rt
-                .block_on(crate::jobs::bench::run(&db, maps, claims))
+                .block_on(crate::jobs::bench::run(&db, maps, sweeps, claims))
                 .map_err(CliError::Failure)?;
             write_either(stdout, json, &r, || r.table())
         }

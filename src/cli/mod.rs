@@ -507,16 +507,19 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
-    /// Scaling out: a campaign of maps on 1 and 2 workers (PostgreSQL) and
-    /// 1 (SQLite), then the claim rate and latency with 1, 8 and 32
+    /// Scaling out: a column-heavy sweep and a campaign of trace maps, each
+    /// on 1 and 2 workers (PostgreSQL) and 1 (SQLite), then the claim rate and latency with 1, 8 and 32
     /// claimers. Needs a PostgreSQL database; it deletes what it stores.
     Scale {
         /// The PostgreSQL database to measure (postgres://…).
         #[arg(long, env = "ZWIDTH_DB")]
         db: String,
-        /// Maps in each campaign.
+        /// Maps in each campaign of trace maps.
         #[arg(long, default_value_t = 16)]
         maps: usize,
+        /// Column-heavy sweeps (24 B columns each) in each sweep run.
+        #[arg(long, default_value_t = 2)]
+        sweeps: usize,
         /// Empty experiments claimed in each claim-rate run.
         #[arg(long, default_value_t = 2000)]
         claims: usize,

@@ -123,9 +123,11 @@ pub async fn metrics(State(st): State<AppState>) -> Result<Response, Problem> {
     }
     out.push_str("# HELP zwidth_trials_total Trials done over all experiments.\n# TYPE zwidth_trials_total counter\n");
     out.push_str(&format!("zwidth_trials_total {trials}\n"));
-    // Every worker process (this one too) reports itself each second:
-    // those seen in the last three seconds are alive.
-    let workers = st.store.workers(3_000).await.map_err(|e| st.fail(e))?;
+    // Every process (this one too) reports itself each second: those
+    // seen in the last three seconds are alive; those that run rigs are
+    // workers (an API-only process runs none).
+    let mut workers = st.store.workers(3_000).await.map_err(|e| st.fail(e))?;
+    workers.retain(|w| !w.rigs.is_empty());
     let rate: f64 = workers.iter().map(|w| w.trials_per_s).sum();
     let busy = workers.iter().filter(|w| w.running.is_some()).count();
     out.push_str("# HELP zwidth_trials_per_second Trials per second over every worker, last second.\n# TYPE zwidth_trials_per_second gauge\n");

@@ -1,8 +1,10 @@
-//! `zwidth bench scale`: what more workers buy (issue 14). A campaign of
-//! time-domain maps run by 1 and 2 workers on PostgreSQL and by one on
-//! SQLite (the embedded default), all in this process (each worker is a
-//! runner with its own single-thread simulator and its own lease id, the
-//! code path of a `zwidth worker` process); then the claim rate the
+//! `zwidth bench scale`: what more workers buy (issue 14). Two kinds of
+//! work, each run by 1 and 2 workers on PostgreSQL and by one process on
+//! SQLite (the embedded default), all in this process (each worker has its
+//! own single-thread simulator, its own lease id and the code path of a
+//! `zwidth worker` process: an experiment runner and a unit runner): a
+//! column-heavy sweep (one experiment whose B columns are the work units)
+//! and a campaign of trace maps (one unit each). Then the claim rate the
 //! database sustains with many claimers on empty experiments, and the
 //! latency of one claim. Everything it stores is under rig names of its
 //! own and deleted at the end.
@@ -12,21 +14,30 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use super::{runner, Running, Worker};
+use super::{spawn_rig, Running, Worker};
 use crate::store::{Lease, Location, NewExperiment, Store};
 
 /// The 2011 boundary trace of the seed device (time domain, 537 trials):
 /// one map of real work, a few tenths of a second in a release build.
 const MAP: &str = r#"{"kind":"map","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","search":"trace"}"#;
 
+/// A column-heavy sweep: the same device's time-domain bisection over 12
+/// B values (0 to 55 N·s/m) at reference accuracy and two Butterworth
+/// cutoffs: 24 B columns, each
+/// a unit of its own.
+const SWEEP: &str = r#"{"kind":"sweep","map":{"scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","accuracy":"reference","b":[0,5,10,15,20,25,30,35,40,45,50,55]},"parameter":{"path":"estimator.cutoff_hz","values":[300,500]}}"#;
+
 #[derive(Debug, Serialize)]
 pub struct CampaignRow {
+    /// "column sweep" (SWEEP) or "trace maps" (MAP).
+    pub work: &'static str,
     pub store: &'static str,
     pub workers: usize,
+    /// Experiments run.
     pub maps: usize,
     pub wall_s: f64,
     pub maps_per_s: f64,
-    /// Against one PostgreSQL worker in the same run.
+    /// Against one PostgreSQL worker on the same work, in the same run.
     pub speedup: f64,
 }
 
@@ -55,13 +66,18 @@ fn tag() -> String {
 }
 
 async fn insert(store: &Store, rig: &str, n: usize, spec: &str) -> Result<Vec<String>, String> {
+    let kind = if spec.starts_with(r#"{"kind":"sweep""#) {
+        "sweep"
+    } else {
+        "map"
+    };
     let mut ids = Vec::new();
     for i in 0..n {
         let id = format!("{rig}-{i:05}");
         store
             .insert(NewExperiment {
                 id: &id,
-                kind: "map",
+                kind,
                 spec,
                 priority: 0,
                 key: None,
@@ -75,22 +91,23 @@ async fn insert(store: &Store, rig: &str, n: usize, spec: &str) -> Result<Vec<St
     Ok(ids)
 }
 
-/// Run `maps` copies of MAP with `workers` runners on `store`: wall seconds.
-async fn campaign(store: &Store, workers: usize, maps: usize) -> Result<f64, String> {
+/// Run `maps` copies of `spec` with `workers` workers on `store`: wall
+/// seconds.
+async fn campaign(store: &Store, workers: usize, maps: usize, spec: &str) -> Result<f64, String> {
     let rig = format!("bench-{}", tag());
-    let ids = insert(store, &rig, maps, MAP).await?;
+    let ids = insert(store, &rig, maps, spec).await?;
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     let start = Instant::now();
     let mut tasks = Vec::new();
     for _ in 0..workers {
         let sim = crate::rig::SimulatedRig::new(&rig, 1).map_err(|e| e.to_string())?;
-        tasks.push(tokio::spawn(runner(
-            store.clone(),
+        tasks.extend(spawn_rig(
+            store,
             Arc::new(sim),
-            Running::default(),
-            stop_rx.clone(),
-            Arc::new(Worker::new(super::LEASE_MS)),
-        )));
+            &Running::default(),
+            &stop_rx,
+            &Arc::new(Worker::new(super::LEASE_MS)),
+        ));
     }
     loop {
         let mut left = 0;
@@ -176,7 +193,12 @@ async fn claim_rate(
     })
 }
 
-pub async fn run(pg: &Location, maps: usize, claims: usize) -> Result<ScaleReport, String> {
+pub async fn run(
+    pg: &Location,
+    maps: usize,
+    sweeps: usize,
+    claims: usize,
+) -> Result<ScaleReport, String> {
     let pg_store = Store::connect(pg).await.map_err(|e| e.to_string())?;
     if !pg_store.shared() {
         return Err(format!(
@@ -188,36 +210,47 @@ pub async fn run(pg: &Location, maps: usize, claims: usize) -> Result<ScaleRepor
     let sqlite = Store::open(&dir.join("bench.db"))
         .await
         .map_err(|e| e.to_string())?;
-    // Warm up (page cache, prepared statements), then measure; the one
-    // PostgreSQL worker is the baseline, measured in the same run.
-    campaign(&pg_store, 1, 2).await?;
-    let pg1 = campaign(&pg_store, 1, maps).await?;
-    let lite1 = campaign(&sqlite, 1, maps).await?;
-    let pg2 = campaign(&pg_store, 2, maps).await?;
+    // Warm up (page cache, prepared statements), then measure; one
+    // PostgreSQL worker is the baseline of each kind of work, measured in
+    // the same run.
+    campaign(&pg_store, 1, 2, MAP).await?;
+    let mut rows = Vec::new();
+    for (work, spec, n) in [("column sweep", SWEEP, sweeps), ("trace maps", MAP, maps)] {
+        let pg1 = campaign(&pg_store, 1, n, spec).await?;
+        let lite1 = campaign(&sqlite, 1, n, spec).await?;
+        let pg2 = campaign(&pg_store, 2, n, spec).await?;
+        let row = |store, workers, wall: f64| CampaignRow {
+            work,
+            store,
+            workers,
+            maps: n,
+            wall_s: wall,
+            maps_per_s: n as f64 / wall,
+            speedup: pg1 / wall,
+        };
+        rows.extend([
+            row("sqlite", 1, lite1),
+            row("postgres", 1, pg1),
+            row("postgres", 2, pg2),
+        ]);
+    }
     let _ = sqlite.close().await;
     let _ = std::fs::remove_dir_all(&dir);
-    let row = |store, workers, wall: f64| CampaignRow {
-        store,
-        workers,
-        maps,
-        wall_s: wall,
-        maps_per_s: maps as f64 / wall,
-        speedup: pg1 / wall,
-    };
-    let campaign = vec![
-        row("sqlite", 1, lite1),
-        row("postgres", 1, pg1),
-        row("postgres", 2, pg2),
-    ];
-    let mut rows = Vec::new();
+    let mut claim_rows = Vec::new();
     for c in [1, 8, 32] {
-        rows.push(claim_rate(pg, &pg_store, c, claims).await?);
+        claim_rows.push(claim_rate(pg, &pg_store, c, claims).await?);
     }
-    let best = rows.iter().map(|r| r.claims_per_s).fold(0.0, f64::max);
-    let map_s = pg1 / maps as f64;
+    let best = claim_rows
+        .iter()
+        .map(|r| r.claims_per_s)
+        .fold(0.0, f64::max);
+    let map_s = rows
+        .iter()
+        .find(|r| r.work == "trace maps" && r.store == "postgres" && r.workers == 1)
+        .map_or(0.0, |r| r.wall_s / maps as f64);
     Ok(ScaleReport {
-        campaign,
-        claims: rows,
+        campaign: rows,
+        claims: claim_rows,
         map_s,
         // Each worker claims one map every `map_s` seconds.
         workers_at_claim_limit: best * map_s,
@@ -226,11 +259,12 @@ pub async fn run(pg: &Location, maps: usize, claims: usize) -> Result<ScaleRepor
 
 impl ScaleReport {
     pub fn table(&self) -> String {
-        let mut s = String::from("store     workers  maps  wall (s)  maps/s  speedup\n");
+        let mut s =
+            String::from("work          store     workers  runs  wall (s)  runs/s  speedup\n");
         for r in &self.campaign {
             s.push_str(&format!(
-                "{:<9} {:>7}  {:>4}  {:>8.2}  {:>6.2}  {:>6.2}×\n",
-                r.store, r.workers, r.maps, r.wall_s, r.maps_per_s, r.speedup
+                "{:<13} {:<9} {:>7}  {:>4}  {:>8.2}  {:>6.2}  {:>6.2}×\n",
+                r.work, r.store, r.workers, r.maps, r.wall_s, r.maps_per_s, r.speedup
             ));
         }
         s.push_str("\nclaimers  claims  claims/s  p50 (ms)  p99 (ms)\n");

@@ -13,8 +13,9 @@ use crate::zwidth::farm::{Farm, Unit};
 use crate::zwidth::search::Observer;
 use crate::zwidth::settings::MapSpec;
 
-/// How often a waiting run looks at its units.
-const POLL: Duration = Duration::from_millis(100);
+/// How often a waiting run looks at its units when no unit's end wakes it
+/// (see `Wakeups`).
+const POLL: Duration = Duration::from_millis(250);
 
 /// The units of the experiment `lease` holds, queued in `store`; waited
 /// for on `handle` (the runtime the run's runner is on).
@@ -77,6 +78,9 @@ impl DbFarm {
         }
         let want: BTreeSet<i64> = units.iter().map(Unit::column_key).collect();
         loop {
+            let ended = self.store.wakeups().ended.notified();
+            tokio::pin!(ended);
+            ended.as_mut().enable();
             if observer.cancelled() {
                 observer.set_elsewhere(scope, 0);
                 return Ok(());
@@ -118,7 +122,10 @@ impl DbFarm {
                 Err(e) if transient(&e) => {}
                 Err(e) => return Err(format!("the units of map {scope} could not be read: {e}")),
             }
-            tokio::time::sleep(POLL).await;
+            tokio::select! {
+                _ = &mut ended => {}
+                _ = tokio::time::sleep(POLL) => {}
+            }
         }
     }
 }

@@ -61,6 +61,7 @@ pub fn spawn_rig(
         me.clone(),
     ))];
     if farmed(store, rig.as_ref()) {
+        store.listen();
         for _ in 0..rig.info().parallelism.max(1) {
             tasks.push(tokio::spawn(unit_runner(
                 store.clone(),
@@ -218,6 +219,11 @@ pub async fn unit_runner(
         if !may_start(&store, &id).await {
             continue;
         }
+        // Woken when a unit is queued (here or, on PostgreSQL, anywhere);
+        // a lease that expires wakes nobody: looked for every 250 ms.
+        let queued = store.wakeups().queued.notified();
+        tokio::pin!(queued);
+        queued.as_mut().enable();
         match store.claim_unit(&id, &me.id, me.lease_ms).await {
             Ok(Some(row)) => {
                 let lease = row.lease();
@@ -233,7 +239,12 @@ pub async fn unit_runner(
                 )
                 .await
             }
-            Ok(None) => tokio::time::sleep(Duration::from_millis(100)).await,
+            Ok(None) => {
+                tokio::select! {
+                    _ = &mut queued => {}
+                    _ = tokio::time::sleep(Duration::from_millis(250)) => {}
+                }
+            }
             Err(e) => {
                 tracing::error!(error = %e, "claiming the next unit failed");
                 tokio::time::sleep(Duration::from_secs(1)).await;

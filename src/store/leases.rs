@@ -67,30 +67,56 @@ impl Lease {
     }
 }
 
-/// Insert `trials` of experiment `id` in transaction `tx`: a trial already
-/// stored keeps its point and takes the place given here. (A macro: the
-/// transaction's type is each backend's.)
+/// Insert `trials` of experiment `id` in transaction `tx`, many rows per
+/// statement: a trial already stored keeps its point and takes the place
+/// given here. (A macro: the transaction's type is each backend's.)
 macro_rules! insert_trials {
     ($tx:ident, $id:expr, $trials:expr) => {
-        for t in $trials {
-            let point = serde_json::to_string(&t.point).unwrap_or_default();
-            sqlx::query(
-                "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES ($1, $2, $3, $4, $5, $6, $7)
-                 ON CONFLICT (experiment_id, scope, k, b) DO UPDATE SET col = excluded.col, idx = excluded.idx",
-            )
-            .bind($id)
-            .bind(t.scope as i64)
-            .bind(t.point.k)
-            .bind(t.point.b)
-            .bind(point)
-            .bind(t.column as i64)
-            .bind(t.index as i64)
-            .execute(&mut *$tx)
-            .await?;
+        // 7 parameters a row: well under either database's limit.
+        for chunk in super::leases::merge_repeats($trials).chunks(500) {
+            let mut q = sqlx::QueryBuilder::new(
+                "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) ",
+            );
+            q.push_values(chunk, |mut row, t| {
+                row.push_bind($id)
+                    .push_bind(t.scope as i64)
+                    .push_bind(t.point.k)
+                    .push_bind(t.point.b)
+                    .push_bind(serde_json::to_string(&t.point).unwrap_or_default())
+                    .push_bind(t.column as i64)
+                    .push_bind(t.index as i64);
+            });
+            q.push(
+                " ON CONFLICT (experiment_id, scope, k, b) DO UPDATE SET col = excluded.col, idx = excluded.idx",
+            );
+            q.build().execute(&mut *$tx).await?;
         }
     };
 }
 pub(super) use insert_trials;
+
+/// `trials` with each (scope, K, B) once, as inserting them one at a time
+/// would store them: the first one's point, the last one's place (one
+/// statement may not touch a row twice).
+pub(super) fn merge_repeats(trials: &[StoredTrial]) -> Vec<StoredTrial> {
+    let mut at = std::collections::HashMap::new();
+    let mut out: Vec<StoredTrial> = Vec::with_capacity(trials.len());
+    for t in trials {
+        let key = (t.scope, t.point.k.to_bits(), t.point.b.to_bits());
+        match at.get(&key) {
+            Some(&i) => {
+                let first: &mut StoredTrial = &mut out[i];
+                first.column = t.column;
+                first.index = t.index;
+            }
+            None => {
+                at.insert(key, out.len());
+                out.push(t.clone());
+            }
+        }
+    }
+    out
+}
 
 /// What a heartbeat found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

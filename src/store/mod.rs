@@ -78,6 +78,8 @@ pub struct Store {
     db: Db,
     /// What the last integrity check found; a corrupt database refuses writes.
     health: std::sync::Arc<std::sync::Mutex<Health>>,
+    /// Wake-ups when units are queued or end (`units.rs`).
+    wake: std::sync::Arc<units::Wakeups>,
 }
 
 /// How a submission went into the store.
@@ -135,6 +137,23 @@ pub struct NewExperiment<'a> {
 }
 
 pub use crate::clock::now_ms;
+
+/// A stored trial as read: scope, column, index, the point (JSON).
+type TrialRow = (i64, i64, i64, String);
+
+/// The trials of `rows` (a point that does not parse is left out).
+fn stored_trials(rows: Vec<TrialRow>) -> Vec<StoredTrial> {
+    rows.into_iter()
+        .filter_map(|(scope, column, index, p)| {
+            serde_json::from_str(&p).ok().map(|point| StoredTrial {
+                scope: scope as u32,
+                column: column as u32,
+                index: index as u32,
+                point,
+            })
+        })
+        .collect()
+}
 
 impl Store {
     /// Open (creating it if needed) and migrate the SQLite database at `path`.
@@ -220,6 +239,7 @@ impl Store {
         let store = Self {
             db,
             health: Default::default(),
+            wake: Default::default(),
         };
         store.check().await?;
         Ok(store)
@@ -596,24 +616,14 @@ impl Store {
                  ORDER BY scope, col, idx, k, b LIMIT $3 OFFSET $4"
             }
         };
-        let rows: Vec<(i64, i64, i64, String)> = on_pool!(self, p => sqlx::query_as(sql)
+        let rows: Vec<TrialRow> = on_pool!(self, p => sqlx::query_as(sql)
             .bind(id)
             .bind(scope.map(|s| s as i64))
             .bind(limit)
             .bind(offset)
             .fetch_all(p)
             .await)?;
-        Ok(rows
-            .into_iter()
-            .filter_map(|(scope, column, index, p)| {
-                serde_json::from_str(&p).ok().map(|point| StoredTrial {
-                    scope: scope as u32,
-                    column: column as u32,
-                    index: index as u32,
-                    point,
-                })
-            })
-            .collect())
+        Ok(stored_trials(rows))
     }
 
     /// Every stored evaluation of a tune, in the order stored.

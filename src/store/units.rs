@@ -13,6 +13,25 @@ use super::{now_ms, on_pool, Db, Store};
 use crate::zwidth::farm::{Unit, WHOLE_MAP};
 use crate::zwidth::search::StoredTrial;
 
+/// Wake-ups, so that a queued unit is claimed, and a finished one seen by
+/// its driver, without waiting out a poll: notified in this process by the
+/// writes themselves, and from other processes by PostgreSQL's
+/// `NOTIFY` (channels `zwidth_units` and `zwidth_unit_done`, sent at the
+/// commit), which [`Store::listen`] relays. Waiters poll as well (a
+/// notification may be missed while a listener reconnects).
+#[derive(Debug, Default)]
+pub struct Wakeups {
+    /// Units were queued.
+    pub queued: tokio::sync::Notify,
+    /// A unit ended.
+    pub ended: tokio::sync::Notify,
+    listening: std::sync::atomic::AtomicBool,
+}
+
+/// The PostgreSQL channels of [`Wakeups`].
+const QUEUED: &str = "zwidth_units";
+const ENDED: &str = "zwidth_unit_done";
+
 /// Which unit of its experiment a lease holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct UnitPlace {
@@ -126,6 +145,71 @@ fn unit_state(state: &str) -> &'static str {
 }
 
 impl Store {
+    /// The wake-ups of this store's units.
+    pub fn wakeups(&self) -> &Wakeups {
+        &self.wake
+    }
+
+    /// On PostgreSQL, relay other processes' unit notifications to
+    /// [`Store::wakeups`] (once per store; the listener reconnects after a
+    /// lost connection). Nothing on SQLite (one process).
+    pub fn listen(&self) {
+        let Db::Postgres(pool) = &self.db else {
+            return;
+        };
+        if self
+            .wake
+            .listening
+            .swap(true, std::sync::atomic::Ordering::Relaxed)
+        {
+            return;
+        }
+        let (pool, wake) = (pool.clone(), self.wake.clone());
+        tokio::spawn(async move {
+            loop {
+                let relay = async {
+                    let mut l = sqlx::postgres::PgListener::connect_with(&pool).await?;
+                    l.listen_all([QUEUED, ENDED]).await?;
+                    loop {
+                        let n = l.recv().await?;
+                        match n.channel() {
+                            QUEUED => wake.queued.notify_waiters(),
+                            _ => wake.ended.notify_waiters(),
+                        }
+                    }
+                };
+                let r: Result<(), sqlx::Error> = relay.await;
+                if let Err(e) = r {
+                    tracing::debug!(error = %e, "unit notifications lost; listening again in 1 s");
+                }
+                if pool.is_closed() {
+                    return;
+                }
+                tokio::time::sleep(std::time::Duration::from_secs(1)).await;
+            }
+        });
+    }
+
+    /// Tell other processes (PostgreSQL) and this one that units were
+    /// queued or one ended, after the write. Best effort: the write stands
+    /// whatever happens here (waiters poll too).
+    async fn notify_units(&self, channel: &str, payload: &str) {
+        if let Db::Postgres(p) = &self.db {
+            if let Err(e) = sqlx::query("SELECT pg_notify($1, $2)")
+                .bind(channel)
+                .bind(payload)
+                .execute(p)
+                .await
+            {
+                tracing::debug!(error = %e, channel, "notifying other workers failed");
+            }
+        }
+        match channel {
+            QUEUED => self.wake.queued.notify_waiters(),
+            _ => self.wake.ended.notify_waiters(),
+        }
+    }
+
     /// Queue `units` of map `scope` of the experiment `lease` holds, whose
     /// spec is `spec` (JSON); units planned before are left as they are.
     /// Nothing when the lease is lost.
@@ -172,7 +256,9 @@ impl Store {
                 .await?;
             }
             tx.commit().await
-        })
+        })?;
+        self.notify_units(QUEUED, &lease.id).await;
+        Ok(())
     }
 
     /// The units of map `scope` of experiment `id`, by column (a whole
@@ -209,16 +295,20 @@ impl Store {
 
     /// The stored trials of a unit: its column's, or its whole map's.
     pub async fn unit_trials(&self, unit: &UnitRow) -> Result<Vec<StoredTrial>, sqlx::Error> {
-        let all = self
-            .trials_page(&unit.experiment_id, Some(unit.scope as u32), 0, i64::MAX)
-            .await?;
-        Ok(match unit.col {
-            WHOLE_MAP => all,
-            c => all
-                .into_iter()
-                .filter(|t| i64::from(t.column) == c)
-                .collect(),
-        })
+        if unit.col == WHOLE_MAP {
+            return self
+                .trials_page(&unit.experiment_id, Some(unit.scope as u32), 0, i64::MAX)
+                .await;
+        }
+        let rows: Vec<super::TrialRow> = on_pool!(self, p => sqlx::query_as(
+            "SELECT scope, col, idx, point FROM trials WHERE experiment_id = $1 AND scope = $2 AND col = $3 ORDER BY idx",
+        )
+        .bind(&unit.experiment_id)
+        .bind(unit.scope)
+        .bind(unit.col)
+        .fetch_all(p)
+        .await)?;
+        Ok(super::stored_trials(rows))
     }
 
     /// Claim `rig`'s next unit for `worker`, holding it for `lease_ms`:
@@ -370,6 +460,9 @@ impl Store {
         .execute(p)
         .await
         .map(|r| r.rows_affected()))?;
+        if r == 1 {
+            self.notify_units(ENDED, &lease.id).await;
+        }
         Ok(r == 1)
     }
 
@@ -396,6 +489,8 @@ impl Store {
         .bind(lease.attempt)
         .execute(p)
         .await
-        .map(|_| ()))
+        .map(|_| ()))?;
+        self.notify_units(QUEUED, &lease.id).await;
+        Ok(())
     }
 }
