@@ -517,7 +517,7 @@ pub enum BenchCommand {
         /// Maps in each campaign of trace maps.
         #[arg(long, default_value_t = 16)]
         maps: usize,
-        /// Column-heavy sweeps (24 B columns each) in each sweep run.
+        /// Column-heavy sweeps (48 B columns each) in each sweep run.
         #[arg(long, default_value_t = 2)]
         sweeps: usize,
         /// Empty experiments claimed in each claim-rate run.

@@ -22,10 +22,9 @@ use crate::store::{Lease, Location, NewExperiment, Store};
 const MAP: &str = r#"{"kind":"map","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","search":"trace"}"#;
 
 /// A column-heavy sweep: the same device's time-domain bisection over 12
-/// B values (0 to 55 N·s/m) at reference accuracy and two Butterworth
-/// cutoffs: 24 B columns, each
-/// a unit of its own.
-const SWEEP: &str = r#"{"kind":"sweep","map":{"scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","accuracy":"reference","b":[0,5,10,15,20,25,30,35,40,45,50,55]},"parameter":{"path":"estimator.cutoff_hz","values":[300,500]}}"#;
+/// B values (0 to 55 N·s/m) at reference accuracy and four Butterworth
+/// cutoffs (300 to 600 Hz): 48 B columns, each a unit of its own.
+const SWEEP: &str = r#"{"kind":"sweep","map":{"scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","accuracy":"reference","b":[0,5,10,15,20,25,30,35,40,45,50,55]},"parameter":{"path":"estimator.cutoff_hz","values":[300,400,500,600]}}"#;
 
 #[derive(Debug, Serialize)]
 pub struct CampaignRow {
@@ -109,21 +108,17 @@ async fn campaign(store: &Store, workers: usize, maps: usize, spec: &str) -> Res
             &Arc::new(Worker::new(super::LEASE_MS)),
         ));
     }
-    loop {
-        let mut left = 0;
-        for id in &ids {
-            match store.get(id).await.map_err(|e| e.to_string())? {
-                Some(r) if r.state == "succeeded" => {}
-                Some(r) if r.state == "failed" => {
-                    return Err(format!("a bench map failed: {:?}", r.error))
-                }
-                _ => left += 1,
+    // Wait for the last one unfinished, one look every 20 ms (looking at
+    // every run each time would load the database the workers share).
+    let mut next = 0;
+    while let Some(id) = ids.get(next) {
+        match store.get(id).await.map_err(|e| e.to_string())? {
+            Some(r) if r.state == "succeeded" => next += 1,
+            Some(r) if r.state == "failed" => {
+                return Err(format!("a bench run failed: {:?}", r.error))
             }
+            _ => tokio::time::sleep(Duration::from_millis(20)).await,
         }
-        if left == 0 {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(20)).await;
     }
     let wall = start.elapsed().as_secs_f64();
     let _ = stop_tx.send(true);

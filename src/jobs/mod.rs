@@ -60,8 +60,9 @@ pub fn spawn_rig(
         shutdown.clone(),
         me.clone(),
     ))];
+    // Woken by other processes' submissions and units (PostgreSQL).
+    store.listen();
     if farmed(store, rig.as_ref()) {
-        store.listen();
         for _ in 0..rig.info().parallelism.max(1) {
             tasks.push(tokio::spawn(unit_runner(
                 store.clone(),
@@ -127,7 +128,7 @@ pub async fn runner(
     store: Store,
     rig: Arc<dyn Rig>,
     running: Running,
-    shutdown: tokio::sync::watch::Receiver<bool>,
+    mut shutdown: tokio::sync::watch::Receiver<bool>,
     me: Arc<Worker>,
 ) {
     let id = rig.info().id.clone();
@@ -159,6 +160,11 @@ pub async fn runner(
                 continue;
             }
         }
+        // Woken when work is queued; a run coming due, a lease expiring or
+        // a window opening wakes nobody: looked for every 500 ms.
+        let queued = store.wakeups().queued.notified();
+        tokio::pin!(queued);
+        queued.as_mut().enable();
         match store.claim(&id, &me.id, me.lease_ms).await {
             Ok(Some(row)) => {
                 let lease = Lease::of(row.id, row.attempt);
@@ -174,7 +180,15 @@ pub async fn runner(
                 )
                 .await
             }
-            Ok(None) => tokio::time::sleep(Duration::from_millis(100)).await,
+            Ok(None) => {
+                tokio::select! {
+                    _ = &mut queued => {}
+                    // (No sender left: nobody can stop this runner but by
+                    // dropping it; it stops.)
+                    r = shutdown.changed() => if r.is_err() { return; },
+                    _ = tokio::time::sleep(Duration::from_millis(500)) => {}
+                }
+            }
             Err(e) => {
                 tracing::error!(error = %e, "claiming the next experiment failed");
                 tokio::time::sleep(Duration::from_secs(1)).await;
@@ -211,7 +225,7 @@ pub async fn unit_runner(
     store: Store,
     rig: Arc<dyn Rig>,
     running: Running,
-    shutdown: tokio::sync::watch::Receiver<bool>,
+    mut shutdown: tokio::sync::watch::Receiver<bool>,
     me: Arc<Worker>,
 ) {
     let id = rig.info().id.clone();
@@ -242,6 +256,9 @@ pub async fn unit_runner(
             Ok(None) => {
                 tokio::select! {
                     _ = &mut queued => {}
+                    // (No sender left: nobody can stop this runner but by
+                    // dropping it; it stops.)
+                    r = shutdown.changed() => if r.is_err() { return; },
                     _ = tokio::time::sleep(Duration::from_millis(250)) => {}
                 }
             }

@@ -377,6 +377,9 @@ impl Store {
         .await
         .map(|r| r.rows_affected()))?;
         if r == 1 {
+            if state == "queued" {
+                self.notify_units(units::QUEUED, id).await;
+            }
             // Committed: the row is what was written (no read that could
             // fail after the commit and turn a stored submission into an error).
             return Ok(Inserted::New(ExperimentRow {
@@ -512,7 +515,11 @@ impl Store {
             .bind(paused as i64)
             .execute(p)
             .await
-            .map(|_| ()))
+            .map(|_| ()))?;
+        if !paused {
+            self.notify_units(units::QUEUED, "resumed").await;
+        }
+        Ok(())
     }
 
     pub async fn paused(&self) -> Result<bool, sqlx::Error> {

@@ -21,15 +21,16 @@ use crate::zwidth::search::StoredTrial;
 /// notification may be missed while a listener reconnects).
 #[derive(Debug, Default)]
 pub struct Wakeups {
-    /// Units were queued.
+    /// Work was queued: units, or experiments (or the queue resumed).
     pub queued: tokio::sync::Notify,
     /// A unit ended.
     pub ended: tokio::sync::Notify,
     listening: std::sync::atomic::AtomicBool,
 }
 
-/// The PostgreSQL channels of [`Wakeups`].
-const QUEUED: &str = "zwidth_units";
+/// The PostgreSQL channels of [`Wakeups`]: work was queued (units, or
+/// experiments), a unit ended.
+pub(super) const QUEUED: &str = "zwidth_units";
 const ENDED: &str = "zwidth_unit_done";
 
 /// Which unit of its experiment a lease holds.
@@ -193,7 +194,7 @@ impl Store {
     /// Tell other processes (PostgreSQL) and this one that units were
     /// queued or one ended, after the write. Best effort: the write stands
     /// whatever happens here (waiters poll too).
-    async fn notify_units(&self, channel: &str, payload: &str) {
+    pub(super) async fn notify_units(&self, channel: &str, payload: &str) {
         if let Db::Postgres(p) = &self.db {
             if let Err(e) = sqlx::query("SELECT pg_notify($1, $2)")
                 .bind(channel)
@@ -407,6 +408,12 @@ impl Store {
     }
 
     /// [`Store::add_trials`] of a unit: its trials, fenced by its lease.
+    /// On PostgreSQL a unit's writes do not wait for the disk
+    /// (`synchronous_commit` off for their transactions): a server crash
+    /// may lose the last few of them, never part of one, and WAL order
+    /// keeps every unit write its driver read durable before the driver's
+    /// own (synchronous) commit of the result. A lost unit write is a unit
+    /// computed again.
     pub(super) async fn add_unit_trials(
         &self,
         lease: &Lease,
@@ -416,6 +423,9 @@ impl Store {
     ) -> Result<(), sqlx::Error> {
         on_pool!(self, p => {
             let mut tx = p.begin().await?;
+            if self.shared() {
+                sqlx::query("SET LOCAL synchronous_commit TO OFF").execute(&mut *tx).await?;
+            }
             let held = sqlx::query(
                 "UPDATE units SET trials = $1
                  WHERE experiment_id = $2 AND scope = $3 AND col = $4 AND attempt = $5 AND state = 'running'",
@@ -446,20 +456,29 @@ impl Store {
         trials: i64,
         error: Option<&str>,
     ) -> Result<bool, sqlx::Error> {
-        let r = on_pool!(self, p => sqlx::query(
-            "UPDATE units SET state = $1, trials = $2, error = $3, lease_until_ms = NULL
-             WHERE experiment_id = $4 AND scope = $5 AND col = $6 AND attempt = $7 AND state = 'running'",
-        )
-        .bind(unit_state(state))
-        .bind(trials)
-        .bind(error)
-        .bind(&lease.id)
-        .bind(at.scope)
-        .bind(at.col)
-        .bind(lease.attempt)
-        .execute(p)
-        .await
-        .map(|r| r.rows_affected()))?;
+        // Not waiting for the disk: see `add_unit_trials`.
+        let r = on_pool!(self, p => {
+            let mut tx = p.begin().await?;
+            if self.shared() {
+                sqlx::query("SET LOCAL synchronous_commit TO OFF").execute(&mut *tx).await?;
+            }
+            let r = sqlx::query(
+                "UPDATE units SET state = $1, trials = $2, error = $3, lease_until_ms = NULL
+                 WHERE experiment_id = $4 AND scope = $5 AND col = $6 AND attempt = $7 AND state = 'running'",
+            )
+            .bind(unit_state(state))
+            .bind(trials)
+            .bind(error)
+            .bind(&lease.id)
+            .bind(at.scope)
+            .bind(at.col)
+            .bind(lease.attempt)
+            .execute(&mut *tx)
+            .await?
+            .rows_affected();
+            tx.commit().await?;
+            Ok::<u64, sqlx::Error>(r)
+        })?;
         if r == 1 {
             self.notify_units(ENDED, &lease.id).await;
         }
