@@ -668,3 +668,64 @@ async fn a_trial_repeated_in_one_batch_is_stored_once_with_its_last_place() {
         assert_eq!(got, [other, StoredTrial { index: 9, ..first }]);
     }
 }
+
+/// Issue 14: an idempotency key is one `INSERT … ON CONFLICT`: eight
+/// submissions with one key at once (as from several API processes, each
+/// with its own connection pool) store one experiment; the others get it
+/// back as an earlier submission, or as a reused key when their request
+/// differs.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn concurrent_submissions_with_one_key_store_one_experiment() {
+    use zwidth::store::Inserted;
+    let dir = tempdir::Dir::new("idem");
+    let mut places = vec![Location::Sqlite(dir.0.join("z.db"))];
+    if let Some(url) = common::pg::fresh_database("idem").await {
+        places.push(Location::Postgres(url));
+    }
+    for at in places {
+        let mut tasks = Vec::new();
+        for i in 0..8 {
+            // Each its own store (pool), as separate processes have.
+            let st = Store::connect(&at).await.unwrap();
+            tasks.push(tokio::spawn(async move {
+                let spec = if i == 7 { "{\"other\":1}" } else { "{}" };
+                let r = st
+                    .insert(NewExperiment {
+                        id: &format!("e-{i}"),
+                        kind: "map",
+                        spec,
+                        priority: 0,
+                        key: Some("the-key"),
+                        not_before_ms: None,
+                        rig: "sim",
+                    })
+                    .await
+                    .unwrap();
+                (i, r)
+            }));
+        }
+        let mut new = Vec::new();
+        let (mut earlier, mut reused) = (0, 0);
+        for t in tasks {
+            match t.await.unwrap() {
+                (i, Inserted::New(row)) => new.push((i, row.id)),
+                (_, Inserted::Earlier(_)) => earlier += 1,
+                (_, Inserted::KeyReused(_)) => reused += 1,
+            }
+        }
+        assert_eq!(new.len(), 1, "{at}: {new:?}");
+        let (winner, id) = &new[0];
+        assert_eq!(id, &format!("e-{winner}"));
+        // The one that differs is told its key was reused, unless it won.
+        assert_eq!(reused, usize::from(*winner != 7), "{at}");
+        assert_eq!(earlier + reused, 7);
+        let st = Store::connect(&at).await.unwrap();
+        let mut stored = Vec::new();
+        for i in 0..8 {
+            if st.get(&format!("e-{i}")).await.unwrap().is_some() {
+                stored.push(i);
+            }
+        }
+        assert_eq!(stored, [*winner], "{at}");
+    }
+}
