@@ -133,13 +133,14 @@ mod tests {
         .unwrap()
     }
 
-    /// The map through `farm` as map `scope` of an experiment: its result,
-    /// what the map itself computed (it should be nothing: every trial
-    /// replayed) and the columns it dropped.
-    fn farmed(
-        spec: &MapSpec,
-        farm: Arc<LocalFarm>,
-    ) -> (MapResult, Vec<StoredTrial>, Vec<(u32, f64)>, Arc<Observer>) {
+    /// A farmed map's result, the trials it computed itself, the columns it
+    /// dropped, and its observer.
+    type Farmed = (MapResult, Vec<StoredTrial>, Vec<(u32, f64)>, Arc<Observer>);
+
+    /// The map through `farm` as map 2 of an experiment: its result, what
+    /// the map itself computed (it should be nothing: every trial
+    /// replayed), the columns it dropped, and its observer.
+    fn farmed(spec: &MapSpec, farm: Arc<LocalFarm>) -> Farmed {
         let o = Arc::new(Observer::default().with_farm(farm));
         let r = map_observed(spec, Some(o.clone()), 2).unwrap();
         (r, o.take_new(), o.take_dropped(), o)
