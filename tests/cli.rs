@@ -875,3 +875,24 @@ fn compare_tuned_rejects_bad_input() {
         "--criterion = \"passivity\"",
     );
 }
+
+/// `bench scale` measures PostgreSQL with counts it can run: anything else
+/// exits 2 naming the flag, the value and what is allowed, before it
+/// connects to anything (the URL below is never reached).
+#[test]
+fn bench_scale_refuses_counts_out_of_range_and_a_sqlite_database() {
+    let pg = "postgres://nobody@127.0.0.1:1/none";
+    for (flag, value, allowed) in [
+        ("--maps", "1", "--maps must be 2 to 1000 (got 1)"),
+        ("--sweeps", "0", "--sweeps 1 to 100 (got 0)"),
+        ("--claims", "9", "--claims 10 to 1000000 (got 9)"),
+        ("--repeat", "11", "--repeat 1 to 10 (got 11)"),
+    ] {
+        rejects(&["bench", "scale", "--db", pg, flag, value], "", allowed);
+    }
+    rejects(
+        &["bench", "scale", "--db", "runs.db"],
+        "",
+        "bench scale measures a PostgreSQL database",
+    );
+}

@@ -366,15 +366,17 @@ pub(super) fn run(
                     maps,
                     sweeps,
                     claims,
+                    repeat,
                     json,
                 },
         } => {
             if !(2..=1000).contains(&maps)
                 || !(1..=100).contains(&sweeps)
                 || !(10..=1_000_000).contains(&claims)
+                || !(1..=10).contains(&repeat)
             {
                 return Err(CliError::Input(format!(
-                    "bench scale: --maps must be 2 to 1000 (got {maps}), --sweeps 1 to 100 (got {sweeps}), --claims 10 to 1000000 (got {claims})"
+                    "bench scale: --maps must be 2 to 1000 (got {maps}), --sweeps 1 to 100 (got {sweeps}), --claims 10 to 1000000 (got {claims}), --repeat 1 to 10 (got {repeat})"
                 )));
             }
             let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
@@ -388,7 +390,7 @@ pub(super) fn run(
                 .build()
                 .map_err(|e| CliError::Failure(format!("cannot start the runtime: {e}")))?;
             let r = rt
-                .block_on(crate::jobs::bench::run(&db, maps, sweeps, claims))
+                .block_on(crate::jobs::bench::run(&db, maps, sweeps, claims, repeat))
                 .map_err(CliError::Failure)?;
             write_either(stdout, json, &r, || r.table())
         }

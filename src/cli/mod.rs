@@ -523,6 +523,9 @@ pub enum BenchCommand {
         /// Empty experiments claimed in each claim-rate run.
         #[arg(long, default_value_t = 2000)]
         claims: usize,
+        /// Runs of each configuration (interleaved; the fastest counts).
+        #[arg(long, default_value_t = 2)]
+        repeat: usize,
         #[arg(long)]
         json: bool,
     },
