@@ -37,12 +37,16 @@ const QUICK: [&str; 3] = [
 /// Column-heavy ones (issue 14's work units: one per B column): a
 /// time-domain bisection over a B list, and one over an automatic B range
 /// (queued in batches; the columns past its end dropped).
-const COLUMNS: [&str; 2] = [
+const COLUMNS: [&str; 3] = [
     r#"{"kind":"map","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},
         "estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","b":[0,10,20,30,40,50]}"#,
     r#"{"kind":"map","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},
         "estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability",
         "b_max":400,"accuracy":{"preset":"draft","b_step":40}}"#,
+    // A tune: a light driver whose evaluation maps' columns are units.
+    r#"{"kind":"tune","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},
+        "estimator":{"kind":"butterworth","cutoff_hz":500}},"params":{"cutoff_hz":{"min":300,"max":600}},
+        "objective":"k_width","method":"time","criterion":"stability","max_evaluations":4,"finalists":0,"b":[0,20,40]}"#,
 ];
 
 fn units(base: &str, id: &str) -> Vec<serde_json::Value> {
@@ -149,7 +153,8 @@ fn outcome(
 fn strip_times(v: &mut serde_json::Value) {
     match v {
         serde_json::Value::Object(m) => {
-            m.remove("elapsed_s");
+            // Wall times: elapsed_s, search_s, mean_search_evaluation_s, …
+            m.retain(|k, _| !k.ends_with("_s"));
             m.values_mut().for_each(strip_times);
         }
         serde_json::Value::Array(a) => a.iter_mut().for_each(strip_times),
@@ -223,13 +228,24 @@ fn a_campaign_on_three_workers_equals_one_process() {
             assert!(workers.iter().any(|w| u["worker"] == w.as_str()), "{u}");
         }
         if COLUMNS.contains(&specs[i]) {
-            let cols: Vec<i64> = us.iter().map(|u| u["column"].as_i64().unwrap()).collect();
-            assert_eq!(
-                cols,
-                (0..us.len() as i64).collect::<Vec<_>>(),
-                "one unit per column"
-            );
-            assert!(cols.len() >= 6, "{cols:?}");
+            if specs[i].contains("\"tune\"") {
+                // 4 evaluation maps (scopes 0…3) of 3 columns each.
+                let places: Vec<(i64, i64)> = us
+                    .iter()
+                    .map(|u| (u["scope"].as_i64().unwrap(), u["column"].as_i64().unwrap()))
+                    .collect();
+                let want: Vec<(i64, i64)> =
+                    (0..4).flat_map(|s| (0..3).map(move |c| (s, c))).collect();
+                assert_eq!(places, want);
+            } else {
+                let cols: Vec<i64> = us.iter().map(|u| u["column"].as_i64().unwrap()).collect();
+                assert_eq!(
+                    cols,
+                    (0..us.len() as i64).collect::<Vec<_>>(),
+                    "one unit per column"
+                );
+                assert!(cols.len() >= 6, "{cols:?}");
+            }
             column_workers.extend(us.iter().map(|u| u["worker"].as_str().unwrap().to_string()));
         } else {
             assert!(us.iter().all(|u| u["column"] == -1), "{us:?}");
