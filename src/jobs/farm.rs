@@ -129,3 +129,182 @@ impl DbFarm {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::NewExperiment;
+    use crate::zwidth::farm::run_unit;
+    use crate::zwidth::search::{map, map_observed};
+    use std::sync::Arc;
+
+    /// The 2011 device in the time domain, two B columns (draft accuracy):
+    /// a few dozen trials.
+    fn two_columns() -> MapSpec {
+        serde_json::from_str(
+            r#"{"scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},
+                "estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability",
+                "accuracy":"draft","b":[0,10]}"#,
+        )
+        .unwrap()
+    }
+
+    /// A SQLite store in a fresh directory (removed by the guard) with
+    /// experiment "e" claimed: the store and the driver's lease.
+    async fn claimed(tag: &str) -> (Store, Lease, TempDir) {
+        let dir = std::env::temp_dir().join(format!("zwidth-farm-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let store = Store::open(&dir.join("z.db")).await.unwrap();
+        store
+            .insert(NewExperiment {
+                id: "e",
+                kind: "map",
+                spec: "{}",
+                priority: 0,
+                key: None,
+                not_before_ms: None,
+                rig: "sim",
+            })
+            .await
+            .unwrap();
+        let row = store.claim("sim", "driver", 60_000).await.unwrap().unwrap();
+        (store, Lease::of(row.id, row.attempt), TempDir(dir))
+    }
+
+    struct TempDir(std::path::PathBuf);
+    impl Drop for TempDir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    /// A worker on `store`: claim `n` units and compute them with
+    /// `run_unit` (or fail them with `fail`), storing their trials.
+    async fn work(store: &Store, n: usize, fail: Option<&str>) {
+        let mut left = n;
+        while left > 0 {
+            let Some(u) = store.claim_unit("sim", "worker", 60_000).await.unwrap() else {
+                tokio::time::sleep(Duration::from_millis(20)).await;
+                continue;
+            };
+            let lease = u.lease();
+            if let Some(why) = fail {
+                assert!(store
+                    .finish(&lease, "failed", 0, None, Some(why))
+                    .await
+                    .unwrap());
+            } else {
+                let spec: MapSpec = serde_json::from_str(&u.spec).unwrap();
+                let own = Arc::new(Observer::default());
+                let (o, unit, scope) = (own.clone(), u.unit(), u.scope as u32);
+                tokio::task::spawn_blocking(move || run_unit(&spec, scope, unit, o))
+                    .await
+                    .unwrap()
+                    .unwrap();
+                let trials = own.take_new();
+                let n = trials.len() as i64;
+                store
+                    .add_trials(&lease, &trials, &[], (n, 1.0))
+                    .await
+                    .unwrap();
+                assert!(store
+                    .finish(&lease, "succeeded", n, None, None)
+                    .await
+                    .unwrap());
+            }
+            left -= 1;
+        }
+    }
+
+    /// The driver's side: `spec` as map `scope` through a `DbFarm`, off the
+    /// runtime's workers (as the runner runs it).
+    fn drive(
+        store: &Store,
+        lease: &Lease,
+        spec: &MapSpec,
+        scope: u32,
+    ) -> (
+        Arc<Observer>,
+        tokio::task::JoinHandle<crate::zwidth::search::MapResult>,
+    ) {
+        let farm = Arc::new(DbFarm {
+            store: store.clone(),
+            lease: lease.clone(),
+            handle: tokio::runtime::Handle::current(),
+        });
+        let o = Arc::new(Observer::default().with_farm(farm));
+        let (obs, spec) = (o.clone(), spec.clone());
+        let task =
+            tokio::task::spawn_blocking(move || map_observed(&spec, Some(obs), scope).unwrap());
+        (o, task)
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_map_farmed_through_the_database_equals_one_process() {
+        let (store, lease, _dir) = claimed("equal").await;
+        let spec = two_columns();
+        let (o, driver) = drive(&store, &lease, &spec, 3);
+        work(&store, 2, None).await;
+        let r = tokio::time::timeout(Duration::from_secs(30), driver)
+            .await
+            .expect("the driver saw its units end")
+            .unwrap();
+        let one = map(&spec).unwrap();
+        assert_eq!(r.points, one.points);
+        assert_eq!(r.boundary, one.boundary);
+        assert_eq!(o.runaway(), None);
+        // Every trial came from the units: the driver computed none.
+        assert!(o.take_new().is_empty());
+        assert_eq!(o.trials_done(), one.trials);
+        // Two column units, done, with the map's trials between them.
+        let units = store.units("e").await.unwrap();
+        let shape: Vec<_> = units
+            .iter()
+            .map(|u| (u.scope, u.col, u.b, u.state.as_str()))
+            .collect();
+        assert_eq!(
+            shape,
+            [(3, 0, Some(0.0), "done"), (3, 1, Some(10.0), "done")]
+        );
+        assert_eq!(
+            units.iter().map(|u| u.trials).sum::<i64>(),
+            one.trials as i64
+        );
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_failed_unit_fails_its_map_with_the_reason() {
+        let (store, lease, _dir) = claimed("fail").await;
+        let spec = two_columns();
+        let (o, driver) = drive(&store, &lease, &spec, 0);
+        work(
+            &store,
+            1,
+            Some("its worker stopped answering 3 times (last w9)"),
+        )
+        .await;
+        tokio::time::timeout(Duration::from_secs(30), driver)
+            .await
+            .expect("the driver saw the failure")
+            .unwrap();
+        assert_eq!(
+            o.runaway().as_deref(),
+            Some("map 0, column 0 (B = 0 N·s/m) failed: its worker stopped answering 3 times (last w9)")
+        );
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_driver_whose_lease_is_lost_stops_without_planning() {
+        let (store, _lease, _dir) = claimed("lost").await;
+        let spec = two_columns();
+        let (o, driver) = drive(&store, &Lease::of("e", 9), &spec, 0);
+        tokio::time::timeout(Duration::from_secs(30), driver)
+            .await
+            .expect("the driver stopped")
+            .unwrap();
+        assert!(o.cancelled());
+        assert_eq!(o.runaway(), None);
+        assert!(store.units("e").await.unwrap().is_empty());
+    }
+}
