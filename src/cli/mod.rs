@@ -517,8 +517,8 @@ pub enum BenchCommand {
         /// Maps in each campaign of trace maps.
         #[arg(long, default_value_t = 16)]
         maps: usize,
-        /// Column-heavy sweeps (48 B columns each) in each sweep run.
-        #[arg(long, default_value_t = 2)]
+        /// Column-heavy sweeps (24 B columns of ~0.6 s each) in each sweep run.
+        #[arg(long, default_value_t = 1)]
         sweeps: usize,
         /// Empty experiments claimed in each claim-rate run.
         #[arg(long, default_value_t = 2000)]

@@ -21,10 +21,12 @@ use crate::store::{Lease, Location, NewExperiment, Store};
 /// one map of real work, a few tenths of a second in a release build.
 const MAP: &str = r#"{"kind":"map","scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","search":"trace"}"#;
 
-/// A column-heavy sweep: the same device's time-domain bisection over 12
-/// B values (0 to 55 N·s/m) at reference accuracy and four Butterworth
-/// cutoffs (300 to 600 Hz): 48 B columns, each a unit of its own.
-const SWEEP: &str = r#"{"kind":"sweep","map":{"scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability","accuracy":"reference","b":[0,5,10,15,20,25,30,35,40,45,50,55]},"parameter":{"path":"estimator.cutoff_hz","values":[300,400,500,600]}}"#;
+/// A column-heavy sweep, as a lab runs one: the 2018 paper's device
+/// (`examples/seed_2018.json`: friction, 1 µm quantization; the frequency
+/// engine with its BLA verdicts and intervals) at reference accuracy, over
+/// 8 B values (0 to 175 N·s/m) at three Butterworth cutoffs (400, 450,
+/// 499 Hz): 24 B columns of ~0.6 s, each a unit of its own.
+const SWEEP: &str = r#"{"kind":"sweep","map":{"scene":{"device":{"mass":0.52,"damping":13.2,"coulomb":0.19,"quantization":1e-6},"loop":{"sample_hz":1000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":499,"order":2},"probe":{"f_min_hz":1,"f_max_hz":100,"amplitude":0.5,"periods":4}},"accuracy":"reference","b":[0,25,50,75,100,125,150,175]},"parameter":{"path":"estimator.cutoff_hz","values":[400,450,499]}}"#;
 
 #[derive(Debug, Serialize)]
 pub struct CampaignRow {
