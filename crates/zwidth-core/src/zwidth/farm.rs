@@ -263,6 +263,43 @@ mod tests {
         }
     }
 
+    /// A farm that keeps the default batch (as the database's does).
+    struct DefaultBatch(LocalFarm);
+    impl Farm for DefaultBatch {
+        fn run(
+            &self,
+            scope: u32,
+            spec: &MapSpec,
+            units: &[Unit],
+            observer: &Observer,
+            done: &(dyn Fn(usize) + Sync),
+        ) -> Result<(), String> {
+            self.0.run(scope, spec, units, observer, done)
+        }
+    }
+
+    #[test]
+    fn an_automatic_range_goes_out_eight_columns_at_a_time_by_default() {
+        // docs/service.md: "queues its columns 8 at a time". The analytic
+        // engine would be one unit: the time engine, 10 columns or more.
+        let spec = time_map(r#","b_max":400,"accuracy":{"preset":"draft","b_step":40}"#);
+        let inner = DefaultBatch(LocalFarm::default());
+        let farm = Arc::new(inner);
+        let o = Arc::new(Observer::default().with_farm(farm.clone()));
+        map_observed(&spec, Some(o.clone()), 0).unwrap();
+        let sizes: Vec<usize> = farm
+            .0
+            .calls
+            .lock()
+            .unwrap()
+            .iter()
+            .map(|(_, u)| u.len())
+            .collect();
+        assert_eq!(sizes.first(), Some(&8), "{sizes:?}");
+        // And the observer says it hands its maps to a farm.
+        assert!(format!("{o:?}").contains("farm: Some(Farm)"), "{o:?}");
+    }
+
     #[test]
     fn a_unit_that_cannot_be_computed_fails_the_map_with_its_reason() {
         let spec = time_map(r#","b":[0,10]"#);
