@@ -316,6 +316,15 @@ mod tests {
     }
 
     #[test]
+    fn a_unit_is_stored_by_its_column_or_minus_one_for_a_whole_map() {
+        // migrations/sqlite/0012_units.sql: `col`, -1 for a whole map.
+        assert_eq!(Unit::Map.column_key(), -1);
+        assert_eq!(WHOLE_MAP, -1);
+        assert_eq!(Unit::Column { column: 7, b: 35.0 }.column_key(), 7);
+        assert_eq!(Unit::Column { column: 0, b: 0.0 }.column_key(), 0);
+    }
+
+    #[test]
     fn a_column_unit_must_be_a_column_of_its_map() {
         let listed = time_map(r#","b":[0,10]"#);
         let o = || Arc::new(Observer::default());
