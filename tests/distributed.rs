@@ -461,3 +461,70 @@ fn killing_the_api_leaves_the_workers_going() {
     let done = get(&format!("{base2}/v1/experiments/{}", ids[0]));
     assert_is_slow_s_result(&done, &trials(&base2, &ids[0]));
 }
+
+/// The 2018 device at reference accuracy over six B values: six column
+/// units of ~0.6 s (frequency engine, BLA verdicts with intervals).
+const SEED_COLUMNS: &str = r#"{"kind":"map","scene":{"device":{"mass":0.52,"damping":13.2,"coulomb":0.19,"quantization":1e-6},
+  "loop":{"sample_hz":1000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":499,"order":2}},
+  "accuracy":"reference","b":[0,25,50,75,100,125]}"#;
+
+/// SIGTERM (`docker stop`) the worker driving a run while units are out:
+/// it stops within a trial, its run interrupted and its unit queued again;
+/// the other worker takes the run over (attempt 2), its units go on, and
+/// the result is the library's.
+#[test]
+fn a_driver_stopped_gracefully_hands_its_run_and_units_over() {
+    let Some(url) = pg::fresh_database_blocking("graceful") else {
+        return;
+    };
+    let mut p = Procs {
+        children: vec![],
+        dir: fresh_dir("graceful"),
+    };
+    let base = api(&mut p, &url, true, "api.err");
+    let ids = [
+        worker(&mut p, &url, "15000", "w1.err"),
+        worker(&mut p, &url, "15000", "w2.err"),
+    ];
+    let id = submit(&base, SEED_COLUMNS);
+    wait_for("two units done", 60, || {
+        units(&base, &id)
+            .iter()
+            .filter(|u| u["state"] == "done")
+            .count()
+            >= 2
+    });
+    let v = get(&format!("{base}/v1/experiments/{id}"));
+    let driver = ids.iter().position(|w| v["worker"] == w.as_str()).unwrap();
+    let pid = p.children[1 + driver].id().to_string();
+    assert!(std::process::Command::new("kill")
+        .args(["-TERM", &pid])
+        .status()
+        .unwrap()
+        .success());
+    let status = p.children[1 + driver].wait().unwrap();
+    assert!(status.success(), "a clean stop: {status}");
+    let done = wait_end(&base, &id, 120);
+    assert_eq!(done["state"], "succeeded", "{done}");
+    assert_eq!(done["attempt"], 2, "{done}");
+    assert_eq!(done["worker"], ids[1 - driver].as_str());
+    let us = units(&base, &id);
+    assert_eq!(us.len(), 6);
+    assert!(us.iter().all(|u| u["state"] == "done"), "{us:?}");
+    // The library's map, in this process.
+    let spec: zwidth::experiment::ExperimentSpec =
+        serde_json::from_str(&SEED_COLUMNS.replace('\n', "")).unwrap();
+    let zwidth::experiment::ExperimentSpec::Map(m) = spec else {
+        unreachable!()
+    };
+    let want = zwidth::zwidth::search::map(&m).unwrap();
+    assert_eq!(
+        done["result"]["boundary"],
+        serde_json::to_value(&want.boundary).unwrap()
+    );
+    assert_eq!(
+        trials(&base, &id).as_array().unwrap().len(),
+        want.trials,
+        "every trial stored once"
+    );
+}

@@ -577,19 +577,97 @@ async fn work_units_are_planned_once_claimed_in_order_and_fenced() {
         assert_eq!(states, [(0, "done".into(), 1), (1, "queued".into(), 1)]);
         let b2 = st.claim_unit("sim", "w5", 60_000).await.unwrap().unwrap();
         assert_eq!((b2.col, b2.attempt), (1, 2));
-        // The experiment cancelled: its units' heartbeats say so, and no
-        // unit of it is claimed, even with its lease expired.
-        st.cancel("e1").await.unwrap();
+        // Its driver shut down (the experiment interrupted): the unit goes
+        // on, its result is what the next driver replays.
+        st.interrupt(&driver, 0, 0).await.unwrap();
+        assert_eq!(
+            st.heartbeat(&b2.lease(), 1, 0.0, 60_000).await.unwrap(),
+            Held::Held
+        );
+        assert_eq!(st.running_units("sim").await.unwrap().len(), 2, "b2 and m");
+        // The experiment cancelled: its units are cancelled with it (their
+        // holders find them gone), none is claimed again, and none shows
+        // as computing.
+        assert!(st.cancel("e1").await.unwrap());
         assert_eq!(
             st.heartbeat(&b2.lease(), 1, 0.0, -1).await.unwrap(),
-            Held::Cancelled
+            Held::Lost
         );
-        assert!(st.claim_unit("sim", "w6", 300).await.unwrap().is_none());
-        assert!(st
+        assert!(!st
             .finish(&b2.lease(), "cancelled", 1, None, None)
             .await
             .unwrap());
-        assert_eq!(st.units_of("e1", 0).await.unwrap()[1].state, "cancelled");
+        assert!(st.claim_unit("sim", "w6", 300).await.unwrap().is_none());
+        let states: Vec<String> = st
+            .units("e1")
+            .await
+            .unwrap()
+            .into_iter()
+            .map(|u| u.state)
+            .collect();
+        assert_eq!(states, ["done", "cancelled", "cancelled"]);
+        assert!(st.running_units("sim").await.unwrap().is_empty());
+    }
+}
+
+/// Issue 14: a unit whose lease ran out is not shown as computing; a
+/// cancelled unit is queued again when its running experiment plans it
+/// again; when the experiment ends, its leftover units are cancelled.
+#[tokio::test]
+async fn units_of_an_ended_experiment_are_cancelled_and_replanning_revives_cancelled_ones() {
+    use zwidth::zwidth::farm::Unit;
+    for (store, _dir) in stores("unit-end").await {
+        let st = &store;
+        let driver = claim(st).await;
+        let col = |c: u32| Unit::Column {
+            column: c,
+            b: 10.0 * f64::from(c),
+        };
+        st.plan_units(&driver, 0, "{}", &[col(0), col(1)])
+            .await
+            .unwrap();
+        st.claim_unit("sim", "w1", 300).await.unwrap().unwrap();
+        assert_eq!(st.running_units("sim").await.unwrap().len(), 1);
+        tokio::time::sleep(std::time::Duration::from_millis(400)).await;
+        assert!(
+            st.running_units("sim").await.unwrap().is_empty(),
+            "its lease ran out"
+        );
+        // Taken over, then cancelled by its holder (what an interrupted
+        // experiment's units did before), then planned again: queued.
+        let u0 = st.claim_unit("sim", "w2", 60_000).await.unwrap().unwrap();
+        assert_eq!((u0.col, u0.attempt), (0, 2));
+        assert!(st
+            .finish(&u0.lease(), "cancelled", 0, None, None)
+            .await
+            .unwrap());
+        st.plan_units(&driver, 0, "{}", &[col(0)]).await.unwrap();
+        let states: Vec<(i64, String)> = st
+            .units("e1")
+            .await
+            .unwrap()
+            .into_iter()
+            .map(|u| (u.col, u.state))
+            .collect();
+        assert_eq!(
+            states,
+            [(0, "queued".into()), (1, "queued".into())],
+            "{}",
+            st.backend()
+        );
+        // The experiment ends (failed by its driver): both cancelled.
+        assert!(st
+            .finish(&driver, "failed", 0, None, Some("map 0, column 1 failed"))
+            .await
+            .unwrap());
+        let states: Vec<String> = st
+            .units("e1")
+            .await
+            .unwrap()
+            .into_iter()
+            .map(|u| u.state)
+            .collect();
+        assert_eq!(states, ["cancelled", "cancelled"]);
     }
 }
 

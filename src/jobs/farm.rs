@@ -77,10 +77,10 @@ impl DbFarm {
             }
         }
         let want: BTreeSet<i64> = units.iter().map(Unit::column_key).collect();
+        // Woken when a unit of this experiment ends (here or, on
+        // PostgreSQL, anywhere); other experiments' units wake nobody here.
+        let mut ended = self.store.wakeups().ended.subscribe();
         loop {
-            let ended = self.store.wakeups().ended.notified();
-            tokio::pin!(ended);
-            ended.as_mut().enable();
             if observer.cancelled() {
                 observer.set_elsewhere(scope, 0);
                 return Ok(());
@@ -122,9 +122,21 @@ impl DbFarm {
                 Err(e) if transient(&e) => {}
                 Err(e) => return Err(format!("the units of map {scope} could not be read: {e}")),
             }
-            tokio::select! {
-                _ = &mut ended => {}
-                _ = tokio::time::sleep(POLL) => {}
+            let look = tokio::time::sleep(POLL);
+            tokio::pin!(look);
+            loop {
+                tokio::select! {
+                    r = ended.recv() => match r {
+                        Ok(id) if id != self.lease.id => continue,
+                        // Ours, or some missed (lagged): look.
+                        Ok(_) | Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => break,
+                        Err(tokio::sync::broadcast::error::RecvError::Closed) => {
+                            (&mut look).await;
+                            break;
+                        }
+                    },
+                    _ = &mut look => break,
+                }
             }
         }
     }

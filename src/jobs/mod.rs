@@ -53,17 +53,41 @@ pub fn spawn_rig(
     shutdown: &tokio::sync::watch::Receiver<bool>,
     me: &Arc<Worker>,
 ) -> Vec<tokio::task::JoinHandle<()>> {
-    let mut tasks = vec![tokio::spawn(runner(
-        store.clone(),
-        rig.clone(),
-        running.clone(),
-        shutdown.clone(),
-        me.clone(),
-    ))];
     // Woken by other processes' submissions and units (PostgreSQL).
     store.listen();
-    if farmed(store, rig.as_ref()) {
-        for _ in 0..rig.info().parallelism.max(1) {
+    let threads = rig.info().parallelism.max(1);
+    // Farmed, one experiment runner per rig thread: a campaign of trace
+    // maps (one unit each) keeps every unit slot busy. Their runs wait on
+    // threads of their own, never the rig's.
+    let driver = if farmed(store, rig.as_ref()) {
+        match rayon::ThreadPoolBuilder::new()
+            .num_threads(DRIVER_THREADS * threads)
+            .thread_name(|i| format!("zwidth-driver-{i}"))
+            .build()
+        {
+            Ok(p) => Some(Arc::new(p)),
+            Err(e) => {
+                tracing::error!(error = %e, "no threads for the experiments' runs: running them on the rig's");
+                None
+            }
+        }
+    } else {
+        None
+    };
+    let runners = if driver.is_some() { threads } else { 1 };
+    let mut tasks = Vec::new();
+    for _ in 0..runners {
+        tasks.push(tokio::spawn(runner(
+            store.clone(),
+            rig.clone(),
+            running.clone(),
+            shutdown.clone(),
+            me.clone(),
+            driver.clone(),
+        )));
+    }
+    if driver.is_some() {
+        for _ in 0..threads {
             tasks.push(tokio::spawn(unit_runner(
                 store.clone(),
                 rig.clone(),
@@ -82,8 +106,8 @@ fn farmed(store: &Store, rig: &dyn Rig) -> bool {
     store.shared() && rig.attached().is_none()
 }
 
-/// Threads of the pool an experiment's run (a driver) waits on: enough for
-/// a comparison's maps to queue their units at once.
+/// Threads per experiment runner of the pool the runs (drivers) wait on:
+/// enough for a comparison's maps to queue their units at once.
 const DRIVER_THREADS: usize = 4;
 
 /// This process as a worker: its id in the `workers` table and on the
@@ -123,30 +147,18 @@ pub const LEASE_MS: i64 = 15_000;
 /// Claim and run `rig`'s experiments until `shutdown` turns true. Outside
 /// the rig's window (if it has one) nothing new starts. On shutdown a
 /// running experiment stops within one trial, its finished trials stored,
-/// and is marked `interrupted` (it resumes at the next start).
+/// and is marked `interrupted` (it resumes at the next start). With
+/// `driver`, experiments run on its threads and hand their units to the
+/// workers (`farm.rs`).
 pub async fn runner(
     store: Store,
     rig: Arc<dyn Rig>,
     running: Running,
     mut shutdown: tokio::sync::watch::Receiver<bool>,
     me: Arc<Worker>,
+    driver: Option<Arc<rayon::ThreadPool>>,
 ) {
     let id = rig.info().id.clone();
-    let driver = if farmed(&store, rig.as_ref()) {
-        match rayon::ThreadPoolBuilder::new()
-            .num_threads(DRIVER_THREADS)
-            .thread_name(|i| format!("zwidth-driver-{i}"))
-            .build()
-        {
-            Ok(p) => Some(Arc::new(p)),
-            Err(e) => {
-                tracing::error!(error = %e, "no threads for the experiments' runs");
-                return;
-            }
-        }
-    } else {
-        None
-    };
     while !*shutdown.borrow() {
         if !may_start(&store, &id).await {
             continue;
@@ -578,7 +590,7 @@ async fn run_one(
                             observer.cancel.store(true, Ordering::Relaxed);
                         }
                         Ok(Held::Lost) => {
-                            tracing::warn!("the run's lease was taken over: abandoning it");
+                            tracing::warn!("the run's lease was taken over: abandoning it (or, for a unit, its experiment ended)");
                             unstored.lost = true;
                             observer.cancel.store(true, Ordering::Relaxed);
                         }

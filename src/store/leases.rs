@@ -240,7 +240,10 @@ impl Store {
                 .pop(),
             };
             match row {
-                Some(r) if r.state == "failed" => continue,
+                Some(r) if r.state == "failed" => {
+                    self.end_units(&r.id).await?;
+                    continue;
+                }
                 other => return Ok(other),
             }
         }
@@ -301,9 +304,7 @@ impl Store {
         }
         let (done, fraction) = progress;
         if let Some(at) = lease.unit {
-            // A unit's columns are never dropped by the unit: its map's
-            // driver drops them.
-            return self.add_unit_trials(lease, at, trials, done).await;
+            return self.add_unit_trials(lease, at, trials, dropped, done).await;
         }
         let fraction = fraction_done(fraction);
         on_pool!(self, p => {
@@ -413,6 +414,11 @@ impl Store {
             .execute(p)
             .await
             .map(|r| r.rows_affected()))?;
+        if r == 1 {
+            // The experiment ended: units it did not wait for are not
+            // claimed again.
+            self.end_units(&lease.id).await?;
+        }
         Ok(r == 1)
     }
 

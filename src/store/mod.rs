@@ -553,6 +553,9 @@ impl Store {
             .execute(p)
             .await
             .map(|r| r.rows_affected()))?;
+        if r == 1 {
+            self.end_units(id).await?;
+        }
         Ok(r == 1)
     }
 

@@ -19,13 +19,24 @@ use crate::zwidth::search::StoredTrial;
 /// `NOTIFY` (channels `zwidth_units` and `zwidth_unit_done`, sent at the
 /// commit), which [`Store::listen`] relays. Waiters poll as well (a
 /// notification may be missed while a listener reconnects).
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Wakeups {
     /// Work was queued: units, or experiments (or the queue resumed).
     pub queued: tokio::sync::Notify,
-    /// A unit ended.
-    pub ended: tokio::sync::Notify,
+    /// A unit of this experiment (its id) ended: each driver listens for
+    /// its own experiment only.
+    pub ended: tokio::sync::broadcast::Sender<String>,
     listening: std::sync::atomic::AtomicBool,
+}
+
+impl Default for Wakeups {
+    fn default() -> Self {
+        Self {
+            queued: tokio::sync::Notify::new(),
+            ended: tokio::sync::broadcast::channel(1024).0,
+            listening: Default::default(),
+        }
+    }
 }
 
 /// The PostgreSQL channels of [`Wakeups`]: work was queued (units, or
@@ -165,17 +176,24 @@ impl Store {
         {
             return;
         }
+        // The listener holds its connection for good: one of its own, not
+        // one of the store's pool.
+        let own = sqlx::postgres::PgPoolOptions::new()
+            .max_connections(1)
+            .connect_lazy_with((*pool.connect_options()).clone());
         let (pool, wake) = (pool.clone(), self.wake.clone());
         tokio::spawn(async move {
             loop {
                 let relay = async {
-                    let mut l = sqlx::postgres::PgListener::connect_with(&pool).await?;
+                    let mut l = sqlx::postgres::PgListener::connect_with(&own).await?;
                     l.listen_all([QUEUED, ENDED]).await?;
                     loop {
                         let n = l.recv().await?;
                         match n.channel() {
                             QUEUED => wake.queued.notify_waiters(),
-                            _ => wake.ended.notify_waiters(),
+                            _ => {
+                                let _ = wake.ended.send(n.payload().to_string());
+                            }
                         }
                     }
                 };
@@ -207,12 +225,15 @@ impl Store {
         }
         match channel {
             QUEUED => self.wake.queued.notify_waiters(),
-            _ => self.wake.ended.notify_waiters(),
+            _ => {
+                let _ = self.wake.ended.send(payload.to_string());
+            }
         }
     }
 
     /// Queue `units` of map `scope` of the experiment `lease` holds, whose
-    /// spec is `spec` (JSON); units planned before are left as they are.
+    /// spec is `spec` (JSON); units planned before are left as they are,
+    /// but for cancelled ones, which are queued again.
     /// Nothing when the lease is lost.
     pub async fn plan_units(
         &self,
@@ -246,7 +267,8 @@ impl Store {
                 sqlx::query(
                     "INSERT INTO units (experiment_id, scope, col, b, spec, rig, priority, created_ms, state)
                      SELECT id, $2, $3, $4, $5, rig, priority, created_ms, 'queued' FROM experiments WHERE id = $1
-                     ON CONFLICT (experiment_id, scope, col) DO NOTHING",
+                     ON CONFLICT (experiment_id, scope, col) DO UPDATE SET state = 'queued', lease_until_ms = NULL
+                     WHERE units.state = 'cancelled'",
                 )
                 .bind(&lease.id)
                 .bind(i64::from(scope))
@@ -285,13 +307,31 @@ impl Store {
     }
 
     /// The units running on `rig`, oldest experiment first.
+    /// (Under a live lease: a unit whose worker died is not computing.)
     pub async fn running_units(&self, rig: &str) -> Result<Vec<UnitRow>, sqlx::Error> {
+        let now = self.db_now_ms().await?;
         on_pool!(self, p => sqlx::query_as::<_, UnitRow>(
-            "SELECT * FROM units WHERE rig = $1 AND state = 'running' ORDER BY created_ms, experiment_id, scope, col",
+            "SELECT * FROM units WHERE rig = $1 AND state = 'running' AND lease_until_ms >= $2
+             ORDER BY created_ms, experiment_id, scope, col",
         )
         .bind(rig)
+        .bind(now)
         .fetch_all(p)
         .await)
+    }
+
+    /// The units of experiment `id` not done yet are cancelled: it ended
+    /// (their holders' next heartbeat or write finds them gone, and no
+    /// claim looks at them again).
+    pub(super) async fn end_units(&self, id: &str) -> Result<(), sqlx::Error> {
+        on_pool!(self, p => sqlx::query(
+            "UPDATE units SET state = 'cancelled', lease_until_ms = NULL
+             WHERE experiment_id = $1 AND state IN ('queued', 'running')",
+        )
+        .bind(id)
+        .execute(p)
+        .await
+        .map(|_| ()))
     }
 
     /// The stored trials of a unit: its column's, or its whole map's.
@@ -401,24 +441,30 @@ impl Store {
         .bind(&lease.id)
         .fetch_optional(p)
         .await)?;
+        // Its experiment ended: stop. Running, or waiting for a driver (a
+        // driver shut down leaves it interrupted): the unit goes on, its
+        // result is what the next driver replays.
         Ok(match state.as_deref() {
-            Some("running") => Held::Held,
-            _ => Held::Cancelled,
+            Some("succeeded" | "failed" | "cancelled") | None => Held::Cancelled,
+            Some(_) => Held::Held,
         })
     }
 
-    /// [`Store::add_trials`] of a unit: its trials, fenced by its lease.
-    /// On PostgreSQL a unit's writes do not wait for the disk
-    /// (`synchronous_commit` off for their transactions): a server crash
-    /// may lose the last few of them, never part of one, and WAL order
-    /// keeps every unit write its driver read durable before the driver's
-    /// own (synchronous) commit of the result. A lost unit write is a unit
-    /// computed again.
+    /// [`Store::add_trials`] of a unit: its trials, fenced by its lease, and
+    /// the columns a whole-map unit's automatic B range ran past (`dropped`;
+    /// the unit owns its map). On PostgreSQL a unit's trial writes do not
+    /// wait for the disk (`synchronous_commit` off for their transactions):
+    /// a server crash may lose the last few of them (never part of one;
+    /// the unit, still `running`, is claimed again when its lease runs out
+    /// and computes them again). Its end waits for the disk, which makes
+    /// every earlier write of it durable (WAL order) before its driver can
+    /// read `done`.
     pub(super) async fn add_unit_trials(
         &self,
         lease: &Lease,
         at: UnitPlace,
         trials: &[StoredTrial],
+        dropped: &[(u32, f64)],
         done: i64,
     ) -> Result<(), sqlx::Error> {
         on_pool!(self, p => {
@@ -443,6 +489,14 @@ impl Store {
                 return Err(lost(lease));
             }
             super::leases::insert_trials!(tx, &lease.id, trials);
+            for &(scope, b) in dropped.iter().filter(|(s, _)| i64::from(*s) == at.scope) {
+                sqlx::query("DELETE FROM trials WHERE experiment_id = $1 AND scope = $2 AND b >= $3")
+                    .bind(&lease.id)
+                    .bind(i64::from(scope))
+                    .bind(b)
+                    .execute(&mut *tx)
+                    .await?;
+            }
             tx.commit().await
         })
     }
@@ -456,12 +510,11 @@ impl Store {
         trials: i64,
         error: Option<&str>,
     ) -> Result<bool, sqlx::Error> {
-        // Not waiting for the disk: see `add_unit_trials`.
+        // Waiting for the disk (unlike its trial writes): its driver reads
+        // `done` only once this and every earlier write of the unit are
+        // durable.
         let r = on_pool!(self, p => {
             let mut tx = p.begin().await?;
-            if self.shared() {
-                sqlx::query("SET LOCAL synchronous_commit TO OFF").execute(&mut *tx).await?;
-            }
             let r = sqlx::query(
                 "UPDATE units SET state = $1, trials = $2, error = $3, lease_until_ms = NULL
                  WHERE experiment_id = $4 AND scope = $5 AND col = $6 AND attempt = $7 AND state = 'running'",

@@ -922,9 +922,11 @@ fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPo
     // columns past that end: they are dropped, trials and all, so the map
     // is the same on any number of threads (issue 14).
     let k_floor = ev.res.k_step;
+    // Columns farmed out go in the farm's batches; a map computed (or
+    // replayed whole) here runs batches of its threads.
     let batch = match ev.farm() {
-        Some(f) => f.batch().max(2),
-        None => rayon::current_num_threads().max(2),
+        Some(f) if !whole_map_unit(spec, ev) => f.batch().max(2),
+        _ => rayon::current_num_threads().max(2),
     };
     let mut columns: Vec<(BoundaryPoint, Vec<Point>)> = Vec::new();
     for chunk in b_auto.chunks(batch) {
