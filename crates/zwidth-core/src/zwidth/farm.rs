@@ -316,6 +316,33 @@ mod tests {
     }
 
     #[test]
+    fn a_farmed_sweep_equals_one_process_map_by_map() {
+        use crate::zwidth::sweep::{sweep_observed, SweepSpec};
+        let spec: SweepSpec = serde_json::from_str(
+            r#"{"map":{"scene":{"device":{"force_limit":4},"loop":{"sample_hz":10000,"render_hz":1000},
+                "estimator":{"kind":"butterworth","cutoff_hz":500}},"method":"time","criterion":"stability",
+                "accuracy":"draft","b":[0,10]},"parameter":{"path":"estimator.cutoff_hz","values":[300,400,500]}}"#,
+        )
+        .unwrap();
+        let one = sweep_observed(&spec, None).unwrap();
+        let farm = Arc::new(LocalFarm::default());
+        let o = Arc::new(Observer::default().with_farm(farm.clone()));
+        let got = sweep_observed(&spec, Some(o.clone())).unwrap();
+        assert_eq!(o.runaway(), None);
+        assert_eq!(got.rows.len(), 3);
+        for (a, b) in got.rows.iter().zip(&one.rows) {
+            assert_eq!((&a.label, a.value), (&b.label, b.value));
+            same(&a.map, &b.map);
+        }
+        assert_eq!(got.best_k_width, one.best_k_width);
+        assert!(o.take_new().is_empty());
+        // Each map (scope 0, 1, 2) farmed its two columns.
+        let mut scopes: Vec<u32> = farm.calls.lock().unwrap().iter().map(|(s, _)| *s).collect();
+        scopes.sort();
+        assert_eq!(scopes, [0, 1, 2]);
+    }
+
+    #[test]
     fn a_unit_is_stored_by_its_column_or_minus_one_for_a_whole_map() {
         // migrations/sqlite/0012_units.sql: `col`, -1 for a whole map.
         assert_eq!(Unit::Map.column_key(), -1);

@@ -218,23 +218,22 @@ impl SweepSpec {
     }
 }
 
-/// Run every variant in turn (each map parallel inside), reporting to `observer`.
+/// Run every variant in turn (each map parallel inside), reporting to
+/// `observer`. With a farm (`farm.rs`) the variants go out at once, each
+/// map's units beside the others' (the rows are the same, in the same
+/// order: each map is its own scope).
 pub fn sweep_observed(
     spec: &SweepSpec,
     observer: Option<Arc<Observer>>,
 ) -> Result<SweepResult, SpecError> {
+    use rayon::prelude::*;
     let start = std::time::Instant::now();
     let variants = spec.variants()?;
     if let Some(o) = &observer {
         o.set_scopes(variants.len());
     }
-    let mut rows = Vec::with_capacity(variants.len());
-    for (scope, (label, value, m)) in variants.into_iter().enumerate() {
-        let map = map_observed(&m, observer.clone(), scope as u32)?;
-        if observer.as_ref().is_some_and(|o| o.cancelled()) {
-            break;
-        }
-        rows.push(SweepRow {
+    let row = |scope: usize, (label, value, m): (String, Option<f64>, MapSpec)| {
+        map_observed(&m, observer.clone(), scope as u32).map(|map| SweepRow {
             label,
             value,
             k_width: map.k_width,
@@ -242,8 +241,26 @@ pub fn sweep_observed(
             max_fidelity_error: map.max_fidelity_error,
             area: map.area,
             map,
-        });
-    }
+        })
+    };
+    let cancelled = || observer.as_ref().is_some_and(|o| o.cancelled());
+    let rows = if observer.as_ref().is_some_and(|o| o.farm().is_some()) {
+        variants
+            .into_par_iter()
+            .enumerate()
+            .map(|(scope, v)| row(scope, v))
+            .collect::<Result<Vec<_>, _>>()?
+    } else {
+        let mut rows = Vec::with_capacity(variants.len());
+        for (scope, v) in variants.into_iter().enumerate() {
+            let r = row(scope, v)?;
+            if cancelled() {
+                break;
+            }
+            rows.push(r);
+        }
+        rows
+    };
     let best_k_width = rows
         .iter()
         .enumerate()
