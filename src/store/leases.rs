@@ -414,9 +414,9 @@ impl Store {
             .execute(p)
             .await
             .map(|r| r.rows_affected()))?;
-        if r == 1 {
-            // The experiment ended: units it did not wait for are not
-            // claimed again.
+        if r == 1 && state != "succeeded" {
+            // The experiment ended early: units it did not wait for are not
+            // claimed again. (One that succeeded waited for all of its own.)
             self.end_units(&lease.id).await?;
         }
         Ok(r == 1)
