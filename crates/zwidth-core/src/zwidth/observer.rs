@@ -456,6 +456,26 @@ mod tests {
     }
 
     #[test]
+    fn trials_done_elsewhere_count_until_they_are_replayed_here() {
+        // A farm's units: 5 trials of map 2 and 4 of map 3 done by other
+        // workers, 3 replayed or computed here.
+        let o = Observer::default();
+        for _ in 0..3 {
+            o.count_trial();
+        }
+        o.set_elsewhere(2, 5);
+        o.set_elsewhere(3, 4);
+        assert_eq!(o.trials_done(), 3 + 5 + 4);
+        o.set_elsewhere(2, 6);
+        assert_eq!(o.trials_done(), 3 + 6 + 4, "replaced, not added");
+        // Map 2 replayed here: its count moves to this process's.
+        o.set_elsewhere(2, 0);
+        assert_eq!(o.trials_done(), 3 + 4);
+        o.set_elsewhere(3, 0);
+        assert_eq!(o.trials_done(), 3);
+    }
+
+    #[test]
     fn progress_is_the_mean_of_the_maps_fractions_and_never_goes_back() {
         let o = Observer::default();
         o.set_scopes(4);
