@@ -528,3 +528,50 @@ fn a_driver_stopped_gracefully_hands_its_run_and_units_over() {
         "every trial stored once"
     );
 }
+
+/// Cancel through the API while two workers compute the run's units: the
+/// driver and every unit stop within a few heartbeats (1 s each), nothing
+/// is claimed again, and /v1/rigs shows no unit computing.
+#[test]
+fn a_cancel_reaches_units_on_other_workers() {
+    let Some(url) = pg::fresh_database_blocking("cancel") else {
+        return;
+    };
+    let mut p = Procs {
+        children: vec![],
+        dir: fresh_dir("cancel"),
+    };
+    let base = api(&mut p, &url, true, "api.err");
+    for i in 0..2 {
+        worker(&mut p, &url, "15000", &format!("w{i}.err"));
+    }
+    let id = submit(&base, SEED_COLUMNS);
+    wait_for("units computing on both workers", 60, || {
+        let rigs = get(&format!("{base}/v1/rigs"));
+        rigs[0]["units"].as_array().unwrap().len() >= 2
+    });
+    let (code, v, _) = post(&format!("{base}/v1/experiments/{id}/cancel"), "");
+    assert_eq!(code, 200, "{v}");
+    let cancelled = Instant::now();
+    wait_for("no unit computing", 10, || {
+        get(&format!("{base}/v1/rigs"))[0]["units"]
+            .as_array()
+            .unwrap()
+            .is_empty()
+            && units(&base, &id)
+                .iter()
+                .all(|u| u["state"] != "running" && u["state"] != "queued")
+    });
+    assert!(cancelled.elapsed() < Duration::from_secs(10));
+    let v = get(&format!("{base}/v1/experiments/{id}"));
+    assert_eq!(v["state"], "cancelled", "{v}");
+    // And it stays so: no unit of it is claimed again.
+    std::thread::sleep(Duration::from_secs(2));
+    let us = units(&base, &id);
+    assert!(
+        us.iter()
+            .all(|u| u["state"] == "cancelled" || u["state"] == "done"),
+        "{us:?}"
+    );
+    assert!(us.iter().any(|u| u["state"] == "cancelled"), "{us:?}");
+}
