@@ -2,7 +2,7 @@
 
 use std::io::{BufRead, Write};
 
-use crate::plot::{zwidth_map_svg, MapPlotPoint};
+use crate::plot::{zwidth_map_svg_styled, FidelityScale, MapPlotPoint, MapStyle};
 use crate::zwidth::scene::SceneSpec;
 use crate::zwidth::search::MapResult;
 use crate::zwidth::settings::Criterion;
@@ -150,25 +150,29 @@ pub(super) fn write_file(path: &std::path::Path, text: &str) -> Result<(), CliEr
         .map_err(|e| CliError::Failure(format!("cannot write {}: {e}", path.display())))
 }
 
-/// The Fig. 7-style plot of a map.
-pub fn map_svg(title: &str, r: &MapResult) -> Result<String, CliError> {
-    let points: Vec<MapPlotPoint> = r
-        .points
-        .iter()
-        .map(|p| MapPlotPoint {
-            b: p.b,
-            k: p.k,
-            ok: p.ok(),
-            fidelity: p.fidelity,
-            decided: p.decided != Some(false),
-        })
-        .collect();
+/// A map's points, for plotting.
+pub fn plot_points(r: &MapResult) -> Vec<MapPlotPoint> {
+    r.points.iter().map(MapPlotPoint::of).collect()
+}
+
+/// The Fig. 7-style plot of a map; `scale` is a fidelity colour scale
+/// shared with the other maps written with it (none: the map's own).
+pub fn map_svg(
+    title: &str,
+    r: &MapResult,
+    scale: Option<FidelityScale>,
+) -> Result<String, CliError> {
     let label = if r.criterion == Criterion::Stability {
         "stable"
     } else {
         "passive"
     };
-    zwidth_map_svg(title, &points, &r.boundary, label).map_err(CliError::Failure)
+    let style = MapStyle {
+        ok_label: label.into(),
+        scale,
+        ..MapStyle::default()
+    };
+    zwidth_map_svg_styled(title, &plot_points(r), &r.boundary, &style).map_err(CliError::Failure)
 }
 
 /// A text summary of a map.

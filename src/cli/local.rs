@@ -6,7 +6,7 @@ use std::io::{BufRead, BufWriter, Write};
 use crate::accuracy::{self, AccuracyConfig};
 use crate::estimators::{EstimatorKind, EstimatorSpec, Sampling, VelocityEstimator};
 use crate::lipschitz;
-use crate::plot::{loglog_svg, Series};
+use crate::plot::{loglog_svg, FidelityScale, Series};
 use crate::zwidth::compare;
 use crate::zwidth::hit::{wall_hit, HitKnobs, NoTrace, TraceRow};
 use crate::zwidth::scene::validate_wall;
@@ -171,7 +171,11 @@ pub(super) fn run(
             if let Some(path) = svg {
                 write_file(
                     &path,
-                    &map_svg(&format!("Z-width: {}", spec.scene.estimator.label()), &r)?,
+                    &map_svg(
+                        &format!("Z-width: {}", spec.scene.estimator.label()),
+                        &r,
+                        None,
+                    )?,
                 )?;
             }
             write_either(stdout, json, &r, || map_table(&r))
@@ -285,6 +289,11 @@ pub(super) fn run(
                 std::fs::create_dir_all(&dir).map_err(|e| {
                     CliError::Failure(format!("cannot create {}: {e}", dir.display()))
                 })?;
+                // One colour scale for every estimator's plot, so colours
+                // compare across the files.
+                let scale = r.rows.iter().fold(None, |acc, row| {
+                    FidelityScale::union(acc, FidelityScale::of(&plot_points(&row.map)))
+                });
                 for row in &r.rows {
                     let name: String = row
                         .name
@@ -302,6 +311,7 @@ pub(super) fn run(
                         &map_svg(
                             &format!("Z-width: {} ({})", row.name, row.parameters),
                             &row.map,
+                            scale,
                         )?,
                     )?;
                 }

@@ -33,7 +33,30 @@ pub async fn compare_runs(
             SpecError::new("format", format!("{format:?}"), "must be json, svg or text").into(),
         );
     }
-    let runs = q.str("runs").unwrap_or("");
+    let ids = run_ids(q.str("runs").unwrap_or(""))?;
+    let mut all = Vec::new();
+    for id in &ids {
+        all.extend(finished_maps(&st, id).await?.2);
+    }
+    let c = report::compare(ids, all)?;
+    Ok(match format {
+        "svg" => (
+            [(header::CONTENT_TYPE, "image/svg+xml")],
+            c.svg().map_err(no_plot)?,
+        )
+            .into_response(),
+        "text" => (
+            [(header::CONTENT_TYPE, "text/plain; charset=utf-8")],
+            c.table(),
+        )
+            .into_response(),
+        _ => Json(c).into_response(),
+    })
+}
+
+/// The ids in `runs` (comma-separated), each once, in the order given:
+/// 1 to [`COMPARE_MAX_RUNS`] of them.
+pub fn run_ids(runs: &str) -> Result<Vec<String>, Problem> {
     let mut ids: Vec<String> = runs
         .split(',')
         .map(str::trim)
@@ -59,22 +82,5 @@ pub async fn compare_runs(
         )
         .into());
     }
-    let mut all = Vec::new();
-    for id in &ids {
-        all.extend(finished_maps(&st, id).await?.2);
-    }
-    let c = report::compare(ids, all)?;
-    Ok(match format {
-        "svg" => (
-            [(header::CONTENT_TYPE, "image/svg+xml")],
-            c.svg().map_err(no_plot)?,
-        )
-            .into_response(),
-        "text" => (
-            [(header::CONTENT_TYPE, "text/plain; charset=utf-8")],
-            c.table(),
-        )
-            .into_response(),
-        _ => Json(c).into_response(),
-    })
+    Ok(ids)
 }

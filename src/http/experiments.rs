@@ -111,7 +111,7 @@ impl From<ExperimentRow> for ExperimentView {
 
 impl AppState {
     /// The view of a row, with `held` when its running trials cannot be stored.
-    fn view(&self, row: ExperimentRow) -> ExperimentView {
+    pub(crate) fn view(&self, row: ExperimentRow) -> ExperimentView {
         let (held, waiting) = self
             .running
             .lock()

@@ -11,6 +11,7 @@ pub mod openapi;
 pub mod problem;
 pub mod queue;
 pub mod rigs;
+pub mod ui;
 
 use axum::http::StatusCode;
 use axum::routing::{get, post, put};
@@ -192,6 +193,7 @@ pub fn router(state: AppState, timeout: Duration) -> Router {
         .route("/v1/queue/pause", post(queue::pause))
         .route("/v1/queue/resume", post(queue::resume))
         .route("/metrics", get(queue::metrics))
+        .merge(ui::routes())
         .layer(from_fn_with_state(state.clone(), guard::same_origin_writes))
         .layer(DefaultBodyLimit::max(BODY_LIMIT))
         .layer(tower_http::timeout::TimeoutLayer::with_status_code(

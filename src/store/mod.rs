@@ -19,6 +19,7 @@ pub mod leases;
 pub use fault::{Fault, Health};
 pub use leases::{Held, Lease, WorkerRow};
 pub mod units;
+pub mod dashboard;
 pub use units::{UnitPlace, UnitRow};
 
 pub mod location;

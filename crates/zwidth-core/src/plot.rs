@@ -220,6 +220,17 @@ pub struct MapPlotPoint {
 }
 
 impl MapPlotPoint {
+    /// From a map's point.
+    pub fn of(p: &crate::zwidth::search::Point) -> Self {
+        Self {
+            b: p.b,
+            k: p.k,
+            ok: p.ok(),
+            fidelity: p.fidelity,
+            decided: p.decided != Some(false),
+        }
+    }
+
     /// From a stored or computed point's JSON (`search::Point`).
     pub fn from_json(p: &serde_json::Value) -> Self {
         Self {
@@ -256,6 +267,128 @@ fn colour(t: f64) -> RGBColor {
     RGBColor(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
 }
 
+/// A fidelity colour scale (N·s/m): `lo` maps to the scale's first
+/// colour, `hi` to its last. Several maps drawn with one scale can be
+/// compared by colour.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FidelityScale {
+    pub lo: f64,
+    pub hi: f64,
+}
+
+impl FidelityScale {
+    /// The range of the finite fidelity errors of the points that render;
+    /// none when no such point has one.
+    pub fn of<'a>(points: impl IntoIterator<Item = &'a MapPlotPoint>) -> Option<Self> {
+        points
+            .into_iter()
+            .filter(|p| p.ok)
+            .filter_map(|p| p.fidelity)
+            .filter(|f| f.is_finite())
+            .fold(None, |acc: Option<Self>, f| {
+                Some(match acc {
+                    None => Self { lo: f, hi: f },
+                    Some(s) => Self {
+                        lo: s.lo.min(f),
+                        hi: s.hi.max(f),
+                    },
+                })
+            })
+    }
+
+    /// The smallest scale holding both.
+    pub fn union(a: Option<Self>, b: Option<Self>) -> Option<Self> {
+        match (a, b) {
+            (Some(a), Some(b)) => Some(Self {
+                lo: a.lo.min(b.lo),
+                hi: a.hi.max(b.hi),
+            }),
+            (a, None) => a,
+            (None, b) => b,
+        }
+    }
+
+    /// Where `f` falls on the scale, 0 to 1.
+    pub fn at(&self, f: f64) -> f64 {
+        (f - self.lo) / (self.hi - self.lo).max(1e-12)
+    }
+}
+
+/// How a map is drawn. `Default` is one map on its own: its own axes and
+/// colour scale, 900 × 640 px, a tooltip on every point.
+#[derive(Debug, Clone)]
+pub struct MapStyle {
+    /// What a point that renders is called: "passive" or "stable".
+    pub ok_label: String,
+    /// A colour scale shared with other maps; none: this map's own.
+    pub scale: Option<FidelityScale>,
+    /// Axes shared with other maps: the largest B (N·s/m) and K (N/m)
+    /// shown; none: this map's own.
+    pub extent: Option<(f64, f64)>,
+    /// Width and height, px.
+    pub size: (u32, u32),
+    /// Most points drawn one element each with a `<title>` tooltip; a map
+    /// with more is drawn compactly (one path per colour, a tooltip per
+    /// colour band), so a page with 20 000 trials stays small.
+    pub tooltip_limit: usize,
+}
+
+impl Default for MapStyle {
+    fn default() -> Self {
+        Self {
+            ok_label: "passive".into(),
+            scale: None,
+            extent: None,
+            size: (900, 640),
+            tooltip_limit: 4000,
+        }
+    }
+}
+
+/// The axes a map needs: its largest B and K (boundary intervals
+/// included), with a margin.
+pub fn map_extent(points: &[MapPlotPoint], boundary: &[BoundaryPoint]) -> (f64, f64) {
+    let bmax = points
+        .iter()
+        .map(|p| p.b)
+        .chain(boundary.iter().map(|b| b.b))
+        .filter(|v| v.is_finite())
+        .fold(1.0, f64::max)
+        * 1.05;
+    let kmax = points
+        .iter()
+        .map(|p| p.k)
+        .chain(boundary.iter().map(|b| b.k_hi.unwrap_or(b.k_max)))
+        .filter(|v| v.is_finite())
+        .fold(1.0, f64::max)
+        * 1.08;
+    (bmax, kmax)
+}
+
+/// Text safe inside SVG/XML character data and attributes.
+pub fn xml_escape(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+fn hex(c: RGBColor) -> String {
+    format!("#{:02x}{:02x}{:02x}", c.0, c.1, c.2)
+}
+
+/// Colour bands of the compact drawing: points whose colour falls in one
+/// band share one path.
+const BANDS: usize = 32;
+
 /// The 2018 paper's Fig. 7 style: K against B, the points that render
 /// coloured by fidelity error (with a colour bar), the others as grey
 /// crosses, undecided noisy verdicts as open orange rings, the boundary as
@@ -267,43 +400,43 @@ pub fn zwidth_map_svg(
     boundary: &[BoundaryPoint],
     ok_label: &str,
 ) -> Result<String, String> {
-    let bmax = points
-        .iter()
-        .map(|p| p.b)
-        .chain(boundary.iter().map(|b| b.b))
-        .fold(1.0, f64::max)
-        * 1.05;
-    let kmax = points
-        .iter()
-        .map(|p| p.k)
-        .chain(boundary.iter().map(|b| b.k_hi.unwrap_or(b.k_max)))
-        .fold(1.0, f64::max)
-        * 1.08;
-    let fids: Vec<f64> = points
-        .iter()
-        .filter(|p| p.ok)
-        .filter_map(|p| p.fidelity)
-        .filter(|f| f.is_finite())
-        .collect();
-    let (fmin, fmax) = fids
-        .iter()
-        .fold((f64::MAX, f64::MIN), |(a, b), &f| (a.min(f), b.max(f)));
-    let has_fid = !fids.is_empty();
-    let span = if has_fid {
-        (fmax - fmin).max(1e-12)
-    } else {
-        1.0
+    let style = MapStyle {
+        ok_label: ok_label.into(),
+        ..MapStyle::default()
     };
+    zwidth_map_svg_styled(title, points, boundary, &style)
+}
+
+/// [`zwidth_map_svg`] with a shared scale, shared axes, another size. The
+/// points are drawn after plotters' axes, each with the class `pt` (`ok`,
+/// `no` or `undecided`) and a `<title>` giving B, K, the verdict and the
+/// fidelity error, up to `style.tooltip_limit` points.
+pub fn zwidth_map_svg_styled(
+    title: &str,
+    points: &[MapPlotPoint],
+    boundary: &[BoundaryPoint],
+    style: &MapStyle,
+) -> Result<String, String> {
+    let (bmax, kmax) = style.extent.unwrap_or_else(|| map_extent(points, boundary));
+    let scale = style.scale.or_else(|| FidelityScale::of(points));
+    let ok_label = style.ok_label.as_str();
+    let (w, h) = style.size;
+    let bar_w = 120u32.min(w / 6);
     let mut svg = String::new();
+    // Pixel positions of the points, from the chart's own mapping.
+    let mut at: Vec<(i32, i32)> = Vec::with_capacity(points.len());
+    // The plotting area's top-right corner (px): the legend's place.
+    let area: (i32, i32);
     {
-        let root = SVGBackend::with_string(&mut svg, (900, 640)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let (left, right) = root.split_horizontally(780);
+        let (left, right) = root.split_horizontally(w - bar_w);
+        let small = w < 600;
         let mut chart = ChartBuilder::on(&left)
-            .caption(title, ("sans-serif", 18))
-            .margin(14)
-            .x_label_area_size(44)
-            .y_label_area_size(80)
+            .caption(title, ("sans-serif", if small { 14 } else { 18 }))
+            .margin(if small { 8 } else { 14 })
+            .x_label_area_size(if small { 36 } else { 44 })
+            .y_label_area_size(if small { 64 } else { 80 })
             .build_cartesian_2d(0.0..bmax, 0.0..kmax)
             .map_err(|e| e.to_string())?;
         chart
@@ -313,40 +446,9 @@ pub fn zwidth_map_svg(
             .y_label_formatter(&|v| format!("{v:.0}"))
             .draw()
             .map_err(|e| e.to_string())?;
-        chart
-            .draw_series(
-                points
-                    .iter()
-                    .filter(|p| !p.ok)
-                    .map(|p| Cross::new((p.b, p.k), 3, RGBColor(170, 170, 170).stroke_width(1))),
-            )
-            .map_err(|e| e.to_string())?
-            .label(format!("not {ok_label}"))
-            .legend(|(x, y)| Cross::new((x + 8, y), 3, RGBColor(170, 170, 170)));
-        if points.iter().any(|p| !p.decided) {
-            chart
-                .draw_series(
-                    points.iter().filter(|p| !p.decided).map(|p| {
-                        Circle::new((p.b, p.k), 6, RGBColor(230, 120, 20).stroke_width(1))
-                    }),
-                )
-                .map_err(|e| e.to_string())?
-                .label("undecided (sign of the estimate inside)")
-                .legend(|(x, y)| {
-                    Circle::new((x + 8, y), 6, RGBColor(230, 120, 20).stroke_width(1))
-                });
-        }
-        chart
-            .draw_series(points.iter().filter(|p| p.ok).map(|p| {
-                let c = match p.fidelity {
-                    Some(f) if has_fid => colour((f - fmin) / span),
-                    _ => RGBColor(40, 120, 200),
-                };
-                Circle::new((p.b, p.k), 4, c.filled())
-            }))
-            .map_err(|e| e.to_string())?
-            .label(ok_label.to_string())
-            .legend(|(x, y)| Circle::new((x + 8, y), 4, colour(0.5).filled()));
+        at.extend(points.iter().map(|p| chart.backend_coord(&(p.b, p.k))));
+        let (xr, yr) = chart.plotting_area().get_pixel_range();
+        area = (xr.end, yr.start);
         let bars: Vec<(f64, f64, f64)> = boundary
             .iter()
             .filter_map(|p| Some((p.b, p.k_lo?, p.k_hi?)))
@@ -359,32 +461,17 @@ pub fn zwidth_map_svg(
                         RGBColor(200, 30, 30).stroke_width(2),
                     )
                 }))
-                .map_err(|e| e.to_string())?
-                .label("boundary interval (k_lo to k_hi)")
-                .legend(|(x, y)| {
-                    PathElement::new(
-                        vec![(x + 8, y - 6), (x + 8, y + 6)],
-                        RGBColor(200, 30, 30).stroke_width(2),
-                    )
-                });
+                .map_err(|e| e.to_string())?;
         }
         let mut line: Vec<(f64, f64)> = boundary.iter().map(|p| (p.b, p.k_max)).collect();
         line.sort_by(|a, b| a.0.total_cmp(&b.0));
         chart
             .draw_series(LineSeries::new(line, BLACK.stroke_width(2)))
-            .map_err(|e| e.to_string())?
-            .label("boundary (largest K)")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK.stroke_width(2)));
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
             .map_err(|e| e.to_string())?;
         // Colour bar: fidelity error (N·s/m).
-        if has_fid {
-            let (top, bottom, x0, x1) = (60i32, 560i32, 20i32, 44i32);
+        if let Some(sc) = scale {
+            let (top, bottom) = (60i32, h as i32 - 80);
+            let (x0, x1) = (16i32, 36i32);
             let n = 100;
             for i in 0..n {
                 let y0 = bottom - (bottom - top) * i / n;
@@ -404,7 +491,7 @@ pub fn zwidth_map_svg(
                 .map_err(|e| e.to_string())?;
             for i in 0..=4 {
                 let y = bottom - (bottom - top) * i / 4;
-                let v = fmin + span * i as f64 / 4.0;
+                let v = sc.lo + (sc.hi - sc.lo) * i as f64 / 4.0;
                 right
                     .draw(&Text::new(
                         format!("{v:.1}"),
@@ -426,7 +513,319 @@ pub fn zwidth_map_svg(
         }
         root.present().map_err(|e| e.to_string())?;
     }
+    let mut marks = point_marks(points, &at, scale, ok_label, style.tooltip_limit);
+    if w >= 600 {
+        let intervals = boundary.iter().any(|p| p.k_lo.is_some() && p.k_hi.is_some());
+        marks.push_str(&legend(area, ok_label, points.iter().any(|p| !p.decided), intervals));
+    }
+    match svg.rfind("</svg>") {
+        Some(i) => svg.insert_str(i, &marks),
+        None => return Err("plotters wrote no closing </svg>".into()),
+    }
     Ok(svg)
+}
+
+/// The legend, drawn over the points at the plotting area's top right.
+fn legend(corner: (i32, i32), ok_label: &str, undecided: bool, intervals: bool) -> String {
+    let ok = xml_escape(ok_label);
+    let mut rows: Vec<(String, String)> = vec![
+        (
+            format!("<circle cx=\"9\" cy=\"0\" r=\"4\" fill=\"{}\"/>", hex(colour(0.5))),
+            ok.clone(),
+        ),
+        (
+            "<path d=\"M6 -3l6 6m0 -6l-6 6\" stroke=\"#969696\" fill=\"none\"/>".into(),
+            format!("not {ok}"),
+        ),
+    ];
+    if undecided {
+        rows.push((
+            "<circle cx=\"9\" cy=\"0\" r=\"6\" fill=\"none\" stroke=\"#e67814\"/>".into(),
+            "undecided (sign of the estimate inside)".into(),
+        ));
+    }
+    rows.push((
+        "<path d=\"M0 0h18\" stroke=\"#000\" stroke-width=\"2\"/>".into(),
+        "boundary (largest K)".into(),
+    ));
+    if intervals {
+        rows.push((
+            "<path d=\"M9 -6v12\" stroke=\"#c81e1e\" stroke-width=\"2\"/>".into(),
+            "boundary interval (k_lo to k_hi)".into(),
+        ));
+    }
+    legend_box(corner, &rows)
+}
+
+/// A legend box at the top-right `corner` (px): each row a mark (SVG drawn
+/// around (0, 0) to (18, 0)) and its text (escaped by the caller).
+fn legend_box(corner: (i32, i32), rows: &[(String, String)]) -> String {
+    use std::fmt::Write;
+    let longest = rows.iter().map(|r| r.1.chars().count()).max().unwrap_or(0) as i32;
+    let (wd, ht) = (40 + 7 * longest, 10 + 20 * rows.len() as i32);
+    let (x, y) = (corner.0 - wd - 8, corner.1 + 8);
+    let mut s = format!(
+        "<g class=\"legend\" transform=\"translate({x},{y})\"><rect width=\"{wd}\" height=\"{ht}\" fill=\"#fff\" fill-opacity=\"0.9\" stroke=\"#000\"/>"
+    );
+    for (i, (mark, text)) in rows.iter().enumerate() {
+        let yy = 15 + 20 * i as i32;
+        let _ = write!(
+            s,
+            "<g transform=\"translate(8,{yy})\">{mark}<text x=\"28\" y=\"4\" font-family=\"sans-serif\" font-size=\"13\">{text}</text></g>"
+        );
+    }
+    s.push_str("</g>\n");
+    s
+}
+
+/// How a group of scatter points is marked.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Mark {
+    /// A filled dot of this colour (r, g, b).
+    Dot(u8, u8, u8),
+    /// An open ring of this colour, larger: drawn around other marks.
+    Ring(u8, u8, u8),
+    /// A filled diamond of this colour.
+    Diamond(u8, u8, u8),
+}
+
+/// One group of a scatter plot: its points and a tooltip for each.
+#[derive(Debug, Clone)]
+pub struct Scatter {
+    pub name: String,
+    pub mark: Mark,
+    pub points: Vec<(f64, f64)>,
+    /// One per point (plain text, escaped here); missing ones are B = …
+    pub tips: Vec<String>,
+}
+
+fn mark_svg(m: Mark, x: i32, y: i32, class: &str, tip: &str) -> String {
+    match m {
+        Mark::Dot(r, g, b) => format!(
+            "<circle class=\"{class}\" cx=\"{x}\" cy=\"{y}\" r=\"4\" fill=\"{}\">{tip}</circle>",
+            hex(RGBColor(r, g, b))
+        ),
+        Mark::Ring(r, g, b) => format!(
+            "<circle class=\"{class}\" cx=\"{x}\" cy=\"{y}\" r=\"8\" fill=\"none\" stroke-width=\"2\" stroke=\"{}\">{tip}</circle>",
+            hex(RGBColor(r, g, b))
+        ),
+        Mark::Diamond(r, g, b) => format!(
+            "<path class=\"{class}\" d=\"M{x} {}l6 6l-6 6l-6 -6z\" fill=\"{}\">{tip}</path>",
+            y - 6,
+            hex(RGBColor(r, g, b))
+        ),
+    }
+}
+
+/// A scatter plot on linear axes (from the data's range, with a margin),
+/// every point with a `<title>` tooltip and the class `pt`; groups drawn
+/// in order (later on top), a legend at the top right.
+pub fn scatter_svg(
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    groups: &[Scatter],
+    size: (u32, u32),
+) -> Result<String, String> {
+    let all = || {
+        groups
+            .iter()
+            .flat_map(|g| g.points.iter())
+            .filter(|p| p.0.is_finite() && p.1.is_finite())
+    };
+    if all().next().is_none() {
+        return Err("no points to plot".into());
+    }
+    let range = |f: &dyn Fn(&(f64, f64)) -> f64| {
+        let (lo, hi) = all().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(f(p)), b.max(f(p))));
+        let pad = ((hi - lo) * 0.08).max(hi.abs().max(1e-9) * 0.02);
+        (lo - pad)..(hi + pad)
+    };
+    let (xr, yr) = (range(&|p| p.0), range(&|p| p.1));
+    let mut svg = String::new();
+    let mut at: Vec<Vec<(i32, i32)>> = Vec::new();
+    let corner: (i32, i32);
+    {
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 18))
+            .margin(14)
+            .x_label_area_size(44)
+            .y_label_area_size(84)
+            .build_cartesian_2d(xr, yr)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc(x_desc)
+            .y_desc(y_desc)
+            .y_label_formatter(&|v| format!("{v:.4}"))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        for g in groups {
+            at.push(g.points.iter().map(|p| chart.backend_coord(p)).collect());
+        }
+        let (x, y) = chart.plotting_area().get_pixel_range();
+        corner = (x.end, y.start);
+        root.present().map_err(|e| e.to_string())?;
+    }
+    let mut marks = String::from("<g class=\"points\">");
+    let mut rows = Vec::new();
+    for (g, px) in groups.iter().zip(&at) {
+        for (i, &(x, y)) in px.iter().enumerate() {
+            let (vx, vy) = g.points[i];
+            if !(vx.is_finite() && vy.is_finite()) {
+                continue;
+            }
+            let tip = g
+                .tips
+                .get(i)
+                .cloned()
+                .unwrap_or_else(|| format!("{x_desc} = {vx:.4}, {y_desc} = {vy:.4}"));
+            marks.push_str(&mark_svg(g.mark, x, y, "pt", &format!("<title>{}</title>", xml_escape(&tip))));
+        }
+        if !g.points.is_empty() {
+            rows.push((mark_svg(g.mark, 9, 0, "key", ""), xml_escape(&g.name)));
+        }
+    }
+    marks.push_str("</g>\n");
+    marks.push_str(&legend_box(corner, &rows));
+    match svg.rfind("</svg>") {
+        Some(i) => svg.insert_str(i, &marks),
+        None => return Err("plotters wrote no closing </svg>".into()),
+    }
+    Ok(svg)
+}
+
+/// The points as SVG: one element with a tooltip each (up to `limit`
+/// points), else one path per kind and colour band.
+fn point_marks(
+    points: &[MapPlotPoint],
+    at: &[(i32, i32)],
+    scale: Option<FidelityScale>,
+    ok_label: &str,
+    limit: usize,
+) -> String {
+    use std::fmt::Write;
+    let grey = "#969696";
+    let orange = "#e67814";
+    let fill = |p: &MapPlotPoint| match (p.fidelity, scale) {
+        (Some(f), Some(sc)) if f.is_finite() => colour(sc.at(f)),
+        _ => RGBColor(40, 120, 200),
+    };
+    let mut s = String::from("<g class=\"points\">");
+    if points.len() <= limit {
+        for (p, &(x, y)) in points.iter().zip(at) {
+            let verdict = if !p.decided {
+                "undecided".to_string()
+            } else if p.ok {
+                ok_label.to_string()
+            } else {
+                format!("not {ok_label}")
+            };
+            let fid = p
+                .fidelity
+                .filter(|f| f.is_finite())
+                .map_or(String::new(), |f| format!(", fidelity error {f:.3} N·s/m"));
+            let tip = format!(
+                "<title>B = {:.3} N·s/m, K = {:.1} N/m: {}{}</title>",
+                p.b,
+                p.k,
+                xml_escape(&verdict),
+                fid
+            );
+            let _ = if !p.decided {
+                write!(
+                    s,
+                    "<circle class=\"pt undecided\" cx=\"{x}\" cy=\"{y}\" r=\"6\" fill=\"none\" stroke=\"{orange}\">{tip}</circle>"
+                )
+            } else if p.ok {
+                write!(
+                    s,
+                    "<circle class=\"pt ok\" cx=\"{x}\" cy=\"{y}\" r=\"4\" fill=\"{}\">{tip}</circle>",
+                    hex(fill(p))
+                )
+            } else {
+                write!(
+                    s,
+                    "<path class=\"pt no\" d=\"M{} {}l6 6m0 -6l-6 6\" stroke=\"{grey}\" fill=\"none\">{tip}</path>",
+                    x - 3,
+                    y - 3
+                )
+            };
+        }
+    } else {
+        // Compact: crosses in one path, rings in one, dots in one path per
+        // colour band (a round cap on a zero-length segment is a dot).
+        let mut crosses = String::new();
+        let mut rings = String::new();
+        let mut bands: Vec<String> = vec![String::new(); BANDS + 1];
+        let mut counts = [0usize; 3];
+        for (p, &(x, y)) in points.iter().zip(at) {
+            if !p.decided {
+                counts[2] += 1;
+                let _ = write!(rings, "M{} {}a6 6 0 1 0 12 0a6 6 0 1 0 -12 0", x - 6, y);
+            } else if p.ok {
+                counts[0] += 1;
+                let band = match (p.fidelity, scale) {
+                    (Some(f), Some(sc)) if f.is_finite() => {
+                        (sc.at(f).clamp(0.0, 1.0) * (BANDS - 1) as f64).round() as usize
+                    }
+                    _ => BANDS,
+                };
+                let _ = write!(bands[band], "M{x} {y}h0");
+            } else {
+                counts[1] += 1;
+                let _ = write!(crosses, "M{} {}l6 6m0 -6l-6 6", x - 3, y - 3);
+            }
+        }
+        if !crosses.is_empty() {
+            let _ = write!(
+                s,
+                "<path class=\"pts no\" data-n=\"{}\" d=\"{crosses}\" stroke=\"{grey}\" fill=\"none\"><title>{} points not {}</title></path>",
+                counts[1],
+                counts[1],
+                xml_escape(ok_label)
+            );
+        }
+        for (i, d) in bands.iter().enumerate().filter(|(_, d)| !d.is_empty()) {
+            let n = d.matches('M').count();
+            let (c, tip) = match scale {
+                Some(sc) if i < BANDS => {
+                    let t = i as f64 / (BANDS - 1) as f64;
+                    let half = 0.5 / (BANDS - 1) as f64 * (sc.hi - sc.lo);
+                    let mid = sc.lo + t * (sc.hi - sc.lo);
+                    (
+                        colour(t),
+                        format!(
+                            "{n} points {}, fidelity error {:.3} to {:.3} N·s/m",
+                            xml_escape(ok_label),
+                            (mid - half).max(sc.lo),
+                            (mid + half).min(sc.hi)
+                        ),
+                    )
+                }
+                _ => (
+                    RGBColor(40, 120, 200),
+                    format!("{n} points {}", xml_escape(ok_label)),
+                ),
+            };
+            let _ = write!(
+                s,
+                "<path class=\"pts ok\" data-n=\"{n}\" d=\"{d}\" stroke=\"{}\" stroke-width=\"8\" stroke-linecap=\"round\" fill=\"none\"><title>{tip}</title></path>",
+                hex(c)
+            );
+        }
+        if !rings.is_empty() {
+            let _ = write!(
+                s,
+                "<path class=\"pts undecided\" data-n=\"{}\" d=\"{rings}\" stroke=\"{orange}\" fill=\"none\"><title>{} points undecided</title></path>",
+                counts[2], counts[2]
+            );
+        }
+    }
+    s.push_str("</g>\n");
+    s
 }
 
 #[cfg(test)]

@@ -1,0 +1,209 @@
+//! Compare runs: pick them; every map as a small multiple on shared axes
+//! with one fidelity colour scale; the boundaries overlaid; the table of
+//! differences; the specs side by side, differences only by default.
+
+use std::collections::BTreeMap;
+
+use axum::extract::{RawQuery, State};
+use axum::response::Response;
+use maud::{html, Markup};
+use serde_json::Value;
+
+use super::run::map_panels;
+use super::{run_link, short, state_badge, svg, Nav};
+use crate::http::compare::run_ids;
+use crate::http::experiments::{finished_maps, no_plot};
+use crate::http::{AppState, Problem};
+use crate::plot::MapPlotPoint;
+use crate::report;
+use crate::store::dashboard::ListFilter;
+
+pub async fn page(State(st): State<AppState>, RawQuery(query): RawQuery) -> Result<Response, Problem> {
+    // `runs=a,b` (a link) or `run=a&run=b` (the run list's checkboxes).
+    let pairs: Vec<(String, String)> = serde_urlencoded::from_str(query.as_deref().unwrap_or(""))
+        .map_err(|e| Problem::from(crate::error::SpecError::new("query", query.clone().unwrap_or_default(), format!("not a query string: {e}"))))?;
+    let mut joined = Vec::new();
+    let mut all = false;
+    for (k, v) in &pairs {
+        match k.as_str() {
+            "runs" | "run" => joined.push(v.clone()),
+            "all" => all = v == "1" || v == "true",
+            other => {
+                return Err(crate::error::SpecError::new(
+                    other,
+                    format!("{v:?}"),
+                    "not a parameter of /compare: runs (comma-separated ids), run (repeated) and all (1: every spec field)",
+                )
+                .into())
+            }
+        }
+    }
+    let joined = joined.join(",");
+    if joined.trim().is_empty() {
+        return picker(&st).await;
+    }
+    let ids = run_ids(&joined)?;
+    let mut maps = Vec::new();
+    let mut specs = Vec::new();
+    for id in &ids {
+        let (spec, _, m) = finished_maps(&st, id).await?;
+        specs.push(serde_json::to_value(&spec).unwrap_or(Value::Null));
+        maps.extend(m);
+    }
+    let c = report::compare(ids.clone(), maps)?;
+    let panels: Vec<_> = c
+        .rows
+        .iter()
+        .map(|r| {
+            let m = &r.map;
+            (
+                format!("{} {}", short(&m.run), m.label),
+                m.points.iter().map(MapPlotPoint::from_json).collect::<Vec<_>>(),
+                m.boundary.clone(),
+                m.criterion.clone(),
+            )
+        })
+        .collect();
+    let figure = map_panels(&panels, true)?;
+    let overlay = c.svg().map_err(no_plot)?;
+    let pct = |p: Option<f64>| p.map_or("–".into(), |p| format!("{p:+.1} %"));
+    let best = |i: usize, j: Option<usize>| if Some(i) == j { "best" } else { "" };
+    let here = format!("/compare?runs={}", ids.join(","));
+    Ok(super::layout(
+        "Compare",
+        Nav::Compare,
+        html! {
+            h1 { "Compare " (ids.len()) " runs" }
+            @for n in &c.notes { p class="warn" { (n) } }
+            table class="figures" {
+                caption { "Differences from the first map (" (short(&ids[0])) " " (c.rows.first().map_or("", |r| r.map.label.as_str())) "); best of each column marked" }
+                thead { tr { th { "run" } th { "map" } th { "K-width (N/m)" } th { "ΔK" } th { "B-width (N·s/m)" } th { "ΔB" } th { "max fidelity error (N·s/m)" } th { "area" } th { "Δarea" } } }
+                tbody {
+                    @for (i, r) in c.rows.iter().enumerate() {
+                        tr {
+                            td { (run_link(&r.map.run)) }
+                            td { (r.map.label) }
+                            td class={"num " (best(i, Some(c.best.k_width)))} { (format!("{:.0}", r.map.k_width)) }
+                            td class="num" { (pct(r.k_width_diff_pct)) }
+                            td class={"num " (best(i, Some(c.best.b_width)))} { (format!("{:.2}", r.map.b_width)) }
+                            td class="num" { (pct(r.b_width_diff_pct)) }
+                            td class={"num " (best(i, c.best.max_fidelity_error))} { (r.map.max_fidelity_error.map_or("–".into(), |f| format!("{f:.3}"))) }
+                            td class={"num " (best(i, Some(c.best.area)))} { (format!("{:.4e}", r.map.area)) }
+                            td class="num" { (pct(r.area_diff_pct)) }
+                        }
+                    }
+                }
+            }
+            h2 { "The maps" }
+            p class="muted small" { "One axis range and one fidelity colour scale for every map." }
+            (figure)
+            h2 { "The boundaries" }
+            figure class="overlay" { (svg(&overlay)) }
+            h2 { "The specs" }
+            p {
+                @if all { a href=(here) { "Show differences only" } } @else { "Differences only. " a href={(here) "&all=1"} { "Show every field" } }
+            }
+            (spec_table(&ids, &specs, all))
+        },
+    ))
+}
+
+/// Each spec flattened to `path = value`; with `all` false only the paths
+/// whose values differ between runs.
+fn spec_table(ids: &[String], specs: &[Value], all: bool) -> Markup {
+    let flat: Vec<BTreeMap<String, String>> = specs.iter().map(flatten).collect();
+    let mut paths: Vec<&String> = flat.iter().flat_map(|f| f.keys()).collect();
+    paths.sort();
+    paths.dedup();
+    let rows: Vec<(&String, Vec<String>)> = paths
+        .into_iter()
+        .map(|p| {
+            (
+                p,
+                flat.iter().map(|f| f.get(p).cloned().unwrap_or_else(|| "–".into())).collect::<Vec<_>>(),
+            )
+        })
+        .filter(|(_, vals)| all || vals.iter().any(|v| v != &vals[0]))
+        .collect();
+    html! {
+        @if rows.is_empty() {
+            p class="muted" { "The specs are the same." }
+        } @else {
+            table class="spec-diff" {
+                thead { tr { th { "field" } @for id in ids { th { (run_link(id)) } } } }
+                tbody {
+                    @for (p, vals) in &rows {
+                        @let differ = vals.iter().any(|v| v != &vals[0]);
+                        tr class=(if differ { "differs" } else { "" }) {
+                            th scope="row" class="mono small" { (p) }
+                            @for v in vals { td class="mono small" { (v) } }
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `{"a":{"b":1}}` → `a.b = 1`; arrays by index.
+pub fn flatten(v: &Value) -> BTreeMap<String, String> {
+    fn walk(prefix: &str, v: &Value, out: &mut BTreeMap<String, String>) {
+        match v {
+            Value::Object(m) if !m.is_empty() => {
+                for (k, x) in m {
+                    let p = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+                    walk(&p, x, out);
+                }
+            }
+            Value::Array(a) if !a.is_empty() => {
+                for (i, x) in a.iter().enumerate() {
+                    walk(&format!("{prefix}[{i}]"), x, out);
+                }
+            }
+            Value::String(s) => {
+                out.insert(prefix.to_string(), s.clone());
+            }
+            other => {
+                out.insert(prefix.to_string(), other.to_string());
+            }
+        }
+    }
+    let mut out = BTreeMap::new();
+    walk("", v, &mut out);
+    out
+}
+
+/// No runs picked: the latest succeeded runs to pick from.
+async fn picker(st: &AppState) -> Result<Response, Problem> {
+    let f = ListFilter {
+        state: "succeeded".into(),
+        ..ListFilter::default()
+    };
+    let (rows, total) = st.store.list_filtered(&f, 50, 0).await.map_err(|e| st.fail(e))?;
+    Ok(super::layout(
+        "Compare",
+        Nav::Compare,
+        html! {
+            h1 { "Compare runs" }
+            p { "Pick runs on the same scene (device, loop, wall, protocol); their maps are compared. The latest " (rows.len()) " of " (total) " succeeded runs; " a href="/runs?state=succeeded" { "all of them" } "." }
+            form method="get" action="/compare" {
+                table class="runs" {
+                    thead { tr { th { span class="sr" { "pick" } } th { "run" } th { "kind" } th { "state" } th { "rig" } th { "trials" } } }
+                    tbody {
+                        @for r in rows.iter().filter(|r| r.kind != "tune") {
+                            tr {
+                                td { input type="checkbox" name="run" value=(r.id) aria-label={"compare " (r.id)}; }
+                                td { (run_link(&r.id)) }
+                                td { (r.kind) }
+                                td { (state_badge(&r.state)) }
+                                td { (r.rig) }
+                                td class="num" { (r.trials_done) }
+                            }
+                        }
+                    }
+                }
+                button type="submit" { "Compare" }
+            }
+        },
+    ))
+}

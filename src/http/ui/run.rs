@@ -1,0 +1,287 @@
+//! A run's page: its spec (collapsible), state and progress, its maps in
+//! the 2018 paper's Fig. 7 style drawn from the stored trials (so they grow
+//! while it runs), the figures of its result, downloads. A tune's page is
+//! `tune`.
+
+use std::collections::BTreeMap;
+
+use axum::extract::{Path, RawQuery, State};
+use axum::response::Response;
+use maud::{html, Markup};
+use serde_json::Value;
+
+use super::{action, duration, fragment, live_part, short, state_badge, svg, unchanged, utc, Nav};
+use crate::experiment::ExperimentSpec;
+use crate::http::{AppState, Problem};
+use crate::plot::{map_extent, zwidth_map_svg_styled, FidelityScale, MapPlotPoint, MapStyle};
+use crate::report::{self, MapSummary};
+use crate::store::ExperimentRow;
+use crate::zwidth::search::BoundaryPoint;
+
+/// Points drawn one by one with a tooltip, over all maps of a page; past
+/// it a map is drawn compactly (a 20 000-trial run page stays under 1 MB).
+pub const TOOLTIP_BUDGET: usize = 3000;
+
+const ENDED: [&str; 3] = ["succeeded", "failed", "cancelled"];
+
+async fn row(st: &AppState, id: &str) -> Result<ExperimentRow, Problem> {
+    st.store
+        .get(id)
+        .await
+        .map_err(|e| st.fail(e))?
+        .ok_or_else(|| Problem::not_found("experiment", id))
+}
+
+/// What changes the live part: state, trials, progress, a tune's best.
+fn token(r: &ExperimentRow) -> String {
+    format!(
+        "{}.{}.{:.4}.{}.{}",
+        r.state,
+        r.trials_done,
+        r.progress,
+        r.finished_ms.unwrap_or(0),
+        r.best.as_deref().map_or(0, str::len)
+    )
+}
+
+pub async fn page(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, Problem> {
+    let r = row(&st, &id).await?;
+    let spec: Option<Value> = serde_json::from_str(&r.spec).ok();
+    let live = live_markup(&st, &r).await?;
+    let pretty = spec
+        .as_ref()
+        .and_then(|s| serde_json::to_string_pretty(s).ok())
+        .unwrap_or_default();
+    Ok(super::layout(
+        &format!("{} {}", r.kind, short(&r.id)),
+        Nav::None,
+        html! {
+            h1 { (r.kind) " " span class="mono" { (r.id) } }
+            dl class="facts" {
+                dt { "rig" } dd { (r.rig) }
+                dt { "priority" } dd { (r.priority) }
+                dt { "submitted" } dd class="volatile" { (utc(r.created_ms)) }
+                @if let Some(t) = r.not_before_ms { dt { "not before" } dd class="volatile" { (utc(t)) } }
+                dt { "scene" } dd { a href={"/runs?kind=" (r.kind)} { "runs of this kind" } }
+            }
+            details class="spec" {
+                summary { "Spec" }
+                pre { code { (pretty) } }
+            }
+            (live)
+        },
+    ))
+}
+
+/// `GET /ui/runs/{id}/live?since=…`: the live part, or 204 when unchanged.
+pub async fn live(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+    RawQuery(q): RawQuery,
+) -> Result<Response, Problem> {
+    let r = row(&st, &id).await?;
+    if let Some(resp) = unchanged(q.as_deref(), &token(&r)) {
+        return Ok(resp);
+    }
+    Ok(fragment(live_markup(&st, &r).await?))
+}
+
+async fn live_markup(st: &AppState, r: &ExperimentRow) -> Result<Markup, Problem> {
+    let spec: Option<ExperimentSpec> = serde_json::from_str(&r.spec).ok();
+    let result: Option<Value> = r.result.as_deref().and_then(|s| serde_json::from_str(s).ok());
+    let v = st.view(r.clone());
+    let ended = ENDED.contains(&r.state.as_str());
+    let status = html! {
+        div class="status" {
+            (state_badge(&r.state))
+            @if !ended {
+                " " progress value=(format!("{:.3}", r.progress)) max="1" aria-label="progress" {}
+                " " span class="num" { (format!("{:.0} %", 100.0 * r.progress)) }
+            }
+            " " span class="num" { (r.trials_done) " trials" }
+            @if let Some(e) = v.progress["elapsed_s"].as_f64() { " · " span class="volatile" { (duration(e)) " elapsed" } }
+            @if let Some(e) = v.progress["eta_s"].as_f64() { " · " span class="volatile" { "ETA " (duration(e)) } }
+            @if let Some(why) = v.progress["waiting_for_rig"].as_str() { " · " span class="warn" { "waiting for the rig: " (why) } }
+            @if let Some(why) = v.progress["held"].as_str() { " · " span class="warn" { "held: " (why) } }
+            @if let (Some(a), Some(b)) = (r.started_ms, r.finished_ms) { " · " span class="volatile" { "took " (duration((b - a) as f64 / 1000.0)) } }
+            @if let Some(w) = &r.worker { " · " span class="mono small volatile" { (w) } }
+            @if !ended { " " (action("POST", &format!("/v1/experiments/{}/cancel", r.id), "Cancel", "this run")) }
+        }
+        @if let Some(e) = &r.error { p class="error" { strong { "Error: " } (e) } }
+    };
+    let body = match &spec {
+        Some(ExperimentSpec::Tune(t)) => {
+            let evals = st.store.evaluations(&r.id).await.map_err(|e| st.fail(e))?;
+            super::tune::render(t, &evals, result.as_ref())
+        }
+        Some(s) => maps_markup(st, r, s, result.as_ref()).await?,
+        None => html! { p class="error" { "The stored spec cannot be read by this version." } },
+    };
+    let downloads = html! {
+        @if r.state == "succeeded" {
+            p class="downloads" { "Download: "
+                a href={"/v1/experiments/" (r.id) "/points.csv"} download { "CSV" } " · "
+                a href={"/v1/experiments/" (r.id) "/plot.svg"} download { "SVG" } " · "
+                a href={"/v1/experiments/" (r.id)} { "JSON" } " · "
+                a href={"/v1/experiments/" (r.id) "/trials"} { "trials (JSON)" }
+            }
+        }
+    };
+    Ok(live_part(
+        "live",
+        &format!("/ui/runs/{}/live", r.id),
+        &token(r),
+        !ended,
+        html! { (status) (body) (downloads) },
+    ))
+}
+
+/// One map's name per scope.
+fn labels(spec: &ExperimentSpec, finished: &[MapSummary], n: usize) -> Vec<String> {
+    if !finished.is_empty() {
+        return finished.iter().map(|m| m.label.clone()).collect();
+    }
+    let mut out: Vec<String> = match spec {
+        ExperimentSpec::Map(m) => vec![m.scene.estimator.label()],
+        ExperimentSpec::Sweep(s) => s
+            .variant_specs()
+            .map(|v| v.into_iter().map(|(l, _, _)| l).collect())
+            .unwrap_or_default(),
+        ExperimentSpec::Compare(c) => c
+            .estimators
+            .as_ref()
+            .map(|e| e.iter().map(|e| e.label()).collect())
+            .unwrap_or_default(),
+        ExperimentSpec::Tune(_) => Vec::new(),
+    };
+    while out.len() < n {
+        out.push(format!("map {}", out.len()));
+    }
+    out
+}
+
+/// The boundary so far of a running map: per B, the largest K decided to
+/// render (a bisection's lower bracket).
+fn boundary_so_far(points: &[MapPlotPoint]) -> Vec<BoundaryPoint> {
+    let mut by_b: BTreeMap<u64, (f64, f64)> = BTreeMap::new();
+    for p in points.iter().filter(|p| p.ok && p.decided) {
+        let e = by_b.entry(p.b.to_bits()).or_insert((p.b, p.k));
+        e.1 = e.1.max(p.k);
+    }
+    let mut out: Vec<BoundaryPoint> = by_b.into_values().map(|(b, k)| BoundaryPoint::new(b, k)).collect();
+    out.sort_by(|a, b| a.b.total_cmp(&b.b));
+    out
+}
+
+/// The run's maps from its stored trials, on shared axes with one colour
+/// scale, and the table of its result's figures.
+async fn maps_markup(
+    st: &AppState,
+    r: &ExperimentRow,
+    spec: &ExperimentSpec,
+    result: Option<&Value>,
+) -> Result<Markup, Problem> {
+    let trials = st.store.trials(&r.id).await.map_err(|e| st.fail(e))?;
+    let mut scopes: BTreeMap<u32, Vec<MapPlotPoint>> = BTreeMap::new();
+    for t in &trials {
+        scopes.entry(t.scope).or_default().push(MapPlotPoint::of(&t.point));
+    }
+    let finished: Vec<MapSummary> = match (result, r.state.as_str()) {
+        (Some(res), "succeeded") => report::maps(&r.id, spec, res),
+        _ => Vec::new(),
+    };
+    let n = scopes.keys().next_back().map_or(0, |s| *s as usize + 1).max(finished.len());
+    let names = labels(spec, &finished, n);
+    let panels: Vec<(String, Vec<MapPlotPoint>, Vec<BoundaryPoint>, String)> = (0..n)
+        .map(|i| {
+            let pts = scopes.remove(&(i as u32)).unwrap_or_default();
+            let (boundary, criterion) = match finished.get(i) {
+                Some(m) => (m.boundary.clone(), m.criterion.clone()),
+                None => (boundary_so_far(&pts), String::new()),
+            };
+            (names.get(i).cloned().unwrap_or_default(), pts, boundary, criterion)
+        })
+        .collect();
+    let figure = map_panels(&panels, !finished.is_empty())?;
+    let table = html! {
+        @if !finished.is_empty() {
+            table class="figures" {
+                caption { "The result" }
+                thead { tr { th { "map" } th { "K-width (N/m)" } th { "B-width (N·s/m)" } th { "max fidelity error (N·s/m)" } th { "area (N/m · N·s/m)" } th { "model" } } }
+                tbody {
+                    @for (i, m) in finished.iter().enumerate() {
+                        @let map = result.map(|res| map_json(spec, res, i)).unwrap_or(Value::Null);
+                        tr {
+                            td { (m.label) }
+                            td class="num" { (format!("{:.0}", m.k_width)) (interval(&map["k_width_interval"], 0)) }
+                            td class="num" { (format!("{:.2}", m.b_width)) (interval(&map["b_width_interval"], 2)) }
+                            td class="num" { (m.max_fidelity_error.map_or("–".into(), |f| format!("{f:.3}"))) }
+                            td class="num" { (format!("{:.4e}", m.area)) }
+                            td class="small" { (map["model"].as_str().unwrap_or("–")) }
+                        }
+                    }
+                }
+            }
+        }
+    };
+    Ok(html! { (table) (figure) })
+}
+
+/// A map's own result JSON (a compare's or sweep's row's `map`).
+fn map_json(spec: &ExperimentSpec, result: &Value, i: usize) -> Value {
+    match spec {
+        ExperimentSpec::Map(_) => result.clone(),
+        _ => result["rows"][i]["map"].clone(),
+    }
+}
+
+fn interval(v: &Value, digits: usize) -> Markup {
+    match (v[0].as_f64(), v[1].as_f64()) {
+        (Some(lo), Some(hi)) => html! { br; span class="small muted" { "[" (format!("{lo:.digits$}")) ", " (format!("{hi:.digits$}")) "]" } },
+        _ => html! {},
+    }
+}
+
+/// Maps as small multiples: one axis range and one fidelity colour scale
+/// for all, so positions and colours compare across panels.
+pub fn map_panels(
+    panels: &[(String, Vec<MapPlotPoint>, Vec<BoundaryPoint>, String)],
+    finished: bool,
+) -> Result<Markup, Problem> {
+    if panels.iter().all(|p| p.1.is_empty() && p.2.is_empty()) {
+        return Ok(html! { p class="muted" { "No trials stored yet." } });
+    }
+    let extent = panels.iter().fold((1.0f64, 1.0f64), |acc, (_, pts, b, _)| {
+        let e = map_extent(pts, b);
+        (acc.0.max(e.0), acc.1.max(e.1))
+    });
+    let scale = panels
+        .iter()
+        .fold(None, |acc, p| FidelityScale::union(acc, FidelityScale::of(&p.1)));
+    let single = panels.len() == 1;
+    let per_map = TOOLTIP_BUDGET / panels.len().max(1);
+    let mut out = Vec::new();
+    for (name, pts, boundary, criterion) in panels {
+        let style = MapStyle {
+            ok_label: if criterion == "stability" { "stable" } else { "passive" }.into(),
+            scale,
+            extent: Some(extent),
+            size: if single { (900, 600) } else { (620, 440) },
+            tooltip_limit: per_map,
+        };
+        let title = format!("{name} ({} trials)", pts.len());
+        let s = zwidth_map_svg_styled(&title, pts, boundary, &style).map_err(Problem::internal)?;
+        out.push((name.clone(), pts.len(), s));
+    }
+    Ok(html! {
+        @if !finished { p class="muted small" { "Drawn from the trials stored so far; the line is the largest K decided to render at each B until the run ends." } }
+        div class={"maps" (if single { " single" } else { "" })} {
+            @for (name, n, s) in &out {
+                figure {
+                    (svg(s))
+                    figcaption { (name) ": " (n) " trials" }
+                }
+            }
+        }
+    })
+}

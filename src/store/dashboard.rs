@@ -1,0 +1,146 @@
+//! What the dashboard reads (issue 15): the queue at a glance, a filtered
+//! page of runs, and change tokens, so a page that polls and finds nothing
+//! new costs one cheap query.
+
+use super::{on_pool, Db, ExperimentRow, Store};
+
+/// The columns of a summary row (no spec, no result).
+macro_rules! summary_columns {
+    () => {
+        "id, kind, '' AS spec, state, priority, created_ms, started_ms, finished_ms, trials_done,
+         NULL AS result, error, idempotency_key, not_before_ms, rig, progress, best,
+         attempt, worker, lease_until_ms"
+    };
+}
+
+/// The queue now: what runs, what waits in the order it will be claimed
+/// (runnable now by priority then age, then those scheduled for later by
+/// their time), and what failed since `since_ms`.
+#[derive(Debug, Default)]
+pub struct Board {
+    pub running: Vec<ExperimentRow>,
+    pub waiting: Vec<ExperimentRow>,
+    /// All waiting, of which `waiting` is the first page.
+    pub waiting_total: i64,
+    pub failed: Vec<ExperimentRow>,
+}
+
+/// Which runs a list shows; an empty field matches every run.
+#[derive(Debug, Default, Clone)]
+pub struct ListFilter {
+    pub kind: String,
+    pub state: String,
+    pub rig: String,
+    /// Text the run's spec contains (its scene: device, estimator, wall…).
+    pub scene: String,
+}
+
+impl Store {
+    /// The queue board at `now_ms`: at most `limit` waiting and failed rows.
+    pub async fn board(&self, now_ms: i64, since_ms: i64, limit: i64) -> Result<Board, sqlx::Error> {
+        let running: Vec<ExperimentRow> = on_pool!(self, p => sqlx::query_as(concat!(
+            "SELECT ", summary_columns!(), " FROM experiments WHERE state = 'running' ORDER BY started_ms, id"))
+            .fetch_all(p)
+            .await)?;
+        let waiting: Vec<ExperimentRow> = on_pool!(self, p => sqlx::query_as(concat!(
+            "SELECT ", summary_columns!(), " FROM experiments
+             WHERE state IN ('queued', 'scheduled', 'interrupted')
+             ORDER BY CASE WHEN not_before_ms > $1 THEN 1 ELSE 0 END,
+                      CASE WHEN not_before_ms > $1 THEN not_before_ms ELSE 0 END,
+                      priority DESC, created_ms, id
+             LIMIT $2"))
+            .bind(now_ms)
+            .bind(limit)
+            .fetch_all(p)
+            .await)?;
+        let waiting_total: i64 = on_pool!(self, p => sqlx::query_scalar(
+            "SELECT COUNT(*) FROM experiments WHERE state IN ('queued', 'scheduled', 'interrupted')")
+            .fetch_one(p)
+            .await)?;
+        let failed: Vec<ExperimentRow> = on_pool!(self, p => sqlx::query_as(concat!(
+            "SELECT ", summary_columns!(), " FROM experiments
+             WHERE state = 'failed' AND finished_ms >= $1
+             ORDER BY finished_ms DESC, id LIMIT $2"))
+            .bind(since_ms)
+            .bind(limit)
+            .fetch_all(p)
+            .await)?;
+        Ok(Board {
+            running,
+            waiting,
+            waiting_total,
+            failed,
+        })
+    }
+
+    /// What changes the queue board: the number waiting and running, their
+    /// trials and progress, the last run to end, and the paused flag.
+    pub async fn board_token(&self) -> Result<String, sqlx::Error> {
+        let (n, trials, progress, started): (i64, i64, f64, i64) = on_pool!(self, p => sqlx::query_as(
+            "SELECT COUNT(*), CAST(COALESCE(SUM(trials_done), 0) AS BIGINT),
+                    CAST(COALESCE(SUM(progress), 0) AS DOUBLE PRECISION), CAST(COALESCE(MAX(started_ms), 0) AS BIGINT)
+             FROM experiments WHERE state IN ('queued', 'scheduled', 'interrupted', 'running')")
+            .fetch_one(p)
+            .await)?;
+        let ended: i64 = on_pool!(self, p => sqlx::query_scalar(
+            "SELECT CAST(COALESCE(MAX(finished_ms), 0) AS BIGINT) FROM experiments")
+            .fetch_one(p)
+            .await)?;
+        let paused = self.paused().await?;
+        Ok(format!("{n}.{trials}.{progress:.4}.{started}.{ended}.{}", paused as u8))
+    }
+
+    /// A page of runs matching `f`, newest first, and how many match.
+    pub async fn list_filtered(
+        &self,
+        f: &ListFilter,
+        limit: i64,
+        offset: i64,
+    ) -> Result<(Vec<ExperimentRow>, i64), sqlx::Error> {
+        // Substring tests without LIKE's wildcards.
+        let (rows_sql, count_sql) = match self.db {
+            Db::Sqlite(_) => (
+                concat!("SELECT ", summary_columns!(), " FROM experiments
+                 WHERE ($1 = '' OR kind = $1) AND ($2 = '' OR state = $2) AND ($3 = '' OR rig = $3)
+                   AND ($4 = '' OR instr(spec, $4) > 0)
+                 ORDER BY created_ms DESC, id DESC LIMIT $5 OFFSET $6"),
+                "SELECT COUNT(*) FROM experiments
+                 WHERE ($1 = '' OR kind = $1) AND ($2 = '' OR state = $2) AND ($3 = '' OR rig = $3)
+                   AND ($4 = '' OR instr(spec, $4) > 0)",
+            ),
+            Db::Postgres(_) => (
+                concat!("SELECT ", summary_columns!(), " FROM experiments
+                 WHERE ($1 = '' OR kind = $1) AND ($2 = '' OR state = $2) AND ($3 = '' OR rig = $3)
+                   AND ($4 = '' OR strpos(spec, $4) > 0)
+                 ORDER BY created_ms DESC, id DESC LIMIT $5 OFFSET $6"),
+                "SELECT COUNT(*) FROM experiments
+                 WHERE ($1 = '' OR kind = $1) AND ($2 = '' OR state = $2) AND ($3 = '' OR rig = $3)
+                   AND ($4 = '' OR strpos(spec, $4) > 0)",
+            ),
+        };
+        let rows: Vec<ExperimentRow> = on_pool!(self, p => sqlx::query_as(rows_sql)
+            .bind(&f.kind)
+            .bind(&f.state)
+            .bind(&f.rig)
+            .bind(&f.scene)
+            .bind(limit)
+            .bind(offset)
+            .fetch_all(p)
+            .await)?;
+        let total: i64 = on_pool!(self, p => sqlx::query_scalar(count_sql)
+            .bind(&f.kind)
+            .bind(&f.state)
+            .bind(&f.rig)
+            .bind(&f.scene)
+            .fetch_one(p)
+            .await)?;
+        Ok((rows, total))
+    }
+
+    /// The rigs named by any stored run (for the list's filter).
+    pub async fn run_rigs(&self) -> Result<Vec<String>, sqlx::Error> {
+        on_pool!(self, p => sqlx::query_scalar("SELECT DISTINCT rig FROM experiments ORDER BY rig")
+            .fetch_all(p)
+            .await)
+    }
+}
