@@ -37,7 +37,12 @@ pub struct ListFilter {
 
 impl Store {
     /// The queue board at `now_ms`: at most `limit` waiting and failed rows.
-    pub async fn board(&self, now_ms: i64, since_ms: i64, limit: i64) -> Result<Board, sqlx::Error> {
+    pub async fn board(
+        &self,
+        now_ms: i64,
+        since_ms: i64,
+        limit: i64,
+    ) -> Result<Board, sqlx::Error> {
         let running: Vec<ExperimentRow> = on_pool!(self, p => sqlx::query_as(concat!(
             "SELECT ", summary_columns!(), " FROM experiments WHERE state = 'running' ORDER BY started_ms, id"))
             .fetch_all(p)
@@ -87,7 +92,10 @@ impl Store {
             .fetch_one(p)
             .await)?;
         let paused = self.paused().await?;
-        Ok(format!("{n}.{trials}.{progress:.4}.{started}.{ended}.{}", paused as u8))
+        Ok(format!(
+            "{n}.{trials}.{progress:.4}.{started}.{ended}.{}",
+            paused as u8
+        ))
     }
 
     /// A page of runs matching `f`, newest first, and how many match.
@@ -100,19 +108,27 @@ impl Store {
         // Substring tests without LIKE's wildcards.
         let (rows_sql, count_sql) = match self.db {
             Db::Sqlite(_) => (
-                concat!("SELECT ", summary_columns!(), " FROM experiments
+                concat!(
+                    "SELECT ",
+                    summary_columns!(),
+                    " FROM experiments
                  WHERE ($1 = '' OR kind = $1) AND ($2 = '' OR state = $2) AND ($3 = '' OR rig = $3)
                    AND ($4 = '' OR instr(spec, $4) > 0)
-                 ORDER BY created_ms DESC, id DESC LIMIT $5 OFFSET $6"),
+                 ORDER BY created_ms DESC, id DESC LIMIT $5 OFFSET $6"
+                ),
                 "SELECT COUNT(*) FROM experiments
                  WHERE ($1 = '' OR kind = $1) AND ($2 = '' OR state = $2) AND ($3 = '' OR rig = $3)
                    AND ($4 = '' OR instr(spec, $4) > 0)",
             ),
             Db::Postgres(_) => (
-                concat!("SELECT ", summary_columns!(), " FROM experiments
+                concat!(
+                    "SELECT ",
+                    summary_columns!(),
+                    " FROM experiments
                  WHERE ($1 = '' OR kind = $1) AND ($2 = '' OR state = $2) AND ($3 = '' OR rig = $3)
                    AND ($4 = '' OR strpos(spec, $4) > 0)
-                 ORDER BY created_ms DESC, id DESC LIMIT $5 OFFSET $6"),
+                 ORDER BY created_ms DESC, id DESC LIMIT $5 OFFSET $6"
+                ),
                 "SELECT COUNT(*) FROM experiments
                  WHERE ($1 = '' OR kind = $1) AND ($2 = '' OR state = $2) AND ($3 = '' OR rig = $3)
                    AND ($4 = '' OR strpos(spec, $4) > 0)",

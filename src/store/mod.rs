@@ -18,8 +18,8 @@ pub mod fault;
 pub mod leases;
 pub use fault::{Fault, Health};
 pub use leases::{Held, Lease, WorkerRow};
-pub mod units;
 pub mod dashboard;
+pub mod units;
 pub use units::{UnitPlace, UnitRow};
 
 pub mod location;

@@ -514,9 +514,16 @@ pub fn zwidth_map_svg_styled(
         root.present().map_err(|e| e.to_string())?;
     }
     let mut marks = point_marks(points, &at, scale, ok_label, style.tooltip_limit);
-    if w >= 600 {
-        let intervals = boundary.iter().any(|p| p.k_lo.is_some() && p.k_hi.is_some());
-        marks.push_str(&legend(area, ok_label, points.iter().any(|p| !p.decided), intervals));
+    if w >= 800 {
+        let intervals = boundary
+            .iter()
+            .any(|p| p.k_lo.is_some() && p.k_hi.is_some());
+        marks.push_str(&legend(
+            area,
+            ok_label,
+            points.iter().any(|p| !p.decided),
+            intervals,
+        ));
     }
     match svg.rfind("</svg>") {
         Some(i) => svg.insert_str(i, &marks),
@@ -530,7 +537,10 @@ fn legend(corner: (i32, i32), ok_label: &str, undecided: bool, intervals: bool) 
     let ok = xml_escape(ok_label);
     let mut rows: Vec<(String, String)> = vec![
         (
-            format!("<circle cx=\"9\" cy=\"0\" r=\"4\" fill=\"{}\"/>", hex(colour(0.5))),
+            format!(
+                "<circle cx=\"9\" cy=\"0\" r=\"4\" fill=\"{}\"/>",
+                hex(colour(0.5))
+            ),
             ok.clone(),
         ),
         (
@@ -573,6 +583,45 @@ fn legend_box(corner: (i32, i32), rows: &[(String, String)]) -> String {
             s,
             "<g transform=\"translate(8,{yy})\">{mark}<text x=\"28\" y=\"4\" font-family=\"sans-serif\" font-size=\"13\">{text}</text></g>"
         );
+    }
+    s.push_str("</g>\n");
+    s
+}
+
+/// Height of the legend row under a scatter plot (px).
+const LEGEND_ROW: i32 = 30;
+
+/// A tick label with as many decimals as the axis span needs.
+fn tick(v: f64, span: f64) -> String {
+    let digits = if span >= 50.0 {
+        0
+    } else if span >= 0.5 {
+        2
+    } else {
+        4
+    };
+    if v.abs() >= 1e7 {
+        format!("{v:.2e}")
+    } else {
+        format!("{v:.digits$}")
+    }
+}
+
+/// A legend in one row from `at` (px, its top left): mark, text, mark, …
+fn legend_row(at: (i32, i32), rows: &[(String, String)]) -> String {
+    use std::fmt::Write;
+    let mut s = format!(
+        "<g class=\"legend\" transform=\"translate({},{})\">",
+        at.0,
+        at.1 + 12
+    );
+    let mut x = 0;
+    for (mark, text) in rows {
+        let _ = write!(
+            s,
+            "<g transform=\"translate({x},0)\">{mark}<text x=\"24\" y=\"4\" font-family=\"sans-serif\" font-size=\"13\">{text}</text></g>"
+        );
+        x += 40 + 8 * text.chars().count() as i32;
     }
     s.push_str("</g>\n");
     s
@@ -648,7 +697,10 @@ pub fn scatter_svg(
     {
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
-        let mut chart = ChartBuilder::on(&root)
+        // The legend goes in a row below the chart, never over the data.
+        let (top, _) = root.split_vertically(size.1 as i32 - LEGEND_ROW);
+        let (yspan, xspan) = (yr.end - yr.start, xr.end - xr.start);
+        let mut chart = ChartBuilder::on(&top)
             .caption(title, ("sans-serif", 18))
             .margin(14)
             .x_label_area_size(44)
@@ -659,14 +711,15 @@ pub fn scatter_svg(
             .configure_mesh()
             .x_desc(x_desc)
             .y_desc(y_desc)
-            .y_label_formatter(&|v| format!("{v:.4}"))
+            .x_label_formatter(&|v| tick(*v, xspan))
+            .y_label_formatter(&|v| tick(*v, yspan))
             .draw()
             .map_err(|e| e.to_string())?;
         for g in groups {
             at.push(g.points.iter().map(|p| chart.backend_coord(p)).collect());
         }
-        let (x, y) = chart.plotting_area().get_pixel_range();
-        corner = (x.end, y.start);
+        let (x, _) = chart.plotting_area().get_pixel_range();
+        corner = (x.start, size.1 as i32 - LEGEND_ROW);
         root.present().map_err(|e| e.to_string())?;
     }
     let mut marks = String::from("<g class=\"points\">");
@@ -682,14 +735,20 @@ pub fn scatter_svg(
                 .get(i)
                 .cloned()
                 .unwrap_or_else(|| format!("{x_desc} = {vx:.4}, {y_desc} = {vy:.4}"));
-            marks.push_str(&mark_svg(g.mark, x, y, "pt", &format!("<title>{}</title>", xml_escape(&tip))));
+            marks.push_str(&mark_svg(
+                g.mark,
+                x,
+                y,
+                "pt",
+                &format!("<title>{}</title>", xml_escape(&tip)),
+            ));
         }
         if !g.points.is_empty() {
             rows.push((mark_svg(g.mark, 9, 0, "key", ""), xml_escape(&g.name)));
         }
     }
     marks.push_str("</g>\n");
-    marks.push_str(&legend_box(corner, &rows));
+    marks.push_str(&legend_row(corner, &rows));
     match svg.rfind("</svg>") {
         Some(i) => svg.insert_str(i, &marks),
         None => return Err("plotters wrote no closing </svg>".into()),

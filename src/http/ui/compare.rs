@@ -18,10 +18,19 @@ use crate::plot::MapPlotPoint;
 use crate::report;
 use crate::store::dashboard::ListFilter;
 
-pub async fn page(State(st): State<AppState>, RawQuery(query): RawQuery) -> Result<Response, Problem> {
+pub async fn page(
+    State(st): State<AppState>,
+    RawQuery(query): RawQuery,
+) -> Result<Response, Problem> {
     // `runs=a,b` (a link) or `run=a&run=b` (the run list's checkboxes).
     let pairs: Vec<(String, String)> = serde_urlencoded::from_str(query.as_deref().unwrap_or(""))
-        .map_err(|e| Problem::from(crate::error::SpecError::new("query", query.clone().unwrap_or_default(), format!("not a query string: {e}"))))?;
+        .map_err(|e| {
+        Problem::from(crate::error::SpecError::new(
+            "query",
+            query.clone().unwrap_or_default(),
+            format!("not a query string: {e}"),
+        ))
+    })?;
     let mut joined = Vec::new();
     let mut all = false;
     for (k, v) in &pairs {
@@ -58,7 +67,10 @@ pub async fn page(State(st): State<AppState>, RawQuery(query): RawQuery) -> Resu
             let m = &r.map;
             (
                 format!("{} {}", short(&m.run), m.label),
-                m.points.iter().map(MapPlotPoint::from_json).collect::<Vec<_>>(),
+                m.points
+                    .iter()
+                    .map(MapPlotPoint::from_json)
+                    .collect::<Vec<_>>(),
                 m.boundary.clone(),
                 m.criterion.clone(),
             )
@@ -120,7 +132,9 @@ fn spec_table(ids: &[String], specs: &[Value], all: bool) -> Markup {
         .map(|p| {
             (
                 p,
-                flat.iter().map(|f| f.get(p).cloned().unwrap_or_else(|| "–".into())).collect::<Vec<_>>(),
+                flat.iter()
+                    .map(|f| f.get(p).cloned().unwrap_or_else(|| "–".into()))
+                    .collect::<Vec<_>>(),
             )
         })
         .filter(|(_, vals)| all || vals.iter().any(|v| v != &vals[0]))
@@ -151,7 +165,11 @@ pub fn flatten(v: &Value) -> BTreeMap<String, String> {
         match v {
             Value::Object(m) if !m.is_empty() => {
                 for (k, x) in m {
-                    let p = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+                    let p = if prefix.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{prefix}.{k}")
+                    };
                     walk(&p, x, out);
                 }
             }
@@ -179,7 +197,11 @@ async fn picker(st: &AppState) -> Result<Response, Problem> {
         state: "succeeded".into(),
         ..ListFilter::default()
     };
-    let (rows, total) = st.store.list_filtered(&f, 50, 0).await.map_err(|e| st.fail(e))?;
+    let (rows, total) = st
+        .store
+        .list_filtered(&f, 50, 0)
+        .await
+        .map_err(|e| st.fail(e))?;
     Ok(super::layout(
         "Compare",
         Nav::Compare,

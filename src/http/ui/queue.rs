@@ -53,7 +53,9 @@ async fn token(st: &AppState) -> Result<String, Problem> {
         let v = rig_view(st, &r).await?;
         v.info.id.hash(&mut h);
         v.open_now.hash(&mut h);
-        serde_json::to_string(&v.window).unwrap_or_default().hash(&mut h);
+        serde_json::to_string(&v.window)
+            .unwrap_or_default()
+            .hash(&mut h);
         v.attached
             .as_ref()
             .map(|a| (a.connected, a.lost_contact, a.quarantine.clone()))
@@ -178,7 +180,10 @@ fn rig_row(r: &RigView, now: i64) -> Markup {
             let opens = if r.open_now {
                 "open now".to_string()
             } else {
-                format!("opens in {}", duration((r.next_start_ms - now) as f64 / 1000.0))
+                format!(
+                    "opens in {}",
+                    duration((r.next_start_ms - now) as f64 / 1000.0)
+                )
             };
             html! { (w.start) "–" (w.end) " " span class="muted" { (w.tz) } br; span class={"volatile " (if r.open_now { "ok" } else { "warn" })} { (opens) } }
         }

@@ -88,7 +88,10 @@ pub async fn live(
 
 async fn live_markup(st: &AppState, r: &ExperimentRow) -> Result<Markup, Problem> {
     let spec: Option<ExperimentSpec> = serde_json::from_str(&r.spec).ok();
-    let result: Option<Value> = r.result.as_deref().and_then(|s| serde_json::from_str(s).ok());
+    let result: Option<Value> = r
+        .result
+        .as_deref()
+        .and_then(|s| serde_json::from_str(s).ok());
     let v = st.view(r.clone());
     let ended = ENDED.contains(&r.state.as_str());
     let status = html! {
@@ -168,7 +171,10 @@ fn boundary_so_far(points: &[MapPlotPoint]) -> Vec<BoundaryPoint> {
         let e = by_b.entry(p.b.to_bits()).or_insert((p.b, p.k));
         e.1 = e.1.max(p.k);
     }
-    let mut out: Vec<BoundaryPoint> = by_b.into_values().map(|(b, k)| BoundaryPoint::new(b, k)).collect();
+    let mut out: Vec<BoundaryPoint> = by_b
+        .into_values()
+        .map(|(b, k)| BoundaryPoint::new(b, k))
+        .collect();
     out.sort_by(|a, b| a.b.total_cmp(&b.b));
     out
 }
@@ -184,13 +190,20 @@ async fn maps_markup(
     let trials = st.store.trials(&r.id).await.map_err(|e| st.fail(e))?;
     let mut scopes: BTreeMap<u32, Vec<MapPlotPoint>> = BTreeMap::new();
     for t in &trials {
-        scopes.entry(t.scope).or_default().push(MapPlotPoint::of(&t.point));
+        scopes
+            .entry(t.scope)
+            .or_default()
+            .push(MapPlotPoint::of(&t.point));
     }
     let finished: Vec<MapSummary> = match (result, r.state.as_str()) {
         (Some(res), "succeeded") => report::maps(&r.id, spec, res),
         _ => Vec::new(),
     };
-    let n = scopes.keys().next_back().map_or(0, |s| *s as usize + 1).max(finished.len());
+    let n = scopes
+        .keys()
+        .next_back()
+        .map_or(0, |s| *s as usize + 1)
+        .max(finished.len());
     let names = labels(spec, &finished, n);
     let panels: Vec<(String, Vec<MapPlotPoint>, Vec<BoundaryPoint>, String)> = (0..n)
         .map(|i| {
@@ -199,7 +212,12 @@ async fn maps_markup(
                 Some(m) => (m.boundary.clone(), m.criterion.clone()),
                 None => (boundary_so_far(&pts), String::new()),
             };
-            (names.get(i).cloned().unwrap_or_default(), pts, boundary, criterion)
+            (
+                names.get(i).cloned().unwrap_or_default(),
+                pts,
+                boundary,
+                criterion,
+            )
         })
         .collect();
     let figure = map_panels(&panels, !finished.is_empty())?;
@@ -217,7 +235,7 @@ async fn maps_markup(
                             td class="num" { (format!("{:.2}", m.b_width)) (interval(&map["b_width_interval"], 2)) }
                             td class="num" { (m.max_fidelity_error.map_or("–".into(), |f| format!("{f:.3}"))) }
                             td class="num" { (format!("{:.4e}", m.area)) }
-                            td class="small" { (map["model"].as_str().unwrap_or("–")) }
+                            td class="small" { details { summary { "model" } (map["model"].as_str().unwrap_or("–")) } }
                         }
                     }
                 }
@@ -237,7 +255,9 @@ fn map_json(spec: &ExperimentSpec, result: &Value, i: usize) -> Value {
 
 fn interval(v: &Value, digits: usize) -> Markup {
     match (v[0].as_f64(), v[1].as_f64()) {
-        (Some(lo), Some(hi)) => html! { br; span class="small muted" { "[" (format!("{lo:.digits$}")) ", " (format!("{hi:.digits$}")) "]" } },
+        (Some(lo), Some(hi)) => {
+            html! { br; span class="small muted" { "[" (format!("{lo:.digits$}")) ", " (format!("{hi:.digits$}")) "]" } }
+        }
         _ => html! {},
     }
 }
@@ -255,15 +275,20 @@ pub fn map_panels(
         let e = map_extent(pts, b);
         (acc.0.max(e.0), acc.1.max(e.1))
     });
-    let scale = panels
-        .iter()
-        .fold(None, |acc, p| FidelityScale::union(acc, FidelityScale::of(&p.1)));
+    let scale = panels.iter().fold(None, |acc, p| {
+        FidelityScale::union(acc, FidelityScale::of(&p.1))
+    });
     let single = panels.len() == 1;
     let per_map = TOOLTIP_BUDGET / panels.len().max(1);
     let mut out = Vec::new();
     for (name, pts, boundary, criterion) in panels {
         let style = MapStyle {
-            ok_label: if criterion == "stability" { "stable" } else { "passive" }.into(),
+            ok_label: if criterion == "stability" {
+                "stable"
+            } else {
+                "passive"
+            }
+            .into(),
             scale,
             extent: Some(extent),
             size: if single { (900, 600) } else { (620, 440) },
@@ -275,6 +300,15 @@ pub fn map_panels(
     }
     Ok(html! {
         @if !finished { p class="muted small" { "Drawn from the trials stored so far; the line is the largest K decided to render at each B until the run ends." } }
+        @if !single {
+            p class="legend small" {
+                span class="key dot" {} " renders (colour: fidelity error, one scale for all) "
+                span class="key cross" { "×" } " does not "
+                span class="key ring" {} " undecided "
+                span class="key line" {} " boundary "
+                span class="key bar" {} " its interval"
+            }
+        }
         div class={"maps" (if single { " single" } else { "" })} {
             @for (name, n, s) in &out {
                 figure {

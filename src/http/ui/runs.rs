@@ -61,7 +61,10 @@ pub fn filter(q: &QueryArgs) -> Result<ListFilter, Problem> {
     })
 }
 
-pub async fn page(State(st): State<AppState>, RawQuery(query): RawQuery) -> Result<Response, Problem> {
+pub async fn page(
+    State(st): State<AppState>,
+    RawQuery(query): RawQuery,
+) -> Result<Response, Problem> {
     let q = QueryArgs::parse(query.as_deref(), &["kind", "state", "rig", "scene", "page"])?;
     let f = filter(&q)?;
     let n = q.int("page", 1..=1_000_000)?.unwrap_or(1);
@@ -75,12 +78,20 @@ pub async fn page(State(st): State<AppState>, RawQuery(query): RawQuery) -> Resu
     let now = now_ms();
     let link = |p: i64| {
         let mut pairs = vec![("page", p.to_string())];
-        for (k, v) in [("kind", &f.kind), ("state", &f.state), ("rig", &f.rig), ("scene", &f.scene)] {
+        for (k, v) in [
+            ("kind", &f.kind),
+            ("state", &f.state),
+            ("rig", &f.rig),
+            ("scene", &f.scene),
+        ] {
             if !v.is_empty() {
                 pairs.push((k, v.clone()));
             }
         }
-        format!("/runs?{}", serde_urlencoded::to_string(&pairs).unwrap_or_default())
+        format!(
+            "/runs?{}",
+            serde_urlencoded::to_string(&pairs).unwrap_or_default()
+        )
     };
     let select = |name: &str, label: &str, options: &[String], cur: &str| {
         html! {

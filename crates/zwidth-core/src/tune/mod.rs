@@ -9,6 +9,7 @@
 
 pub mod fair;
 pub mod params;
+pub mod plots;
 mod run;
 pub mod solvers;
 pub mod study;
@@ -199,7 +200,7 @@ impl Metrics {
         }
     }
 
-    fn get(&self, m: Metric) -> Option<f64> {
+    pub fn get(&self, m: Metric) -> Option<f64> {
         match m {
             Metric::KWidth => Some(self.k_width),
             Metric::BWidth => Some(self.b_width),
@@ -488,51 +489,15 @@ fn accuracy_name(a: &Accuracy) -> String {
 }
 
 impl TuneResult {
-    /// The score of each search evaluation and the best so far, against
-    /// the evaluation number; with a Pareto front, the front over the first
-    /// two metrics instead.
+    /// The objective against the parameter, every evaluation, the
+    /// finalists marked (`plots::landscape_svg`); with a Pareto objective,
+    /// the front over all search evaluations (`plots::pareto_svg`).
     pub fn svg(&self) -> Result<String, String> {
-        use crate::plot::{lines_svg, Series};
-        if let (Some(front), Objective::Pareto(ms)) = (&self.pareto_front, &self.objective) {
-            let (mx, my) = (ms[0], ms[1]);
-            let mut pts: Vec<(f64, f64)> = front
-                .iter()
-                .filter_map(|&i| self.history.iter().find(|e| e.index == i))
-                .filter_map(|e| Some((e.metrics.get(mx)?, e.metrics.get(my)?)))
-                .collect();
-            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-            return lines_svg(
-                "Pareto front (search evaluations)",
-                metric_name(mx),
-                metric_name(my),
-                &[Series::new("non-dominated", pts)],
-            );
+        if let Objective::Pareto(ms) = &self.objective {
+            return plots::pareto_svg(ms, &self.history).map(|(s, _)| s);
         }
-        let search: Vec<&Evaluation> = self
-            .history
-            .iter()
-            .filter(|e| e.phase == "search" && e.feasible)
-            .collect();
-        let mut best = f64::MIN;
-        let running: Vec<(f64, f64)> = search
-            .iter()
-            .map(|e| {
-                best = best.max(e.score);
-                (e.index as f64, best)
-            })
-            .collect();
-        lines_svg(
-            "Objective over evaluations",
-            "evaluation",
-            "score (higher is better)",
-            &[
-                Series::new(
-                    "each evaluation",
-                    search.iter().map(|e| (e.index as f64, e.score)).collect(),
-                ),
-                Series::new("best so far", running),
-            ],
-        )
+        let params: Vec<String> = self.best.params.keys().cloned().collect();
+        plots::landscape_svg(&params, &self.objective, &self.history, ("search", "final"))
     }
 
     /// Every evaluation as CSV: index, phase, each parameter, the four

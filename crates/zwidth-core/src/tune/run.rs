@@ -712,7 +712,7 @@ fn internal(e: argmin::core::Error) -> SpecError {
 
 /// Indices of the feasible search evaluations no other one dominates
 /// (at least as good in every metric, better in one).
-fn pareto_front(history: &[Evaluation], metrics: &[Metric]) -> Vec<usize> {
+pub(crate) fn pareto_front(history: &[Evaluation], metrics: &[Metric]) -> Vec<usize> {
     let pts: Vec<(usize, Vec<f64>)> = history
         .iter()
         .filter(|e| e.phase == "search" && e.feasible)

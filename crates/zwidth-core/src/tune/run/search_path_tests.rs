@@ -84,10 +84,17 @@ fn one_parameter_auto_grids_a_quarter_of_the_budget_then_runs_brent_in_the_best_
     assert!(hits > 0, "the lattice makes some points repeat");
     // The finalist is mapped at the search's accuracy: a cache hit too.
     assert_eq!(r.evaluations, 12);
-    // Its plot: every search evaluation and the best so far.
+    // Its plot: the objective against the cutoff, one point (with a
+    // tooltip) per evaluation in the history, the best ringed.
     let svg = r.svg().unwrap();
-    assert!(svg.starts_with("<svg") && svg.contains("Objective over evaluations"));
-    assert!(svg.contains("each evaluation") && svg.contains("best so far"));
+    assert!(svg.starts_with("<svg") && svg.contains("against cutoff_hz"));
+    let marks = svg.matches("class=\"pt\"").count();
+    assert_eq!(
+        marks,
+        r.history.len() + 1,
+        "every evaluation and the best ring"
+    );
+    assert!(svg.contains("best: #"));
 }
 
 #[test]

@@ -1,0 +1,182 @@
+//! What a tune looks like: the objective against the parameter (every
+//! evaluation; the finalists re-evaluated at the final accuracy marked; the
+//! best ringed), and for two or more objectives the Pareto front over all
+//! search evaluations. Drawn from the evaluations so far, so a running
+//! tune's page and its finished SVG are the same picture.
+
+use super::{metric_name, Evaluation, Metric, Objective};
+use crate::plot::{scatter_svg, Mark, Scatter};
+
+/// A metric on an axis, with its unit.
+pub fn metric_axis(m: Metric) -> &'static str {
+    match m {
+        Metric::KWidth => "K-width (N/m)",
+        Metric::BWidth => "B-width (N·s/m)",
+        Metric::MaxFidelityError => "max fidelity error (N·s/m)",
+        Metric::Area => "area (N/m · N·s/m)",
+    }
+}
+
+/// An evaluation in words (its tooltip).
+pub fn describe(e: &Evaluation) -> String {
+    let params: Vec<String> = e
+        .params
+        .iter()
+        .map(|(k, v)| format!("{k} = {v:.4}"))
+        .collect();
+    let objs: Vec<String> = [
+        Metric::KWidth,
+        Metric::BWidth,
+        Metric::MaxFidelityError,
+        Metric::Area,
+    ]
+    .iter()
+    .filter_map(|&m| Some(format!("{} = {:.4}", metric_name(m), e.metrics.get(m)?)))
+    .collect();
+    format!(
+        "#{} ({}{}): {}; {}; score {:.4}",
+        e.index,
+        e.phase,
+        if e.feasible { "" } else { ", infeasible" },
+        params.join(", "),
+        objs.join(", "),
+        e.score
+    )
+}
+
+/// The evaluation the tune would report now: the best feasible final
+/// one, else the best feasible search one (by score).
+pub fn best_so_far(history: &[Evaluation]) -> Option<&Evaluation> {
+    let best = |phase: &str| {
+        history
+            .iter()
+            .filter(|e| e.phase == phase && e.feasible && e.score.is_finite())
+            .max_by(|a, b| a.score.total_cmp(&b.score))
+    };
+    best("final").or_else(|| best("search"))
+}
+
+/// The objective as plotted: a single metric's value, else the score.
+fn value(objective: &Objective, e: &Evaluation) -> f64 {
+    match objective {
+        Objective::Single(m) => e.metrics.get(*m).unwrap_or(f64::NAN),
+        _ => e.score,
+    }
+}
+
+/// One parameter: the objective against it, each evaluation a point
+/// (search at `accuracy.0`, finalists at `accuracy.1` as diamonds, the best
+/// ringed). Several: the objective against the evaluation's number.
+pub fn landscape_svg(
+    params: &[String],
+    objective: &Objective,
+    history: &[Evaluation],
+    accuracy: (&str, &str),
+) -> Result<String, String> {
+    let y_label = match objective {
+        Objective::Single(m) => metric_axis(*m),
+        _ => "score (higher is better)",
+    };
+    let one = (params.len() == 1).then(|| params[0].as_str());
+    let x = |e: &Evaluation| match one {
+        Some(p) => e.params.get(p).copied().unwrap_or(f64::NAN),
+        None => e.index as f64,
+    };
+    let group = |name: String, mark: Mark, keep: &dyn Fn(&Evaluation) -> bool| {
+        let kept: Vec<&Evaluation> = history.iter().filter(|e| keep(e)).collect();
+        Scatter {
+            name,
+            mark,
+            points: kept.iter().map(|e| (x(e), value(objective, e))).collect(),
+            tips: kept.iter().map(|e| describe(e)).collect(),
+        }
+    };
+    let best = best_so_far(history);
+    let groups = vec![
+        group(
+            format!("search ({})", accuracy.0),
+            Mark::Dot(40, 120, 200),
+            &|e| e.phase == "search" && e.feasible,
+        ),
+        group("infeasible".into(), Mark::Dot(170, 170, 170), &|e| {
+            !e.feasible
+        }),
+        group(
+            format!("finalists ({})", accuracy.1),
+            Mark::Diamond(200, 30, 30),
+            &|e| e.phase == "final" && e.feasible,
+        ),
+        Scatter {
+            name: "best".into(),
+            mark: Mark::Ring(0, 0, 0),
+            points: best
+                .map(|e| vec![(x(e), value(objective, e))])
+                .unwrap_or_default(),
+            tips: best
+                .map(|e| vec![format!("best: {}", describe(e))])
+                .unwrap_or_default(),
+        },
+    ];
+    match one {
+        Some(p) => scatter_svg(
+            &format!("{y_label} against {p}"),
+            p,
+            y_label,
+            &groups,
+            (900, 540),
+        ),
+        None => scatter_svg(
+            &format!("{y_label} by evaluation ({} parameters)", params.len()),
+            "evaluation",
+            y_label,
+            &groups,
+            (900, 540),
+        ),
+    }
+}
+
+/// Two or more objectives: the first two metrics of every search
+/// evaluation, the non-dominated ones (over all the metrics) highlighted.
+/// Returns the SVG and the front's size.
+pub fn pareto_svg(metrics: &[Metric], history: &[Evaluation]) -> Result<(String, usize), String> {
+    let (Some(&mx), Some(&my)) = (metrics.first(), metrics.get(1)) else {
+        return Err("a Pareto plot needs two metrics".into());
+    };
+    let front = super::run::pareto_front(history, metrics);
+    let search: Vec<&Evaluation> = history.iter().filter(|e| e.phase == "search").collect();
+    let group = |name: &str, mark: Mark, on_front: bool| {
+        let kept: Vec<&&Evaluation> = search
+            .iter()
+            .filter(|e| front.contains(&e.index) == on_front)
+            .collect();
+        Scatter {
+            name: name.into(),
+            mark,
+            points: kept
+                .iter()
+                .map(|e| {
+                    (
+                        e.metrics.get(mx).unwrap_or(f64::NAN),
+                        e.metrics.get(my).unwrap_or(f64::NAN),
+                    )
+                })
+                .collect(),
+            tips: kept.iter().map(|e| describe(e)).collect(),
+        }
+    };
+    let svg = scatter_svg(
+        &format!(
+            "Pareto front: {} against {}",
+            metric_axis(my),
+            metric_axis(mx)
+        ),
+        metric_axis(mx),
+        metric_axis(my),
+        &[
+            group("dominated", Mark::Dot(150, 150, 150), false),
+            group("Pareto front", Mark::Diamond(200, 30, 30), true),
+        ],
+        (900, 540),
+    )?;
+    Ok((svg, front.len()))
+}
