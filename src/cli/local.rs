@@ -405,6 +405,43 @@ pub(super) fn run(
             write_either(stdout, json, &r, || r.table())
         }
         Command::Bench {
+            what:
+                BenchCommand::Ui {
+                    db,
+                    experiments,
+                    trials,
+                    big,
+                    repeat,
+                    json,
+                },
+        } => {
+            if !(3..=1_000_000).contains(&experiments)
+                || !(1..=100_000_000).contains(&trials)
+                || !(1..=1_000_000).contains(&big)
+                || big > trials
+                || !(1..=100).contains(&repeat)
+            {
+                return Err(CliError::Input(format!(
+                    "bench ui: --experiments must be 3 to 1000000 (got {experiments}), --trials 1 to 100000000 (got {trials}), --big 1 to 1000000 and at most --trials (got {big}), --repeat 1 to 100 (got {repeat})"
+                )));
+            }
+            let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
+            let rt = tokio::runtime::Builder::new_multi_thread()
+                .enable_all()
+                .build()
+                .map_err(|e| CliError::Failure(format!("cannot start the runtime: {e}")))?;
+            let r = rt
+                .block_on(crate::http::ui::bench::run(
+                    &db,
+                    experiments,
+                    trials,
+                    big,
+                    repeat,
+                ))
+                .map_err(CliError::Failure)?;
+            write_either(stdout, json, &r, || r.table())
+        }
+        Command::Bench {
             what: BenchCommand::Tradeoff { json },
         } => {
             let rows = tradeoff::run()?;

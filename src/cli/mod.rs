@@ -529,6 +529,26 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Each dashboard page's server time (median and slowest of --repeat)
+    /// and size on a new database seeded with --experiments runs holding
+    /// --trials trials (--big of them in one run), through the real router
+    /// in this process; the JSON list is the baseline.
+    Ui {
+        /// A new or empty database to seed (a file path or postgres://…).
+        #[arg(long, env = "ZWIDTH_DB")]
+        db: String,
+        #[arg(long, default_value_t = 10_000)]
+        experiments: usize,
+        #[arg(long, default_value_t = 1_000_000)]
+        trials: usize,
+        /// Trials of the biggest run.
+        #[arg(long, default_value_t = 20_000)]
+        big: usize,
+        #[arg(long, default_value_t = 5)]
+        repeat: usize,
+        #[arg(long)]
+        json: bool,
+    },
     /// Wall time and K/B-width error against `reference` for each accuracy preset, on the example scenes.
     Tradeoff {
         #[arg(long)]

@@ -70,6 +70,23 @@ impl AppState {
         Problem::store(e)
     }
 
+    /// A state that serves reads of `store` with the default simulated rig
+    /// and runs nothing (benchmarks and tests of the pages).
+    pub fn reader(store: Store) -> Result<Self, String> {
+        let sim: Arc<dyn Rig> =
+            Arc::new(crate::rig::SimulatedRig::new("sim", 1).map_err(|e| e.to_string())?);
+        Ok(Self {
+            store,
+            tokens: Arc::new(vec![random_secret()]),
+            agent_tokens: Arc::new(vec![random_secret()]),
+            allow_origins: Arc::new(Vec::new()),
+            rigs: Arc::new(std::sync::RwLock::new(vec![sim])),
+            start_runner: Arc::new(|_| {}),
+            lease: crate::rig::lease::Timing::default(),
+            running: Default::default(),
+        })
+    }
+
     fn rig_ids(&self) -> String {
         self.rig_list()
             .iter()

@@ -160,3 +160,55 @@ impl Store {
             .await)
     }
 }
+
+impl Store {
+    /// A run written as given, with its trials, in one transaction: for
+    /// benchmarks and demos of the dashboard (`zwidth bench ui`), never for
+    /// work (it bypasses the queue's rules).
+    pub async fn import_run(
+        &self,
+        r: &ExperimentRow,
+        trials: &[crate::zwidth::search::StoredTrial],
+        evaluations: &[crate::zwidth::search::StoredEvaluation],
+    ) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        on_pool!(self, p => {
+            let mut tx = p.begin().await?;
+            sqlx::query(
+                "INSERT INTO experiments (id, kind, spec, state, priority, created_ms, started_ms, finished_ms,
+                     trials_done, result, error, not_before_ms, rig, progress, best, attempt, worker)
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16, $17)",
+            )
+            .bind(&r.id)
+            .bind(&r.kind)
+            .bind(&r.spec)
+            .bind(&r.state)
+            .bind(r.priority)
+            .bind(r.created_ms)
+            .bind(r.started_ms)
+            .bind(r.finished_ms)
+            .bind(r.trials_done)
+            .bind(&r.result)
+            .bind(&r.error)
+            .bind(r.not_before_ms)
+            .bind(&r.rig)
+            .bind(r.progress)
+            .bind(&r.best)
+            .bind(r.attempt)
+            .bind(&r.worker)
+            .execute(&mut *tx)
+            .await?;
+            super::leases::insert_trials!(tx, &r.id, trials);
+            for (seq, e) in evaluations.iter().enumerate() {
+                sqlx::query("INSERT INTO evaluations (experiment_id, key, seq, record) VALUES ($1, $2, $3, $4)")
+                    .bind(&r.id)
+                    .bind(&e.key)
+                    .bind(seq as i64)
+                    .bind(e.record.to_string())
+                    .execute(&mut *tx)
+                    .await?;
+            }
+            tx.commit().await
+        })
+    }
+}

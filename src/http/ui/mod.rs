@@ -7,6 +7,7 @@
 //! token the user entered once (kept in the browser's local storage).
 //! No CDN, no build step: it works offline.
 
+pub mod bench;
 mod compare;
 mod queue;
 mod run;

@@ -33,7 +33,7 @@ async fn row(st: &AppState, id: &str) -> Result<ExperimentRow, Problem> {
 }
 
 /// What changes the live part: state, trials, progress, a tune's best.
-fn token(r: &ExperimentRow) -> String {
+pub(super) fn token(r: &ExperimentRow) -> String {
     format!(
         "{}.{}.{:.4}.{}.{}",
         r.state,
