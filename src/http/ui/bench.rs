@@ -29,14 +29,15 @@ pub struct Seeded {
     pub typical: String,
 }
 
-/// A small real map (the analytic engine on the linear scene, Colgate &
-/// Schenkel's strict passivity): its spec, result and one point to copy.
+/// A small real map (the analytic engine on the linear scene, the 2018
+/// paper's impedance criterion, with fidelity): its spec, result and one
+/// point to copy.
 fn template() -> Result<(MapSpec, serde_json::Value, Point), String> {
     let spec: MapSpec = serde_json::from_value(serde_json::json!({
         "scene": {"device": {"coulomb": 0, "quantization": 0},
                   "loop": {"sample_hz": 1000, "render_hz": 1000},
                   "estimator": {"kind": "butterworth", "cutoff_hz": 200, "order": 2}},
-        "criterion": "strict_passivity",
+        "criterion": "impedance",
         "b": [0, 2, 4, 6, 8, 10]
     }))
     .map_err(|e| e.to_string())?;
