@@ -147,6 +147,14 @@ pub struct Best {
     pub max_fidelity_error: Option<usize>,
 }
 
+/// A run's id in 8 characters: its last ones (a uuid v7 starts with its
+/// time, the same for runs submitted within a minute).
+pub fn short_id(id: &str) -> &str {
+    let n = id.chars().count();
+    let skip = n.saturating_sub(8);
+    &id[id.char_indices().nth(skip).map_or(0, |(i, _)| i)..]
+}
+
 fn pct(d: f64, base: f64) -> Option<f64> {
     (base != 0.0).then(|| 100.0 * d / base)
 }
@@ -251,7 +259,7 @@ impl Comparison {
         );
         for r in &self.rows {
             let m = &r.map;
-            let name = format!("{} {}", &m.run[..m.run.len().min(8)], m.label);
+            let name = format!("{} {}", short_id(&m.run), m.label);
             s.push_str(&format!(
                 "{:<38} {:>11.4e} {:>9} {:>9.1} {:>11} {:>10.3e} {:>9}\n",
                 name.chars().take(38).collect::<String>(),
@@ -272,6 +280,16 @@ impl Comparison {
     pub fn svg(&self) -> Result<String, String> {
         boundaries_svg("Z-width boundaries", self.rows.iter().map(|r| &r.map))
     }
+
+    /// The same, each map named by `name` (the dashboard names runs A, B, …).
+    pub fn svg_named(&self, name: impl Fn(&MapSummary) -> String) -> Result<String, String> {
+        let series: Vec<Series> = self
+            .rows
+            .iter()
+            .map(|r| Series::boundary(name(&r.map), &r.map.boundary))
+            .collect();
+        lines_svg("Z-width boundaries", "B (N·s/m)", "K (N/m)", &series)
+    }
 }
 
 fn boundaries_svg<'a>(
@@ -280,7 +298,7 @@ fn boundaries_svg<'a>(
 ) -> Result<String, String> {
     let series: Vec<Series> = maps
         .map(|m| {
-            let name = format!("{} {}", &m.run[..m.run.len().min(8)], m.label);
+            let name = format!("{} {}", short_id(&m.run), m.label);
             Series::boundary(name, &m.boundary)
         })
         .collect();

@@ -119,7 +119,7 @@ async fn every_page_answers_html_with_the_seeded_runs() {
         assert_eq!(html.matches("href=\"/runs/").count(), 40);
         let (_, _, html) = get(&app, "/runs?kind=tune").await;
         assert!(html.contains("1 runs; page 1 of 1."));
-        assert!(html.contains(&s.tune[..8]));
+        assert!(html.contains(zwidth::report::short_id(&s.tune)));
         let (_, _, html) = get(&app, "/runs?state=failed&rig=sim").await;
         assert!(html.contains(&format!("{} runs;", n("failed"))), "{html}");
         // Scene text: every map spec names its Butterworth filter; the tune's too.

@@ -268,15 +268,30 @@ fn colour(t: f64) -> RGBColor {
 }
 
 /// A fidelity colour scale (N·s/m): `lo` maps to the scale's first
-/// colour, `hi` to its last. Several maps drawn with one scale can be
-/// compared by colour.
+/// colour, `hi` to its last; logarithmic when the errors span a factor of
+/// [`LOG_SPAN`] or more (the seed device's estimators range from tens to
+/// tens of thousands of N·s/m: on a linear scale all but one would look
+/// alike). Several maps drawn with one scale can be compared by colour.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FidelityScale {
     pub lo: f64,
     pub hi: f64,
+    pub log: bool,
 }
 
+/// The ratio hi/lo from which a fidelity scale is logarithmic.
+pub const LOG_SPAN: f64 = 20.0;
+
 impl FidelityScale {
+    /// A scale from `lo` to `hi`, logarithmic if they span [`LOG_SPAN`].
+    pub fn new(lo: f64, hi: f64) -> Self {
+        Self {
+            lo,
+            hi,
+            log: lo > 0.0 && hi / lo >= LOG_SPAN,
+        }
+    }
+
     /// The range of the finite fidelity errors of the points that render;
     /// none when no such point has one.
     pub fn of<'a>(points: impl IntoIterator<Item = &'a MapPlotPoint>) -> Option<Self> {
@@ -287,11 +302,8 @@ impl FidelityScale {
             .filter(|f| f.is_finite())
             .fold(None, |acc: Option<Self>, f| {
                 Some(match acc {
-                    None => Self { lo: f, hi: f },
-                    Some(s) => Self {
-                        lo: s.lo.min(f),
-                        hi: s.hi.max(f),
-                    },
+                    None => Self::new(f, f),
+                    Some(s) => Self::new(s.lo.min(f), s.hi.max(f)),
                 })
             })
     }
@@ -299,10 +311,7 @@ impl FidelityScale {
     /// The smallest scale holding both.
     pub fn union(a: Option<Self>, b: Option<Self>) -> Option<Self> {
         match (a, b) {
-            (Some(a), Some(b)) => Some(Self {
-                lo: a.lo.min(b.lo),
-                hi: a.hi.max(b.hi),
-            }),
+            (Some(a), Some(b)) => Some(Self::new(a.lo.min(b.lo), a.hi.max(b.hi))),
             (a, None) => a,
             (None, b) => b,
         }
@@ -310,7 +319,20 @@ impl FidelityScale {
 
     /// Where `f` falls on the scale, 0 to 1.
     pub fn at(&self, f: f64) -> f64 {
-        (f - self.lo) / (self.hi - self.lo).max(1e-12)
+        if self.log {
+            (f.max(self.lo).ln() - self.lo.ln()) / (self.hi.ln() - self.lo.ln()).max(1e-12)
+        } else {
+            (f - self.lo) / (self.hi - self.lo).max(1e-12)
+        }
+    }
+
+    /// The error at `t` (0 to 1) along the scale: the inverse of [`Self::at`].
+    pub fn value_at(&self, t: f64) -> f64 {
+        if self.log {
+            self.lo * (self.hi / self.lo).powf(t)
+        } else {
+            self.lo + (self.hi - self.lo) * t
+        }
     }
 }
 
@@ -491,7 +513,7 @@ pub fn zwidth_map_svg_styled(
                 .map_err(|e| e.to_string())?;
             for i in 0..=4 {
                 let y = bottom - (bottom - top) * i / 4;
-                let v = sc.lo + (sc.hi - sc.lo) * i as f64 / 4.0;
+                let v = sc.value_at(i as f64 / 4.0);
                 right
                     .draw(&Text::new(
                         format!("{v:.1}"),
@@ -508,7 +530,11 @@ pub fn zwidth_map_svg_styled(
                 ))
                 .map_err(|e| e.to_string())?;
             right
-                .draw(&Text::new("(N·s/m)", (4, top - 24), ("sans-serif", 13)))
+                .draw(&Text::new(
+                    if sc.log { "(N·s/m, log)" } else { "(N·s/m)" },
+                    (4, top - 24),
+                    ("sans-serif", 13),
+                ))
                 .map_err(|e| e.to_string())?;
         }
         root.present().map_err(|e| e.to_string())?;
@@ -852,15 +878,14 @@ fn point_marks(
             let (c, tip) = match scale {
                 Some(sc) if i < BANDS => {
                     let t = i as f64 / (BANDS - 1) as f64;
-                    let half = 0.5 / (BANDS - 1) as f64 * (sc.hi - sc.lo);
-                    let mid = sc.lo + t * (sc.hi - sc.lo);
+                    let half = 0.5 / (BANDS - 1) as f64;
                     (
                         colour(t),
                         format!(
                             "{n} points {}, fidelity error {:.3} to {:.3} N·s/m",
                             xml_escape(ok_label),
-                            (mid - half).max(sc.lo),
-                            (mid + half).min(sc.hi)
+                            sc.value_at((t - half).max(0.0)),
+                            sc.value_at((t + half).min(1.0))
                         ),
                     )
                 }

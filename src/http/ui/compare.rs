@@ -10,7 +10,7 @@ use maud::{html, Markup};
 use serde_json::Value;
 
 use super::run::map_panels;
-use super::{run_link, short, state_badge, svg, Nav};
+use super::{run_link, state_badge, svg, Nav};
 use crate::http::compare::run_ids;
 use crate::http::experiments::{finished_maps, no_plot};
 use crate::http::{AppState, Problem};
@@ -60,13 +60,15 @@ pub async fn page(
         maps.extend(m);
     }
     let c = report::compare(ids.clone(), maps)?;
+    // Runs by letter (A, B, …): short and unlike each other.
+    let letter = |run: &str| letter(ids.iter().position(|i| i == run).unwrap_or(0));
     let panels: Vec<_> = c
         .rows
         .iter()
         .map(|r| {
             let m = &r.map;
             (
-                format!("{} {}", short(&m.run), m.label),
+                format!("{} {}", letter(&m.run), m.label),
                 m.points
                     .iter()
                     .map(MapPlotPoint::from_json)
@@ -77,7 +79,9 @@ pub async fn page(
         })
         .collect();
     let figure = map_panels(&panels, true)?;
-    let overlay = c.svg().map_err(no_plot)?;
+    let overlay = c
+        .svg_named(|m| format!("{} {}", letter(&m.run), m.label))
+        .map_err(no_plot)?;
     let pct = |p: Option<f64>| p.map_or("–".into(), |p| format!("{p:+.1} %"));
     let best = |i: usize, j: Option<usize>| if Some(i) == j { "best" } else { "" };
     let here = format!("/compare?runs={}", ids.join(","));
@@ -86,14 +90,17 @@ pub async fn page(
         Nav::Compare,
         html! {
             h1 { "Compare " (ids.len()) " runs" }
+            ul class="runs-key" {
+                @for id in &ids { li { strong { (letter(id)) } " " (run_link(id)) } }
+            }
             @for n in &c.notes { p class="warn" { (n) } }
             table class="figures" {
-                caption { "Differences from the first map (" (short(&ids[0])) " " (c.rows.first().map_or("", |r| r.map.label.as_str())) "); best of each column marked" }
+                caption { "Differences from the first map (A " (c.rows.first().map_or("", |r| r.map.label.as_str())) "); best of each column marked" }
                 thead { tr { th { "run" } th { "map" } th { "K-width (N/m)" } th { "ΔK" } th { "B-width (N·s/m)" } th { "ΔB" } th { "max fidelity error (N·s/m)" } th { "area" } th { "Δarea" } } }
                 tbody {
                     @for (i, r) in c.rows.iter().enumerate() {
                         tr {
-                            td { (run_link(&r.map.run)) }
+                            td { strong { (letter(&r.map.run)) } " " (run_link(&r.map.run)) }
                             td { (r.map.label) }
                             td class={"num " (best(i, Some(c.best.k_width)))} { (format!("{:.0}", r.map.k_width)) }
                             td class="num" { (pct(r.k_width_diff_pct)) }
@@ -144,7 +151,7 @@ fn spec_table(ids: &[String], specs: &[Value], all: bool) -> Markup {
             p class="muted" { "The specs are the same." }
         } @else {
             table class="spec-diff" {
-                thead { tr { th { "field" } @for id in ids { th { (run_link(id)) } } } }
+                thead { tr { th { "field" } @for (i, id) in ids.iter().enumerate() { th { strong { (letter(i)) } " " (run_link(id)) } } } }
                 tbody {
                     @for (p, vals) in &rows {
                         @let differ = vals.iter().any(|v| v != &vals[0]);
@@ -156,6 +163,16 @@ fn spec_table(ids: &[String], specs: &[Value], all: bool) -> Markup {
                 }
             }
         }
+    }
+}
+
+/// A run's letter by its place: A … Z, then AA, AB, …
+pub fn letter(i: usize) -> String {
+    const L: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZ";
+    if i < 26 {
+        (L[i] as char).to_string()
+    } else {
+        format!("{}{}", L[i / 26 - 1] as char, L[i % 26] as char)
     }
 }
 

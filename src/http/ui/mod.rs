@@ -27,6 +27,8 @@ use super::AppState;
 const HTMX: &str = include_str!("assets/htmx-2.0.11.min.js");
 const APP_JS: &str = include_str!("assets/app.js");
 const STYLE: &str = include_str!("assets/style.css");
+/// A K–B boundary as the tab's icon.
+const ICON: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 16 16"><rect width="16" height="16" rx="3" fill="#0b5cad"/><path d="M2 3C6 4 9 8 14 14" stroke="#fff" stroke-width="2" fill="none"/></svg>"##;
 
 /// How often a live part asks for changes (ms).
 pub const POLL_MS: u64 = 2000;
@@ -50,6 +52,7 @@ async fn asset(Path(name): Path<String>) -> Response {
         "htmx-2.0.11.min.js" => (HTMX, "text/javascript; charset=utf-8"),
         "app.js" => (APP_JS, "text/javascript; charset=utf-8"),
         "style.css" => (STYLE, "text/css; charset=utf-8"),
+        "icon.svg" => (ICON, "image/svg+xml"),
         _ => {
             return super::Problem::not_found("asset", &name).into_response();
         }
@@ -93,6 +96,7 @@ pub fn layout(title: &str, nav: Nav, body: Markup) -> Response {
                 meta name="htmx-config" content=r#"{"includeIndicatorStyles":false,"allowEval":false,"historyCacheSize":0}"#;
                 title { (title) " · zwidth" }
                 link rel="stylesheet" href="/assets/style.css";
+                link rel="icon" href="/assets/icon.svg" type="image/svg+xml";
                 script src="/assets/htmx-2.0.11.min.js" defer {}
                 script src="/assets/app.js" defer {}
             }
@@ -200,14 +204,11 @@ pub fn state_badge(state: &str) -> Markup {
     html! { span class={"badge " (state)} { (state) } }
 }
 
-/// The first 8 characters of an id (ids are uuid v7: their start is time).
-pub fn short(id: &str) -> &str {
-    &id[..id.char_indices().nth(8).map_or(id.len(), |(i, _)| i)]
-}
+pub use crate::report::short_id as short;
 
 /// A run's link.
 pub fn run_link(id: &str) -> Markup {
-    html! { a href={"/runs/" (id)} class="mono" title=(id) { (short(id)) } }
+    html! { a href={"/runs/" (id)} class="mono id" title=(id) { (short(id)) } }
 }
 
 /// An action button: app.js sends `method url` with the saved token and

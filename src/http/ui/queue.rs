@@ -107,9 +107,9 @@ async fn render(st: &AppState, token: &str) -> Result<Markup, Problem> {
                             td { (run_link(&r.id)) }
                             td { (r.kind) }
                             td { (r.rig) }
-                            td { progress value=(format!("{:.3}", r.progress)) max="1" aria-label={"progress of " (r.id)} {} " " span class="num" { (format!("{:.0} %", 100.0 * r.progress)) } }
-                            td class="num" { (r.trials_done) }
-                            td class="num" { (elapsed.filter(|e| *e > 0.5).map_or("–".into(), |e| format!("{:.1}", r.trials_done as f64 / e))) }
+                            td class="volatile" { progress value=(format!("{:.3}", r.progress)) max="1" aria-label={"progress of " (r.id)} {} " " span class="num" { (format!("{:.0} %", 100.0 * r.progress)) } }
+                            td class="num volatile" { (r.trials_done) }
+                            td class="num volatile" { (elapsed.filter(|e| *e > 0.5).map_or("–".into(), |e| format!("{:.1}", r.trials_done as f64 / e))) }
                             td class="volatile" {
                                 @if let Some(why) = v.progress["waiting_for_rig"].as_str() { span class="warn" { "waiting for the rig: " (why) } }
                                 @else { (v.progress["eta_s"].as_f64().map_or("–".into(), duration)) }

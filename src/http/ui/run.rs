@@ -56,7 +56,7 @@ pub async fn page(State(st): State<AppState>, Path(id): Path<String>) -> Result<
         &format!("{} {}", r.kind, short(&r.id)),
         Nav::None,
         html! {
-            h1 { (r.kind) " " span class="mono" { (r.id) } }
+            h1 { (r.kind) " " span class="mono id" { (r.id) } }
             dl class="facts" {
                 dt { "rig" } dd { (r.rig) }
                 dt { "priority" } dd { (r.priority) }
@@ -98,10 +98,10 @@ async fn live_markup(st: &AppState, r: &ExperimentRow) -> Result<Markup, Problem
         div class="status" {
             (state_badge(&r.state))
             @if !ended {
-                " " progress value=(format!("{:.3}", r.progress)) max="1" aria-label="progress" {}
-                " " span class="num" { (format!("{:.0} %", 100.0 * r.progress)) }
+                " " progress class="volatile" value=(format!("{:.3}", r.progress)) max="1" aria-label="progress" {}
+                " " span class="num volatile" { (format!("{:.0} %", 100.0 * r.progress)) }
             }
-            " " span class="num" { (r.trials_done) " trials" }
+            " " span class="num trials" { (r.trials_done) " trials" }
             @if let Some(e) = v.progress["elapsed_s"].as_f64() { " · " span class="volatile" { (duration(e)) " elapsed" } }
             @if let Some(e) = v.progress["eta_s"].as_f64() { " · " span class="volatile" { "ETA " (duration(e)) } }
             @if let Some(why) = v.progress["waiting_for_rig"].as_str() { " · " span class="warn" { "waiting for the rig: " (why) } }

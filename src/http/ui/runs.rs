@@ -134,8 +134,8 @@ pub async fn page(
                                 td { (r.kind) }
                                 td { (state_badge(&r.state)) }
                                 td { (r.rig) }
-                                td class="num" { (format!("{:.0} %", 100.0 * r.progress)) }
-                                td class="num" { (r.trials_done) }
+                                td class="num volatile" { (format!("{:.0} %", 100.0 * r.progress)) }
+                                td class="num volatile" { (r.trials_done) }
                                 td class="volatile" { (ago(r.created_ms, now)) }
                                 td class="error small" { (r.error.as_deref().unwrap_or("")) }
                             }
