@@ -896,3 +896,76 @@ fn bench_scale_refuses_counts_out_of_range_and_a_sqlite_database() {
         "bench scale measures a PostgreSQL database",
     );
 }
+
+/// `bench ui` seeds a new database with counts it can hold: anything else
+/// exits 2 naming the flag and what is allowed, and a database that holds
+/// experiments is refused, untouched.
+#[test]
+fn bench_ui_refuses_counts_out_of_range_and_a_database_in_use() {
+    for (flag, value, allowed) in [
+        (
+            "--experiments",
+            "2",
+            "--experiments must be 3 to 1000000 (got 2)",
+        ),
+        ("--trials", "0", "--trials 1 to 100000000 (got 0)"),
+        ("--repeat", "0", "--repeat 1 to 100 (got 0)"),
+        (
+            "--big",
+            "2000000",
+            "--big 1 to 1000000 and at most --trials",
+        ),
+    ] {
+        rejects(
+            &["bench", "ui", "--db", "never.db", flag, value],
+            "",
+            allowed,
+        );
+    }
+    rejects(
+        &[
+            "bench", "ui", "--db", "x.db", "--trials", "10", "--big", "11",
+        ],
+        "",
+        "at most --trials (got 11)",
+    );
+    assert!(!std::path::Path::new("never.db").exists());
+    // A database in use: seeded once (tiny), then refused.
+    let dir = std::env::temp_dir().join(format!("zwidth-bench-ui-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let db = dir.join("b.db");
+    let db = db.to_str().unwrap();
+    let args = [
+        "bench",
+        "ui",
+        "--db",
+        db,
+        "--experiments",
+        "3",
+        "--trials",
+        "30",
+        "--big",
+        "10",
+        "--repeat",
+        "1",
+        "--json",
+    ];
+    let o = zwidth(&args, "");
+    assert_eq!(o.code, 0, "{}", o.stderr);
+    let r: serde_json::Value = serde_json::from_str(&o.stdout).unwrap();
+    assert_eq!(r["seeded"]["trials"], 30, "{r}");
+    assert!(
+        r["pages"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|p| p["status"] == 200 || p["status"] == 204),
+        "{r}"
+    );
+    rejects(
+        &args,
+        "",
+        "holds experiments: bench ui seeds a new, empty database",
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -438,7 +438,10 @@ pub(super) fn run(
                     big,
                     repeat,
                 ))
-                .map_err(CliError::Failure)?;
+                .map_err(|e| match e {
+                    crate::http::ui::bench::BenchError::Input(m) => CliError::Input(m),
+                    crate::http::ui::bench::BenchError::Failure(m) => CliError::Failure(m),
+                })?;
             write_either(stdout, json, &r, || r.table())
         }
         Command::Bench {

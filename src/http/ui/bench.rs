@@ -113,8 +113,23 @@ pub async fn seed(
         })
         .collect();
     let now = crate::clock::now_ms();
-    let rest = trials.saturating_sub(big);
-    let per = rest / experiments.saturating_sub(1).max(1);
+    // Every 50th waiting, every 200th running, every 97th failed; the
+    // first the biggest, the third the tune.
+    let state_of = |i: usize| match i {
+        1 => "succeeded",
+        _ if i % 200 == 7 => "running",
+        _ if i % 50 == 3 => "queued",
+        _ if i % 97 == 5 => "failed",
+        _ => "succeeded",
+    };
+    // The other trials over the runs that hold trials (not the biggest,
+    // the tune or the waiting), so the database holds `trials` in all.
+    let holders = (3..experiments)
+        .filter(|&i| state_of(i) != "queued")
+        .count()
+        + 1;
+    let per = trials.saturating_sub(big).div_ceil(holders.max(1));
+    let mut left = trials.saturating_sub(big);
     let mut out = Seeded {
         experiments,
         trials: 0,
@@ -125,16 +140,17 @@ pub async fn seed(
     };
     for i in 0..experiments {
         let id = uuid::Uuid::now_v7().to_string();
-        let n = if i == 0 { big } else { per };
-        let t0 = now - (experiments - i) as i64 * 60_000;
-        // Every 50th waiting, every 200th running, every 97th failed.
-        let state = match i {
-            _ if i == 1 => "succeeded",
-            _ if i % 200 == 7 => "running",
-            _ if i % 50 == 3 => "queued",
-            _ if i % 97 == 5 => "failed",
-            _ => "succeeded",
+        let n = if i == 0 {
+            big
+        } else if i == 2 || state_of(i) == "queued" {
+            0
+        } else {
+            let n = per.min(left);
+            left -= n;
+            n
         };
+        let t0 = now - (experiments - i) as i64 * 60_000;
+        let state = state_of(i);
         let is_tune = i == 2;
         let row = ExperimentRow {
             id: id.clone(),
@@ -235,6 +251,25 @@ impl Report {
     }
 }
 
+/// Why a bench could not run: the database given (exit 2), or a failure.
+#[derive(Debug)]
+pub enum BenchError {
+    Input(String),
+    Failure(String),
+}
+
+impl From<String> for BenchError {
+    fn from(s: String) -> Self {
+        Self::Failure(s)
+    }
+}
+
+impl From<&str> for BenchError {
+    fn from(s: &str) -> Self {
+        Self::Failure(s.into())
+    }
+}
+
 /// Seed `db` (it must be new or empty) and time every page `repeat` times.
 pub async fn run(
     db: &crate::store::Location,
@@ -242,13 +277,16 @@ pub async fn run(
     trials: usize,
     big: usize,
     repeat: usize,
-) -> Result<Report, String> {
-    let store = Store::connect(db).await.map_err(|e| format!("{e:?}"))?;
+) -> Result<Report, BenchError> {
+    let store = Store::connect(db).await.map_err(|e| match e {
+        crate::store::OpenError::Refused(m) => BenchError::Input(format!("--db {db}: {m}")),
+        crate::store::OpenError::Failed(m) => BenchError::Failure(m),
+    })?;
     let (counts, _) = store.counts().await.map_err(|e| e.to_string())?;
     if counts.iter().any(|(_, n)| *n > 0) {
-        return Err(format!(
+        return Err(BenchError::Input(format!(
             "--db {db} holds experiments: bench ui seeds a new, empty database"
-        ));
+        )));
     }
     let t = Instant::now();
     let seeded = seed(&store, experiments, trials, big).await?;
@@ -278,6 +316,10 @@ pub async fn run(
             format!("/ui/runs/{}/live?since=x", seeded.big),
         ),
         (
+            "queue, live part unchanged (204)",
+            "/ui/queue/live?since=q".into(),
+        ),
+        (
             "compare two runs",
             format!("/compare?runs={},{}", seeded.pair[0], seeded.pair[1]),
         ),
@@ -293,6 +335,13 @@ pub async fn run(
                 .map_err(|e| e.to_string())?
                 .ok_or("big run gone")?;
             path.replace("since=x", &format!("since={}", super::run::token(&r)))
+        } else if path.contains("since=q") {
+            let st = super::super::AppState::reader(store.clone())?;
+            let t = super::queue::token(&st)
+                .await
+                .map_err(|p| format!("{p:?}"))?;
+            let q = serde_urlencoded::to_string([("since", t)]).map_err(|e| e.to_string())?;
+            path.replace("since=q", &q)
         } else {
             path
         };

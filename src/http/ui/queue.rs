@@ -45,7 +45,7 @@ async fn current(st: &AppState) -> Result<Markup, Problem> {
 
 /// The board's token plus what only this process knows: the rigs'
 /// windows (and whether they are open) and attached rigs' connections.
-async fn token(st: &AppState) -> Result<String, Problem> {
+pub(super) async fn token(st: &AppState) -> Result<String, Problem> {
     use std::hash::{Hash, Hasher};
     let t = st.store.board_token().await.map_err(|e| st.fail(e))?;
     let mut h = std::collections::hash_map::DefaultHasher::new();
