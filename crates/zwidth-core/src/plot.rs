@@ -930,6 +930,170 @@ mod tests {
         assert!(loglog_svg("t", "x", "y", &[]).is_err());
     }
 
+    fn pt(b: f64, k: f64, ok: bool, fidelity: Option<f64>, decided: bool) -> MapPlotPoint {
+        MapPlotPoint {
+            b,
+            k,
+            ok,
+            fidelity,
+            decided,
+        }
+    }
+
+    #[test]
+    fn a_fidelity_scale_spans_the_rendering_points_and_goes_log_past_twenty() {
+        // Only points that render count; NaN and non-rendering ones do not.
+        let pts = [
+            pt(0.0, 1.0, true, Some(2.0), true),
+            pt(0.0, 2.0, true, Some(30.0), true),
+            pt(0.0, 3.0, false, Some(1e6), true),
+            pt(0.0, 4.0, true, Some(f64::NAN), true),
+            pt(0.0, 5.0, true, None, true),
+        ];
+        let s = FidelityScale::of(&pts).unwrap();
+        assert_eq!((s.lo, s.hi), (2.0, 30.0));
+        // 30/2 = 15 < 20: linear; at(16) = (16 − 2)/(30 − 2) = 0.5.
+        assert!(!s.log);
+        assert_eq!(s.at(16.0), 0.5);
+        assert_eq!(s.value_at(0.5), 16.0);
+        assert!(FidelityScale::of(&pts[2..3]).is_none());
+        // Exactly 20×: logarithmic; the middle is the geometric mean.
+        let l = FidelityScale::new(10.0, 200.0);
+        assert!(l.log);
+        assert!(!FidelityScale::new(10.0, 199.0).log);
+        assert!(!FidelityScale::new(0.0, 1e9).log, "no log scale from 0");
+        let mid = (10.0f64 * 200.0).sqrt();
+        assert!((l.at(mid) - 0.5).abs() < 1e-12);
+        assert!((l.value_at(0.5) - mid).abs() < 1e-9);
+        assert_eq!(l.at(10.0), 0.0);
+        assert!((l.at(200.0) - 1.0).abs() < 1e-12);
+        assert!((l.value_at(1.0) - 200.0).abs() < 1e-9);
+        // The union holds both, and is log when together they span 20×.
+        let u = FidelityScale::union(Some(FidelityScale::new(5.0, 50.0)), Some(s)).unwrap();
+        assert_eq!((u.lo, u.hi, u.log), (2.0, 50.0, true));
+        assert_eq!(FidelityScale::union(None, Some(s)), Some(s));
+        assert_eq!(FidelityScale::union(Some(s), None), Some(s));
+        assert_eq!(FidelityScale::union(None, None), None);
+    }
+
+    #[test]
+    fn every_point_is_one_mark_with_its_tooltip_or_counted_in_a_compact_path() {
+        let pts = vec![
+            pt(1.0, 100.0, true, Some(1.0), true),
+            pt(2.0, 200.0, true, Some(3.0), true),
+            pt(3.0, 300.0, false, None, true),
+            pt(4.0, 400.0, false, None, false),
+        ];
+        let b = [
+            BoundaryPoint::new(1.0, 150.0),
+            BoundaryPoint::new(2.0, 250.0),
+        ];
+        let svg = zwidth_map_svg("t <&>", &pts, &b, "passive").unwrap();
+        assert!(svg.trim_end().ends_with("</svg>"));
+        assert_eq!(svg.matches("class=\"pt ok\"").count(), 2);
+        assert_eq!(svg.matches("class=\"pt no\"").count(), 1);
+        assert_eq!(svg.matches("class=\"pt undecided\"").count(), 1);
+        assert!(svg.contains(
+            "<title>B = 2.000 N·s/m, K = 200.0 N/m: passive, fidelity error 3.000 N·s/m</title>"
+        ));
+        assert!(svg.contains("K = 300.0 N/m: not passive</title>"));
+        assert!(svg.contains("K = 400.0 N/m: undecided</title>"));
+        // Colours: the scale's ends (viridis' first and last stops).
+        assert!(svg.contains("fill=\"#440154\""), "the smallest error");
+        assert!(svg.contains("fill=\"#fde725\""), "the largest error");
+        // The title is escaped by plotters.
+        assert!(!svg.contains("t <&>"));
+        // Past the limit: one path per kind and band, counting its points.
+        let style = MapStyle {
+            tooltip_limit: 3,
+            ..MapStyle::default()
+        };
+        let c = zwidth_map_svg_styled("t", &pts, &b, &style).unwrap();
+        assert_eq!(c.matches("class=\"pt ").count(), 0);
+        let n: Vec<usize> = c
+            .match_indices("data-n=\"")
+            .map(|(i, m)| {
+                let r = &c[i + m.len()..];
+                r[..r.find('"').unwrap()].parse().unwrap()
+            })
+            .collect();
+        assert_eq!(n.iter().sum::<usize>(), pts.len());
+        // Two rendering points at the two ends of the scale: two bands.
+        assert_eq!(c.matches("class=\"pts ok\"").count(), 2);
+        assert!(c.contains("1 points passive, fidelity error 1.000 to"));
+        assert_eq!(c.matches("class=\"pts no\"").count(), 1);
+        assert_eq!(c.matches("class=\"pts undecided\"").count(), 1);
+    }
+
+    #[test]
+    fn a_shared_scale_and_extent_override_the_maps_own() {
+        let pts = vec![pt(1.0, 100.0, true, Some(2.0), true)];
+        let style = MapStyle {
+            scale: Some(FidelityScale::new(0.0, 4.0)),
+            extent: Some((50.0, 1000.0)),
+            ..MapStyle::default()
+        };
+        let svg = zwidth_map_svg_styled("t", &pts, &[], &style).unwrap();
+        // 2 on a 0–4 scale is the middle stop of the five: #21918c.
+        assert!(
+            svg.contains("fill=\"#21918c\""),
+            "the shared scale's middle"
+        );
+        let flat = svg.replace('\n', "");
+        assert!(
+            flat.contains(">4.0</text>") && flat.contains(">0.0</text>"),
+            "its colour bar"
+        );
+        // The axis reaches the shared extent, not the point's own 105.
+        assert!(
+            flat.contains(">1000</text>") || flat.contains(">900</text>"),
+            "K axis to 1000"
+        );
+        assert_eq!(map_extent(&pts, &[]), (1.05, 108.0));
+    }
+
+    #[test]
+    fn a_scatter_marks_every_point_with_an_escaped_tooltip_and_a_legend_row() {
+        let g = vec![
+            Scatter {
+                name: "search <draft>".into(),
+                mark: Mark::Dot(1, 2, 3),
+                points: vec![(1.0, 2.0), (2.0, 3.0), (f64::NAN, 1.0)],
+                tips: vec!["a & b".into()],
+            },
+            Scatter {
+                name: "best".into(),
+                mark: Mark::Ring(0, 0, 0),
+                points: vec![(2.0, 3.0)],
+                tips: vec![],
+            },
+        ];
+        let svg = scatter_svg("t", "x", "y", &g, (600, 400)).unwrap();
+        // NaN points are left out: 2 + 1 marks.
+        assert_eq!(svg.matches("class=\"pt\"").count(), 3);
+        assert!(svg.contains("<title>a &amp; b</title>"));
+        assert!(
+            svg.contains("<title>x = 2.0000, y = 3.0000</title>"),
+            "a default tooltip"
+        );
+        assert!(svg.contains("search &lt;draft&gt;</text>"));
+        assert!(svg.contains("fill=\"#010203\""));
+        assert_eq!(svg.matches("class=\"key\"").count(), 2);
+        assert!(scatter_svg("t", "x", "y", &[], (600, 400)).is_err());
+    }
+
+    #[test]
+    fn ticks_carry_the_decimals_their_span_needs() {
+        assert_eq!(tick(123456.0, 400000.0), "123456");
+        assert_eq!(tick(1.25, 3.0), "1.25");
+        assert_eq!(tick(0.12345, 0.2), "0.1235");
+        assert_eq!(tick(3.4e7, 1e8), "3.40e7");
+        assert_eq!(
+            xml_escape("<a href='x'>&\"</a>"),
+            "&lt;a href=&#39;x&#39;&gt;&amp;&quot;&lt;/a&gt;"
+        );
+    }
+
     #[test]
     fn a_boundary_draws_one_bar_per_interval_and_the_axis_reaches_its_top() {
         // Three boundary points, two with an interval: two bars (the

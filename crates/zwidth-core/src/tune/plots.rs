@@ -180,3 +180,88 @@ pub fn pareto_svg(metrics: &[Metric], history: &[Evaluation]) -> Result<(String,
     )?;
     Ok((svg, front.len()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tune::Metrics;
+
+    fn eval(index: usize, phase: &str, hz: f64, k: f64, fid: f64, feasible: bool) -> Evaluation {
+        Evaluation {
+            index,
+            phase: phase.into(),
+            params: [("cutoff_hz".to_string(), hz)].into(),
+            objectives: Default::default(),
+            metrics: Metrics {
+                k_width: k,
+                b_width: 1.0,
+                max_fidelity_error: Some(fid),
+                area: 1.0,
+                k_width_interval: None,
+                b_width_interval: None,
+            },
+            score: k,
+            feasible,
+            cached: false,
+            trials: 1,
+            elapsed_s: 0.0,
+            replicate: 0,
+        }
+    }
+
+    #[test]
+    fn the_landscape_draws_each_evaluation_once_and_rings_the_best_final() {
+        let h = vec![
+            eval(0, "search", 100.0, 10.0, 1.0, true),
+            eval(1, "search", 200.0, 30.0, 2.0, true),
+            eval(2, "search", 300.0, 50.0, 2.0, false),
+            eval(3, "final", 200.0, 25.0, 2.0, true),
+            eval(4, "final", 100.0, 12.0, 2.0, true),
+        ];
+        // The best is the best feasible final (25 at 200 Hz), not the
+        // larger search score (30) nor the infeasible 50.
+        assert_eq!(best_so_far(&h).map(|e| e.index), Some(3));
+        assert_eq!(best_so_far(&h[..3]).map(|e| e.index), Some(1));
+        assert_eq!(best_so_far(&h[2..3]).map(|e| e.index), None);
+        let svg = landscape_svg(
+            &["cutoff_hz".into()],
+            &Objective::Single(Metric::KWidth),
+            &h,
+            ("draft", "standard"),
+        )
+        .unwrap();
+        assert_eq!(svg.matches("class=\"pt\"").count(), h.len() + 1);
+        assert!(svg.contains("K-width (N/m) against cutoff_hz"));
+        assert!(svg.contains("finalists (standard)") && svg.contains("search (draft)"));
+        assert!(svg.contains("<title>best: #3 (final): cutoff_hz = 200.0000;"));
+        assert!(svg.contains("#2 (search, infeasible)"));
+        // Two parameters: against the evaluation's number.
+        let svg = landscape_svg(
+            &["a".into(), "b".into()],
+            &Objective::Weighted([(Metric::KWidth, 1.0)].into()),
+            &h,
+            ("draft", "draft"),
+        )
+        .unwrap();
+        assert!(svg.contains("score (higher is better) by evaluation (2 parameters)"));
+    }
+
+    #[test]
+    fn the_pareto_plot_highlights_the_non_dominated_search_evaluations() {
+        // K-width up, fidelity error down: (10, 1) dominates (10, 3);
+        // (20, 2) is on the front too; the final is not drawn.
+        let h = vec![
+            eval(0, "search", 1.0, 10.0, 1.0, true),
+            eval(1, "search", 2.0, 20.0, 2.0, true),
+            eval(2, "search", 3.0, 10.0, 3.0, true),
+            eval(3, "final", 2.0, 99.0, 0.1, true),
+        ];
+        let (svg, n) = pareto_svg(&[Metric::KWidth, Metric::MaxFidelityError], &h).unwrap();
+        assert_eq!(n, 2);
+        assert_eq!(svg.matches("class=\"pt\"").count(), 3);
+        // Diamonds (paths) for the front, dots for the dominated.
+        assert_eq!(svg.matches("<path class=\"pt\"").count(), 2);
+        assert_eq!(svg.matches("<circle class=\"pt\"").count(), 1);
+        assert!(pareto_svg(&[Metric::KWidth], &h).is_err());
+    }
+}
