@@ -795,7 +795,11 @@ fn a_killed_tune_resumes_from_its_stored_evaluations() {
     let csv = fetch(ureq::get(&format!("{url}/{id}/points.csv")).call());
     assert_eq!(csv.2.lines().count(), 1 + n_hist, "{}", csv.2);
     let svg = fetch(ureq::get(&format!("{url}/{id}/plot.svg")).call());
-    assert!(svg.2.contains("best so far"));
+    // The objective against the parameter: one mark per feasible
+    // evaluation of the history, plus the best's ring (tune::plots).
+    assert!(svg.2.contains("against cutoff_hz"), "{}", svg.2);
+    let feasible = want.history.iter().filter(|e| e.feasible).count();
+    assert_eq!(svg.2.matches("class=\"pt\"").count(), feasible + 1);
     // Bad tune requests are problems naming the field.
     for (body, field) in [
         (

@@ -355,7 +355,14 @@ async fn bad_queries_are_problems_naming_the_field() {
             ("/runs?colour=red", 422, "colour"),
             ("/compare?x=1", 422, "x"),
             ("/compare?runs=,,,", 422, "runs"),
-            ("/compare?runs=no-such-run", 404, ""),
+            ("/compare?runs=no-such-run", 404, "runs"),
+            ("/runs?page=2", 422, "page"),
+            // A NUL byte: PostgreSQL's text cannot hold one (a 500 before).
+            ("/runs?scene=%00", 422, "query"),
+            ("/runs/%00", 404, "path"),
+            ("/ui/runs/%00/live", 404, "path"),
+            ("/compare?runs=%00", 422, "query"),
+            ("/v1/experiments/%00", 404, "path"),
             ("/runs/no-such-run", 404, ""),
             ("/ui/runs/no-such-run/live", 404, ""),
         ] {

@@ -140,7 +140,8 @@ fn logged_uri(uri: &axum::http::Uri) -> String {
     format!("{}?{}", uri.path(), redacted.join("&"))
 }
 
-/// A request target longer than [`URI_LIMIT`] is a 414 problem.
+/// A request target longer than [`URI_LIMIT`] is a 414 problem; one with
+/// a NUL byte a 404 (path) or 422 (query).
 async fn uri_limit(
     req: axum::extract::Request,
     next: axum::middleware::Next,
@@ -152,6 +153,27 @@ async fn uri_limit(
             StatusCode::URI_TOO_LONG,
             "URI too long",
             format!("the request target is {len} bytes; at most {URI_LIMIT}"),
+        )
+        .with_field("query")
+        .into_response();
+    }
+    // A NUL byte names nothing that can be stored (PostgreSQL's text
+    // refuses it): an id with one does not exist, a query value with one
+    // is invalid.
+    if req.uri().path().contains("%00") {
+        return Problem::new(
+            StatusCode::NOT_FOUND,
+            "Not found",
+            "the path holds a NUL byte (%00): no resource is named so",
+        )
+        .with_field("path")
+        .into_response();
+    }
+    if req.uri().query().is_some_and(|q| q.contains("%00")) {
+        return Problem::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "Invalid request",
+            "the query holds a NUL byte (%00): no parameter takes one",
         )
         .with_field("query")
         .into_response();

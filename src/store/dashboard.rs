@@ -23,6 +23,8 @@ pub struct Board {
     /// All waiting, of which `waiting` is the first page.
     pub waiting_total: i64,
     pub failed: Vec<ExperimentRow>,
+    /// All failed since `since_ms`, of which `failed` is the first page.
+    pub failed_total: i64,
 }
 
 /// Which runs a list shows; an empty field matches every run.
@@ -47,11 +49,15 @@ impl Store {
             "SELECT ", summary_columns!(), " FROM experiments WHERE state = 'running' ORDER BY started_ms, id"))
             .fetch_all(p)
             .await)?;
+        // Runnable now first (by priority, then age: the claim's order),
+        // then those that become runnable later (scheduled, or interrupted
+        // until their lease ends) by that time.
         let waiting: Vec<ExperimentRow> = on_pool!(self, p => sqlx::query_as(concat!(
             "SELECT ", summary_columns!(), " FROM experiments
              WHERE state IN ('queued', 'scheduled', 'interrupted')
-             ORDER BY CASE WHEN not_before_ms > $1 THEN 1 ELSE 0 END,
-                      CASE WHEN not_before_ms > $1 THEN not_before_ms ELSE 0 END,
+             ORDER BY CASE WHEN not_before_ms > $1 OR (state = 'interrupted' AND lease_until_ms > $1) THEN 1 ELSE 0 END,
+                      CASE WHEN not_before_ms > $1 THEN not_before_ms
+                           WHEN state = 'interrupted' AND lease_until_ms > $1 THEN lease_until_ms ELSE 0 END,
                       priority DESC, created_ms, id
              LIMIT $2"))
             .bind(now_ms)
@@ -60,6 +66,11 @@ impl Store {
             .await)?;
         let waiting_total: i64 = on_pool!(self, p => sqlx::query_scalar(
             "SELECT COUNT(*) FROM experiments WHERE state IN ('queued', 'scheduled', 'interrupted')")
+            .fetch_one(p)
+            .await)?;
+        let failed_total: i64 = on_pool!(self, p => sqlx::query_scalar(
+            "SELECT COUNT(*) FROM experiments WHERE state = 'failed' AND finished_ms >= $1")
+            .bind(since_ms)
             .fetch_one(p)
             .await)?;
         let failed: Vec<ExperimentRow> = on_pool!(self, p => sqlx::query_as(concat!(
@@ -75,26 +86,59 @@ impl Store {
             waiting,
             waiting_total,
             failed,
+            failed_total,
         })
     }
 
-    /// What changes the queue board: the number waiting and running, their
-    /// trials and progress, the last run to end, and the paused flag.
-    pub async fn board_token(&self) -> Result<String, sqlx::Error> {
-        let (n, trials, progress, started): (i64, i64, f64, i64) = on_pool!(self, p => sqlx::query_as(
-            "SELECT COUNT(*), CAST(COALESCE(SUM(trials_done), 0) AS BIGINT),
-                    CAST(COALESCE(SUM(progress), 0) AS DOUBLE PRECISION), CAST(COALESCE(MAX(started_ms), 0) AS BIGINT)
+    /// What changes the queue board at `now_ms`: the runs waiting and
+    /// running by state, their trials, progress, attempts and priorities,
+    /// the next time a waiting one becomes runnable, the failures since
+    /// `since_ms`, the paused flag, and the minute (the "ago" and "opens
+    /// in" texts). Two indexed aggregates.
+    pub async fn board_token(&self, now_ms: i64, since_ms: i64) -> Result<String, sqlx::Error> {
+        let row: (i64, i64, i64, i64, f64, i64, i64, i64, i64) = on_pool!(self, p => sqlx::query_as(
+            "SELECT CAST(COALESCE(SUM(CASE WHEN state = 'queued' THEN 1 ELSE 0 END), 0) AS BIGINT),
+                    CAST(COALESCE(SUM(CASE WHEN state = 'scheduled' THEN 1 ELSE 0 END), 0) AS BIGINT),
+                    CAST(COALESCE(SUM(CASE WHEN state = 'interrupted' THEN 1 ELSE 0 END), 0) AS BIGINT),
+                    CAST(COALESCE(SUM(trials_done), 0) AS BIGINT),
+                    CAST(COALESCE(SUM(progress), 0) AS DOUBLE PRECISION),
+                    CAST(COALESCE(SUM(attempt), 0) AS BIGINT),
+                    CAST(COALESCE(SUM(priority), 0) AS BIGINT),
+                    CAST(COALESCE(MAX(started_ms), 0) AS BIGINT),
+                    CAST(COALESCE(MIN(CASE WHEN not_before_ms > $1 THEN not_before_ms
+                                           WHEN state = 'interrupted' AND lease_until_ms > $1 THEN lease_until_ms END), 0) AS BIGINT)
              FROM experiments WHERE state IN ('queued', 'scheduled', 'interrupted', 'running')")
+            .bind(now_ms)
             .fetch_one(p)
             .await)?;
-        let ended: i64 = on_pool!(self, p => sqlx::query_scalar(
-            "SELECT CAST(COALESCE(MAX(finished_ms), 0) AS BIGINT) FROM experiments")
+        let running: (i64, i64) = on_pool!(self, p => sqlx::query_as(
+            "SELECT CAST(COUNT(*) AS BIGINT), CAST(COALESCE(SUM(attempt), 0) AS BIGINT) FROM experiments WHERE state = 'running'")
+            .fetch_one(p)
+            .await)?;
+        let failed: (i64, i64) = on_pool!(self, p => sqlx::query_as(
+            "SELECT CAST(COUNT(*) AS BIGINT), CAST(COALESCE(MAX(finished_ms), 0) AS BIGINT)
+             FROM experiments WHERE state = 'failed' AND finished_ms >= $1")
+            .bind(since_ms)
             .fetch_one(p)
             .await)?;
         let paused = self.paused().await?;
         Ok(format!(
-            "{n}.{trials}.{progress:.4}.{started}.{ended}.{}",
-            paused as u8
+            "{}.{}.{}.{}.{:.4}.{}.{}.{}.{}.{}.{}.{}.{}.{}.{}",
+            row.0,
+            row.1,
+            row.2,
+            row.3,
+            row.4,
+            row.5,
+            row.6,
+            row.7,
+            row.8,
+            running.0,
+            running.1,
+            failed.0,
+            failed.1,
+            paused as u8,
+            now_ms / 60_000
         ))
     }
 
@@ -151,6 +195,13 @@ impl Store {
             .fetch_one(p)
             .await)?;
         Ok((rows, total))
+    }
+
+    /// Every rig's window as stored (JSON), by rig: one query.
+    pub async fn rig_windows(&self) -> Result<Vec<(String, String)>, sqlx::Error> {
+        on_pool!(self, p => sqlx::query_as(r#"SELECT rig, "window" FROM rig_windows ORDER BY rig"#)
+            .fetch_all(p)
+            .await)
     }
 
     /// The rigs named by any stored run (for the list's filter).

@@ -334,7 +334,11 @@ pub async fn run(
                 .await
                 .map_err(|e| e.to_string())?
                 .ok_or("big run gone")?;
-            path.replace("since=x", &format!("since={}", super::run::token(&r)))
+            let st = super::super::AppState::reader(store.clone())?;
+            let n = store.trial_count(&r.id).await.map_err(|e| e.to_string())?;
+            let q = serde_urlencoded::to_string([("since", super::run::token(&r, n, &st))])
+                .map_err(|e| e.to_string())?;
+            path.replace("since=x", &q)
         } else if path.contains("since=q") {
             let st = super::super::AppState::reader(store.clone())?;
             let t = super::queue::token(&st)

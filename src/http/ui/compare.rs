@@ -10,7 +10,7 @@ use maud::{html, Markup};
 use serde_json::Value;
 
 use super::run::map_panels;
-use super::{run_link, state_badge, svg, Nav};
+use super::{run_link, state_badge, Nav};
 use crate::http::compare::run_ids;
 use crate::http::experiments::{finished_maps, no_plot};
 use crate::http::{AppState, Problem};
@@ -55,7 +55,9 @@ pub async fn page(
     let mut maps = Vec::new();
     let mut specs = Vec::new();
     for id in &ids {
-        let (spec, _, m) = finished_maps(&st, id).await?;
+        let (spec, _, m) = finished_maps(&st, id)
+            .await
+            .map_err(|p| p.with_field("runs"))?;
         specs.push(serde_json::to_value(&spec).unwrap_or(Value::Null));
         maps.extend(m);
     }
@@ -84,6 +86,9 @@ pub async fn page(
         .map_err(no_plot)?;
     let pct = |p: Option<f64>| p.map_or("–".into(), |p| format!("{p:+.1} %"));
     let best = |i: usize, j: Option<usize>| if Some(i) == j { "best" } else { "" };
+    // The best in words too (not by weight and colour alone).
+    let mark =
+        |i: usize, j: Option<usize>| html! { @if Some(i) == j { span class="sr" { " (best)" } } };
     let here = format!("/compare?runs={}", ids.join(","));
     Ok(super::layout(
         "Compare",
@@ -102,12 +107,12 @@ pub async fn page(
                         tr {
                             td { strong { (letter(&r.map.run)) } " " (run_link(&r.map.run)) }
                             td { (r.map.label) }
-                            td class={"num " (best(i, Some(c.best.k_width)))} { (format!("{:.0}", r.map.k_width)) }
+                            td class={"num " (best(i, Some(c.best.k_width)))} { (format!("{:.0}", r.map.k_width)) (mark(i, Some(c.best.k_width))) }
                             td class="num" { (pct(r.k_width_diff_pct)) }
-                            td class={"num " (best(i, Some(c.best.b_width)))} { (format!("{:.2}", r.map.b_width)) }
+                            td class={"num " (best(i, Some(c.best.b_width)))} { (format!("{:.2}", r.map.b_width)) (mark(i, Some(c.best.b_width))) }
                             td class="num" { (pct(r.b_width_diff_pct)) }
-                            td class={"num " (best(i, c.best.max_fidelity_error))} { (r.map.max_fidelity_error.map_or("–".into(), |f| format!("{f:.3}"))) }
-                            td class={"num " (best(i, Some(c.best.area)))} { (format!("{:.4e}", r.map.area)) }
+                            td class={"num " (best(i, c.best.max_fidelity_error))} { (r.map.max_fidelity_error.map_or("–".into(), |f| format!("{f:.3}"))) (mark(i, c.best.max_fidelity_error)) }
+                            td class={"num " (best(i, Some(c.best.area)))} { (format!("{:.4e}", r.map.area)) (mark(i, Some(c.best.area))) }
                             td class="num" { (pct(r.area_diff_pct)) }
                         }
                     }
@@ -117,7 +122,7 @@ pub async fn page(
             p class="muted small" { "One axis range and one fidelity colour scale for every map." }
             (figure)
             h2 { "The boundaries" }
-            figure class="overlay" { (svg(&overlay)) }
+            figure class="overlay" { (super::chart("every map's boundary, K against B", &overlay)) }
             h2 { "The specs" }
             p {
                 @if all { a href=(here) { "Show differences only" } } @else { "Differences only. " a href={(here) "&all=1"} { "Show every field" } }

@@ -133,7 +133,7 @@ fn html_response(code: StatusCode, m: Markup) -> Response {
             (header::CACHE_CONTROL, "no-store"),
             (
                 header::CONTENT_SECURITY_POLICY,
-                "default-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'; script-src 'self'; connect-src 'self'; frame-ancestors 'none'; base-uri 'none'; form-action 'self'",
+                "default-src 'self'; img-src 'self' data:; style-src 'self'; script-src 'self'; connect-src 'self'; frame-ancestors 'none'; base-uri 'none'; form-action 'self'",
             ),
         ],
         m.into_string(),
@@ -214,9 +214,26 @@ pub fn run_link(id: &str) -> Markup {
 /// An action button: app.js sends `method url` with the saved token and
 /// refreshes the live part on success.
 pub fn action(method: &str, url: &str, label: &str, what: &str) -> Markup {
+    // An id, so the focus comes back to it when the live part is redrawn.
+    let id: String = format!("act-{method}-{url}")
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
     html! {
-        button type="button" class="action" data-method=(method) data-url=(url) aria-label={(label) " " (what)} { (label) }
+        button type="button" id=(id) class="action" data-method=(method) data-url=(url) aria-label={(label) " " (what)} { (label) }
     }
+}
+
+/// A chart: its SVG inline, named for screen readers as one image (the
+/// points' tooltips are for pointers).
+pub fn chart(label: &str, s: &str) -> Markup {
+    html! { div class="chart" role="img" aria-label=(label) { (svg(s)) } }
 }
 
 /// Inline SVG made by `zwidth::plot` (our own markup: every text in it

@@ -13,6 +13,8 @@ use crate::http::{AppState, Problem};
 
 /// Rows shown of the waiting and the failed.
 const SHOWN: i64 = 50;
+/// The failures shown: those of the last day (ms).
+const DAY_MS: i64 = 24 * 3600 * 1000;
 
 pub async fn page(State(st): State<AppState>) -> Result<Response, Problem> {
     Ok(page_with(current(&st).await?))
@@ -43,22 +45,49 @@ async fn current(st: &AppState) -> Result<Markup, Problem> {
     render(st, &token).await
 }
 
-/// The board's token plus what only this process knows: the rigs'
-/// windows (and whether they are open) and attached rigs' connections.
+/// The board's token plus what only this process knows: the running
+/// runs' rig status (held, waiting for the rig), the rigs' windows (and
+/// whether each is open now) and attached rigs' connections.
 pub(super) async fn token(st: &AppState) -> Result<String, Problem> {
     use std::hash::{Hash, Hasher};
-    let t = st.store.board_token().await.map_err(|e| st.fail(e))?;
+    let now = now_ms();
+    let t = st
+        .store
+        .board_token(now, now - DAY_MS)
+        .await
+        .map_err(|e| st.fail(e))?;
     let mut h = std::collections::hash_map::DefaultHasher::new();
+    {
+        let running = st.running.lock().unwrap_or_else(|e| e.into_inner());
+        let mut status: Vec<(String, Option<String>, Option<String>)> = running
+            .iter()
+            .map(|(id, o)| (id.clone(), o.held(), o.waiting()))
+            .collect();
+        status.sort();
+        status.hash(&mut h);
+    }
+    let windows = st.store.rig_windows().await.map_err(|e| st.fail(e))?;
+    windows.hash(&mut h);
+    let at = jiff::Timestamp::from_millisecond(now).unwrap_or_else(|_| jiff::Timestamp::now());
+    for (_, w) in &windows {
+        let open = serde_json::from_str::<crate::rig::window::Window>(w)
+            .ok()
+            .and_then(|w| w.validate().ok())
+            .is_some_and(|h| h.is_open(at));
+        open.hash(&mut h);
+    }
     for r in st.rig_list() {
-        let v = rig_view(st, &r).await?;
-        v.info.id.hash(&mut h);
-        v.open_now.hash(&mut h);
-        serde_json::to_string(&v.window)
-            .unwrap_or_default()
-            .hash(&mut h);
-        v.attached
-            .as_ref()
-            .map(|a| (a.connected, a.lost_contact, a.quarantine.clone()))
+        r.info().id.hash(&mut h);
+        r.attached()
+            .map(|a| a.view())
+            .map(|a| {
+                (
+                    a.connected,
+                    a.lost_contact,
+                    a.quarantine,
+                    a.state.map(|s| format!("{s:?}")),
+                )
+            })
             .hash(&mut h);
     }
     Ok(format!("{t}.{:x}", h.finish()))
@@ -68,7 +97,7 @@ async fn render(st: &AppState, token: &str) -> Result<Markup, Problem> {
     let now = now_ms();
     let board = st
         .store
-        .board(now, now - 24 * 3600 * 1000, SHOWN)
+        .board(now, now - DAY_MS, SHOWN)
         .await
         .map_err(|e| st.fail(e))?;
     let paused = st.store.paused().await.map_err(|e| st.fail(e))?;
@@ -125,20 +154,21 @@ async fn render(st: &AppState, token: &str) -> Result<Markup, Problem> {
         @if board.waiting.is_empty() {
             p class="muted" { "Nothing is waiting." }
         } @else {
-            p class="muted small" { "In the order they will be claimed: on each rig, runnable now by priority then age, then those scheduled for later." }
+            p class="muted small" { "In the order they will be claimed on each rig: runnable now by priority then age, then those that become runnable later (scheduled, or interrupted until their last lease ends) by that time." }
             table class="waiting" {
-                thead { tr { th { "#" } th { "run" } th { "kind" } th { "rig" } th { "priority" } th { "state" } th { "submitted" } th { "not before" } th { span class="sr" { "actions" } } } }
+                thead { tr { th { "rig" } th { "#" } th { "run" } th { "kind" } th { "priority" } th { "state" } th { "submitted" } th { "runnable" } th { span class="sr" { "actions" } } } }
                 tbody {
-                    @for (i, r) in board.waiting.iter().enumerate() {
+                    @for (r, n) in board.waiting.iter().zip(per_rig_order(&board.waiting)) {
+                        @let ready = ready_at(r, now);
                         tr {
-                            td class="num" { (i + 1) }
+                            td { (r.rig) }
+                            td class="num" { (n) }
                             td { (run_link(&r.id)) }
                             td { (r.kind) }
-                            td { (r.rig) }
                             td class="num" { (r.priority) }
                             td { (state_badge(&r.state)) }
                             td class="volatile" { (ago(r.created_ms, now)) }
-                            td class="volatile" { (r.not_before_ms.filter(|t| *t > now).map_or("–".into(), |t| format!("in {}", duration((t - now) as f64 / 1000.0)))) }
+                            td class="volatile" { (ready.map_or("now".into(), |t| format!("in {}", duration((t - now) as f64 / 1000.0)))) }
                             td { (action("POST", &format!("/v1/experiments/{}/cancel", r.id), "Cancel", &r.id)) }
                         }
                     }
@@ -148,7 +178,7 @@ async fn render(st: &AppState, token: &str) -> Result<Markup, Problem> {
                 p class="muted" { "and " (board.waiting_total - board.waiting.len() as i64) " more: " a href="/runs?state=queued" { "all queued runs" } }
             }
         }
-        h2 { "Failed in the last 24 h " span class="count" { "(" (board.failed.len()) ")" } }
+        h2 { "Failed in the last 24 h " span class="count" { "(" (board.failed_total) ")" } }
         @if board.failed.is_empty() {
             p class="muted" { "No failures." }
         } @else {
@@ -165,6 +195,9 @@ async fn render(st: &AppState, token: &str) -> Result<Markup, Problem> {
                         }
                     }
                 }
+            }
+            @if board.failed_total > board.failed.len() as i64 {
+                p class="muted" { "and " (board.failed_total - board.failed.len() as i64) " more: " a href="/runs?state=failed" { "all failed runs" } }
             }
         }
     };
@@ -207,7 +240,8 @@ fn rig_row(r: &RigView, now: i64) -> Markup {
             td class="num" { (r.waiting) }
             td { @if let Some(run) = &r.running { (run_link(run)) } @else { "–" } }
             td {
-                details {
+                // Kept as it is when the live part is redrawn (open, typed).
+                details id={"window-edit-" (id)} hx-preserve="true" {
                     summary { "Window" }
                     form id=(form_id) class="window" data-rig=(id) {
                         label { "opens " input name="start" type="time" required value=(w.as_ref().map_or("22:00", |w| w.start.as_str())); }
@@ -219,5 +253,95 @@ fn rig_row(r: &RigView, now: i64) -> Markup {
                 }
             }
         }
+    }
+}
+
+/// Each run's place in its own rig's queue (1, 2, … per rig), in the
+/// board's order.
+pub fn per_rig_order(rows: &[crate::store::ExperimentRow]) -> Vec<usize> {
+    let mut seen: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+    rows.iter()
+        .map(|r| {
+            let n = seen.entry(r.rig.as_str()).or_insert(0);
+            *n += 1;
+            *n
+        })
+        .collect()
+}
+
+/// When a waiting run becomes claimable, if later than `now`: its
+/// `not_before`, or an interrupted run's last lease end.
+pub fn ready_at(r: &crate::store::ExperimentRow, now: i64) -> Option<i64> {
+    let lease = (r.state == "interrupted")
+        .then_some(r.lease_until_ms)
+        .flatten();
+    [r.not_before_ms, lease]
+        .into_iter()
+        .flatten()
+        .filter(|t| *t > now)
+        .max()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::ExperimentRow;
+
+    fn row(rig: &str, state: &str, not_before: Option<i64>, lease: Option<i64>) -> ExperimentRow {
+        ExperimentRow {
+            id: "x".into(),
+            kind: "map".into(),
+            spec: String::new(),
+            state: state.into(),
+            priority: 0,
+            created_ms: 0,
+            started_ms: None,
+            finished_ms: None,
+            trials_done: 0,
+            result: None,
+            error: None,
+            idempotency_key: None,
+            not_before_ms: not_before,
+            rig: rig.into(),
+            progress: 0.0,
+            best: None,
+            attempt: 0,
+            worker: None,
+            lease_until_ms: lease,
+        }
+    }
+
+    #[test]
+    fn places_count_per_rig_and_readiness_is_the_later_of_schedule_and_lease() {
+        let rows = [
+            row("a", "queued", None, None),
+            row("b", "queued", None, None),
+            row("a", "queued", None, None),
+            row("a", "scheduled", None, None),
+            row("b", "queued", None, None),
+        ];
+        assert_eq!(per_rig_order(&rows), vec![1, 1, 2, 3, 2]);
+        let now = 1_000;
+        assert_eq!(ready_at(&row("a", "queued", None, None), now), None);
+        assert_eq!(
+            ready_at(&row("a", "scheduled", Some(500), None), now),
+            None,
+            "past: now"
+        );
+        assert_eq!(
+            ready_at(&row("a", "scheduled", Some(5_000), None), now),
+            Some(5_000)
+        );
+        // An interrupted run waits for its last lease to end (the claim's
+        // rule); a queued one's stale lease does not count.
+        assert_eq!(
+            ready_at(&row("a", "interrupted", None, Some(3_000)), now),
+            Some(3_000)
+        );
+        assert_eq!(ready_at(&row("a", "queued", None, Some(3_000)), now), None);
+        assert_eq!(
+            ready_at(&row("a", "interrupted", Some(9_000), Some(3_000)), now),
+            Some(9_000)
+        );
     }
 }

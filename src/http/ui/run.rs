@@ -10,7 +10,7 @@ use axum::response::Response;
 use maud::{html, Markup};
 use serde_json::Value;
 
-use super::{action, duration, fragment, live_part, short, state_badge, svg, unchanged, utc, Nav};
+use super::{action, duration, fragment, live_part, short, state_badge, unchanged, utc, Nav};
 use crate::experiment::ExperimentSpec;
 use crate::http::{AppState, Problem};
 use crate::plot::{map_extent, zwidth_map_svg_styled, FidelityScale, MapPlotPoint, MapStyle};
@@ -32,16 +32,35 @@ async fn row(st: &AppState, id: &str) -> Result<ExperimentRow, Problem> {
         .ok_or_else(|| Problem::not_found("experiment", id))
 }
 
-/// What changes the live part: state, trials, progress, a tune's best.
-pub(super) fn token(r: &ExperimentRow) -> String {
+/// What changes the live part: state, trials stored and done, progress,
+/// the end, a tune's best, and (known only to this process) whether its
+/// trials are held or it waits for its rig.
+pub(super) fn token(r: &ExperimentRow, stored: i64, st: &AppState) -> String {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    r.best.hash(&mut h);
+    if let Some(o) = st
+        .running
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .get(&r.id)
+    {
+        (o.held(), o.waiting()).hash(&mut h);
+    }
     format!(
-        "{}.{}.{:.4}.{}.{}",
+        "{}.{}.{}.{:.4}.{}.{:x}",
         r.state,
         r.trials_done,
+        stored,
         r.progress,
         r.finished_ms.unwrap_or(0),
-        r.best.as_deref().map_or(0, str::len)
+        h.finish()
     )
+}
+
+async fn current_token(st: &AppState, r: &ExperimentRow) -> Result<String, Problem> {
+    let stored = st.store.trial_count(&r.id).await.map_err(|e| st.fail(e))?;
+    Ok(token(r, stored, st))
 }
 
 pub async fn page(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, Problem> {
@@ -62,7 +81,7 @@ pub async fn page(State(st): State<AppState>, Path(id): Path<String>) -> Result<
                 dt { "priority" } dd { (r.priority) }
                 dt { "submitted" } dd class="volatile" { (utc(r.created_ms)) }
                 @if let Some(t) = r.not_before_ms { dt { "not before" } dd class="volatile" { (utc(t)) } }
-                dt { "scene" } dd { a href={"/runs?kind=" (r.kind)} { "runs of this kind" } }
+                dt { "more like it" } dd { a href={"/runs?kind=" (r.kind)} { "runs of this kind" } " · " a href={"/runs?rig=" (r.rig)} { "runs on this rig" } }
             }
             details class="spec" {
                 summary { "Spec" }
@@ -80,7 +99,7 @@ pub async fn live(
     RawQuery(q): RawQuery,
 ) -> Result<Response, Problem> {
     let r = row(&st, &id).await?;
-    if let Some(resp) = unchanged(q.as_deref(), &token(&r)) {
+    if let Some(resp) = unchanged(q.as_deref(), &current_token(&st, &r).await?) {
         return Ok(resp);
     }
     Ok(fragment(live_markup(&st, &r).await?))
@@ -133,7 +152,7 @@ async fn live_markup(st: &AppState, r: &ExperimentRow) -> Result<Markup, Problem
     Ok(live_part(
         "live",
         &format!("/ui/runs/{}/live", r.id),
-        &token(r),
+        &current_token(st, r).await?,
         !ended,
         html! { (status) (body) (downloads) },
     ))
@@ -150,11 +169,20 @@ fn labels(spec: &ExperimentSpec, finished: &[MapSummary], n: usize) -> Vec<Strin
             .variant_specs()
             .map(|v| v.into_iter().map(|(l, _, _)| l).collect())
             .unwrap_or_default(),
-        ExperimentSpec::Compare(c) => c
-            .estimators
-            .as_ref()
-            .map(|e| e.iter().map(|e| e.label()).collect())
-            .unwrap_or_default(),
+        ExperimentSpec::Compare(c) => match &c.estimators {
+            Some(e) => e.iter().map(|e| e.label()).collect(),
+            // The paper's four, named as the result will name them (their
+            // names do not depend on Levant's C).
+            None => crate::zwidth::compare::paper_estimators(
+                &c.scene
+                    .clone()
+                    .unwrap_or_else(crate::zwidth::compare::seed_2018_scene),
+                1.0,
+            )
+            .into_iter()
+            .map(|(name, _, _)| name)
+            .collect(),
+        },
         ExperimentSpec::Tune(_) => Vec::new(),
     };
     while out.len() < n {
@@ -312,7 +340,7 @@ pub fn map_panels(
         div class={"maps" (if single { " single" } else { "" })} {
             @for (name, n, s) in &out {
                 figure {
-                    (svg(s))
+                    (super::chart(&format!("K–B map of {name}: {n} trials"), s))
                     figcaption { (name) ": " (n) " trials" }
                 }
             }

@@ -73,8 +73,20 @@ pub async fn page(
         .list_filtered(&f, PER_PAGE, (n - 1) * PER_PAGE)
         .await
         .map_err(|e| st.fail(e))?;
-    let rigs = st.store.run_rigs().await.map_err(|e| st.fail(e))?;
+    let mut rigs = st.store.run_rigs().await.map_err(|e| st.fail(e))?;
+    // A rig asked for that no run names is still the filter shown.
+    if !f.rig.is_empty() && !rigs.contains(&f.rig) {
+        rigs.push(f.rig.clone());
+    }
     let pages = ((total + PER_PAGE - 1) / PER_PAGE).max(1);
+    if n > pages {
+        return Err(SpecError::new(
+            "page",
+            n.to_string(),
+            format!("must be 1 to {pages}: {total} runs match, {PER_PAGE} a page"),
+        )
+        .into());
+    }
     let now = now_ms();
     let link = |p: i64| {
         let mut pairs = vec![("page", p.to_string())];

@@ -7,7 +7,6 @@
 use maud::{html, Markup};
 use serde_json::Value;
 
-use super::svg;
 use crate::tune::plots::{best_so_far, describe, landscape_svg, metric_axis, pareto_svg};
 use crate::tune::{Evaluation, Metric, Objective, TuneSpec};
 use crate::zwidth::observer::StoredEvaluation;
@@ -54,9 +53,9 @@ pub fn render(spec: &TuneSpec, stored: &[StoredEvaluation], result: Option<&Valu
                 @if let Some(h) = result.and_then(|r| r["ranking_held"].as_bool()) { " · ranking held: " (h) }
             }
         }
-        @if let Some(s) = &landscape { figure class="tune" { (svg(s)) } } @else { p class="muted" { "No evaluations stored yet." } }
+        @if let Some(s) = &landscape { figure class="tune" { (super::chart("the objective of every evaluation against the parameter", s)) } } @else { p class="muted" { "No evaluations stored yet." } }
         @if let Some((s, n)) = &front {
-            figure class="tune" { (svg(s)) figcaption { (n) " evaluations on the front" } }
+            figure class="tune" { (super::chart("the Pareto front over all search evaluations", s)) figcaption { (n) " evaluations on the front" } }
         }
         @if !finals.is_empty() {
             table class="figures" {
@@ -68,7 +67,7 @@ pub fn render(spec: &TuneSpec, stored: &[StoredEvaluation], result: Option<&Valu
                             td class="num" { (e.index) }
                             td class="mono small" { @for (k, v) in &e.params { (k) " = " (format!("{v:.4}")) " " } }
                             @for m in &metrics { td class="num" { (metric_value(e, *m)) } }
-                            td class="num" { (format!("{:.4}", e.score)) }
+                            td class="num" { @if e.feasible { (format!("{:.4}", e.score)) } @else { "infeasible" } }
                         }
                     }
                 }

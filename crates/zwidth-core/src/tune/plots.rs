@@ -33,14 +33,19 @@ pub fn describe(e: &Evaluation) -> String {
     .iter()
     .filter_map(|&m| Some(format!("{} = {:.4}", metric_name(m), e.metrics.get(m)?)))
     .collect();
+    // An infeasible evaluation's score is a stand-in far below every real
+    // one (`run::infeasible_score`): not a number to read.
+    let score = if e.feasible {
+        format!("score {:.4}", e.score)
+    } else {
+        "infeasible".to_string()
+    };
     format!(
-        "#{} ({}{}): {}; {}; score {:.4}",
+        "#{} ({}): {}; {}; {score}",
         e.index,
         e.phase,
-        if e.feasible { "" } else { ", infeasible" },
         params.join(", "),
-        objs.join(", "),
-        e.score
+        objs.join(", ")
     )
 }
 
@@ -92,15 +97,19 @@ pub fn landscape_svg(
         }
     };
     let best = best_so_far(history);
+    // Infeasible gains are left out: their scores stand far below every
+    // feasible one and would flatten the axis; the legend counts them.
+    let infeasible = history.iter().filter(|e| !e.feasible).count();
     let groups = vec![
         group(
-            format!("search ({})", accuracy.0),
+            if infeasible > 0 {
+                format!("search ({}; {infeasible} infeasible not drawn)", accuracy.0)
+            } else {
+                format!("search ({})", accuracy.0)
+            },
             Mark::Dot(40, 120, 200),
             &|e| e.phase == "search" && e.feasible,
         ),
-        group("infeasible".into(), Mark::Dot(170, 170, 170), &|e| {
-            !e.feasible
-        }),
         group(
             format!("finalists ({})", accuracy.1),
             Mark::Diamond(200, 30, 30),
@@ -230,11 +239,22 @@ mod tests {
             ("draft", "standard"),
         )
         .unwrap();
-        assert_eq!(svg.matches("class=\"pt\"").count(), h.len() + 1);
+        // Every feasible evaluation once, plus the best's ring; the
+        // infeasible one (its score a stand-in) is counted, not drawn.
+        assert_eq!(svg.matches("class=\"pt\"").count(), h.len() - 1 + 1);
+        assert!(svg.contains("1 infeasible not drawn"));
         assert!(svg.contains("K-width (N/m) against cutoff_hz"));
-        assert!(svg.contains("finalists (standard)") && svg.contains("search (draft)"));
+        assert!(
+            svg.contains("finalists (standard)")
+                && svg.contains("search (draft; 1 infeasible not drawn)")
+        );
         assert!(svg.contains("<title>best: #3 (final): cutoff_hz = 200.0000;"));
-        assert!(svg.contains("#2 (search, infeasible)"));
+        assert!(
+            describe(&h[2]).ends_with("; infeasible"),
+            "{}",
+            describe(&h[2])
+        );
+        assert!(describe(&h[1]).ends_with("; score 30.0000"));
         // Two parameters: against the evaluation's number.
         let svg = landscape_svg(
             &["a".into(), "b".into()],
