@@ -905,8 +905,8 @@ fn bench_ui_refuses_counts_out_of_range_and_a_database_in_use() {
     for (flag, value, allowed) in [
         (
             "--experiments",
-            "2",
-            "--experiments must be 3 to 1000000 (got 2)",
+            "4",
+            "--experiments must be 5 to 1000000 (got 4)",
         ),
         ("--trials", "0", "--trials 1 to 100000000 (got 0)"),
         ("--repeat", "0", "--repeat 1 to 100 (got 0)"),
@@ -941,7 +941,7 @@ fn bench_ui_refuses_counts_out_of_range_and_a_database_in_use() {
         "--db",
         db,
         "--experiments",
-        "3",
+        "5",
         "--trials",
         "30",
         "--big",

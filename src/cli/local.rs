@@ -415,14 +415,14 @@ pub(super) fn run(
                     json,
                 },
         } => {
-            if !(3..=1_000_000).contains(&experiments)
+            if !(5..=1_000_000).contains(&experiments)
                 || !(1..=100_000_000).contains(&trials)
                 || !(1..=1_000_000).contains(&big)
                 || big > trials
                 || !(1..=100).contains(&repeat)
             {
                 return Err(CliError::Input(format!(
-                    "bench ui: --experiments must be 3 to 1000000 (got {experiments}), --trials 1 to 100000000 (got {trials}), --big 1 to 1000000 and at most --trials (got {big}), --repeat 1 to 100 (got {repeat})"
+                    "bench ui: --experiments must be 5 to 1000000 (got {experiments}), --trials 1 to 100000000 (got {trials}), --big 1 to 1000000 and at most --trials (got {big}), --repeat 1 to 100 (got {repeat})"
                 )));
             }
             let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;

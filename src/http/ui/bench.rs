@@ -303,7 +303,11 @@ pub async fn run(
         ("queue", "/".into()),
         ("queue, live part", "/ui/queue/live".into()),
         ("runs, page 1", "/runs".into()),
-        ("runs, page 100", "/runs?page=100".into()),
+        // The last page: the deepest OFFSET.
+        (
+            "runs, last page",
+            format!("/runs?page={}", experiments.div_ceil(50)),
+        ),
         (
             "runs, kind+state filter",
             "/runs?kind=map&state=failed".into(),
