@@ -176,6 +176,63 @@ async fn map_marks_count_the_stored_trials_and_a_big_run_stays_small() {
     }
 }
 
+/// The run page reads a run's points joined per scope in the database
+/// (`Store::map_points`): the same points, in the same order, as the
+/// trials read one row each (`Store::trials`); a damaged stored point is
+/// left out as `trials` leaves it out, not the whole map.
+#[tokio::test]
+async fn map_points_are_the_stored_trials_in_order_and_a_damaged_one_is_left_out() {
+    for (app, store, s, dir) in seeded("points").await {
+        for id in [&s.typical, &s.big] {
+            let joined: Vec<serde_json::Value> = store
+                .map_points(id)
+                .await
+                .unwrap()
+                .into_iter()
+                .flat_map(|(scope, pts)| {
+                    pts.into_iter().map(move |p| serde_json::json!([scope, p]))
+                })
+                .collect();
+            let rows: Vec<serde_json::Value> = store
+                .trials(id)
+                .await
+                .unwrap()
+                .into_iter()
+                .map(|t| serde_json::json!([t.scope, t.point]))
+                .collect();
+            assert!(!rows.is_empty());
+            assert_eq!(joined, rows);
+        }
+        // SQLite: damage one stored point of the typical run by hand.
+        let Some(Dir(d)) = &dir else { continue };
+        let n = store.trial_count(&s.typical).await.unwrap() as usize;
+        let pool = sqlx::SqlitePool::connect(&format!("sqlite://{}", d.join("z.db").display()))
+            .await
+            .unwrap();
+        sqlx::query(
+            "UPDATE trials SET point = '{' WHERE rowid = \
+             (SELECT rowid FROM trials WHERE experiment_id = $1 LIMIT 1)",
+        )
+        .bind(&s.typical)
+        .execute(&pool)
+        .await
+        .unwrap();
+        pool.close().await;
+        assert_eq!(store.trials(&s.typical).await.unwrap().len(), n - 1);
+        let points: usize = store
+            .map_points(&s.typical)
+            .await
+            .unwrap()
+            .iter()
+            .map(|(_, p)| p.len())
+            .sum();
+        assert_eq!(points, n - 1);
+        let (code, _, html) = get(&app, &format!("/runs/{}", s.typical)).await;
+        assert_eq!(code, StatusCode::OK);
+        assert_eq!(html.matches("class=\"pt ").count(), n - 1);
+    }
+}
+
 #[tokio::test]
 async fn a_twenty_thousand_trial_run_page_is_under_a_megabyte() {
     let d = std::env::temp_dir().join(format!("zwidth-ui-big-{}", std::process::id()));

@@ -3,6 +3,7 @@
 //! new costs one cheap query.
 
 use super::{on_pool, Db, ExperimentRow, Store};
+use crate::zwidth::search::Point;
 
 /// The columns of a summary row (no spec, no result).
 macro_rules! summary_columns {
@@ -195,6 +196,53 @@ impl Store {
             .fetch_one(p)
             .await)?;
         Ok((rows, total))
+    }
+
+    /// A run's stored points per scope, in the maps' order, for drawing:
+    /// one row per scope (the points joined in the database), not one per
+    /// trial, because handing 20 000 rows one by one from SQLite's thread
+    /// cost ~100 ms of a 20 000-trial run page (docs/benchmarks.md). A
+    /// scope whose joined text does not parse (a damaged point) is read
+    /// trial by trial, leaving that point out as `trials` does.
+    pub async fn map_points(&self, id: &str) -> Result<Vec<(u32, Vec<Point>)>, sqlx::Error> {
+        let sql = match self.db {
+            Db::Sqlite(_) => {
+                "SELECT scope, '[' || group_concat(point, ',' ORDER BY col, idx, rowid) || ']'
+                 FROM trials WHERE experiment_id = $1 GROUP BY scope ORDER BY scope"
+            }
+            Db::Postgres(_) => {
+                "SELECT scope, '[' || string_agg(point, ',' ORDER BY col, idx, k, b) || ']'
+                 FROM trials WHERE experiment_id = $1 GROUP BY scope ORDER BY scope"
+            }
+        };
+        let rows: Vec<(i64, String)> =
+            on_pool!(self, p => sqlx::query_as(sql).bind(id).fetch_all(p).await)?;
+        let mut out = Vec::with_capacity(rows.len());
+        for (scope, joined) in rows {
+            let points = match serde_json::from_str::<Vec<Point>>(&joined) {
+                Ok(points) => points,
+                Err(_) => self
+                    .trials_page(id, Some(scope as u32), 0, i64::MAX)
+                    .await?
+                    .into_iter()
+                    .map(|t| t.point)
+                    .collect(),
+            };
+            out.push((scope as u32, points));
+        }
+        Ok(out)
+    }
+
+    /// Refresh the planner's statistics (PostgreSQL's `ANALYZE`; nothing
+    /// on SQLite, whose planner keeps none unless asked). Autovacuum does
+    /// this on its own within a minute of a big change; `bench ui` calls it
+    /// after seeding a million trials in seconds, or it would time the
+    /// planner's sequential scans over a table it still thinks is small.
+    pub async fn analyze(&self) -> Result<(), sqlx::Error> {
+        if let Db::Postgres(p) = &self.db {
+            sqlx::query("ANALYZE").execute(p).await?;
+        }
+        Ok(())
     }
 
     /// Every rig's window as stored (JSON), by rig: one query.

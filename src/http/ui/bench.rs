@@ -291,6 +291,7 @@ pub async fn run(
     let t = Instant::now();
     let seeded = seed(&store, experiments, trials, big).await?;
     let seed_s = t.elapsed().as_secs_f64();
+    store.analyze().await.map_err(|e| e.to_string())?;
     let app = super::super::router(
         super::super::AppState::reader(store.clone())?,
         std::time::Duration::from_secs(60),

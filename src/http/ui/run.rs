@@ -215,14 +215,14 @@ async fn maps_markup(
     spec: &ExperimentSpec,
     result: Option<&Value>,
 ) -> Result<Markup, Problem> {
-    let trials = st.store.trials(&r.id).await.map_err(|e| st.fail(e))?;
-    let mut scopes: BTreeMap<u32, Vec<MapPlotPoint>> = BTreeMap::new();
-    for t in &trials {
-        scopes
-            .entry(t.scope)
-            .or_default()
-            .push(MapPlotPoint::of(&t.point));
-    }
+    let mut scopes: BTreeMap<u32, Vec<MapPlotPoint>> = st
+        .store
+        .map_points(&r.id)
+        .await
+        .map_err(|e| st.fail(e))?
+        .into_iter()
+        .map(|(scope, points)| (scope, points.iter().map(MapPlotPoint::of).collect()))
+        .collect();
     let finished: Vec<MapSummary> = match (result, r.state.as_str()) {
         (Some(res), "succeeded") => report::maps(&r.id, spec, res),
         _ => Vec::new(),
