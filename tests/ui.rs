@@ -257,7 +257,7 @@ async fn a_twenty_thousand_trial_run_page_is_under_a_megabyte() {
 
 #[tokio::test]
 async fn the_live_part_answers_204_while_nothing_changed() {
-    for (app, _store, s, _dir) in seeded("live").await {
+    for (app, store, s, _dir) in seeded("live").await {
         let (_, _, html) = get(&app, &format!("/runs/{}", s.big)).await;
         // A finished run's part does not poll; its token is still given.
         let at = html.find("data-token=\"").unwrap() + "data-token=\"".len();
@@ -279,6 +279,16 @@ async fn the_live_part_answers_204_while_nothing_changed() {
             get(&app, &format!("/ui/queue/live?{enc}")).await.0,
             StatusCode::NO_CONTENT
         );
+        // A run joins the queue in the store (another process's submit):
+        // the same token now answers the part, showing it.
+        let mut row = store.get(&s.typical).await.unwrap().unwrap();
+        row.id = "joined-the-queue".into();
+        row.state = "queued".into();
+        (row.started_ms, row.finished_ms, row.result) = (None, None, None);
+        store.import_run(&row, &[], &[]).await.unwrap();
+        let (code, _, body) = get(&app, &format!("/ui/queue/live?{enc}")).await;
+        assert_eq!(code, StatusCode::OK);
+        assert!(body.contains("/runs/joined-the-queue"), "the new run shown");
     }
 }
 

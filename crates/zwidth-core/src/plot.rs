@@ -930,6 +930,22 @@ mod tests {
         assert!(loglog_svg("t", "x", "y", &[]).is_err());
     }
 
+    /// The criterion's word (the 2011 paper's maps are "stable", the 2018
+    /// paper's "passive") names the legend's rows and the tooltips.
+    #[test]
+    fn a_map_names_its_criterion_in_the_legend_and_tooltips() {
+        let pts = [
+            pt(10.0, 100.0, true, Some(1.0), true),
+            pt(20.0, 900.0, false, None, true),
+        ];
+        let svg = zwidth_map_svg("m", &pts, &[], "stable").unwrap();
+        assert!(svg.contains(">not stable<"), "legend row");
+        assert!(svg.contains("stable"));
+        assert!(!svg.contains("passive"), "the default word leaked");
+        let svg = zwidth_map_svg("m", &pts, &[], "passive").unwrap();
+        assert!(svg.contains(">not passive<") && !svg.contains("stable"));
+    }
+
     fn pt(b: f64, k: f64, ok: bool, fidelity: Option<f64>, decided: bool) -> MapPlotPoint {
         MapPlotPoint {
             b,
