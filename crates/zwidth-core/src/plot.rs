@@ -930,6 +930,22 @@ mod tests {
         assert!(loglog_svg("t", "x", "y", &[]).is_err());
     }
 
+    /// The colour bar takes a sixth of a narrow map's width (at most
+    /// 120 px): its frame starts 16 px into that strip.
+    #[test]
+    fn the_colour_bar_takes_a_sixth_of_a_narrow_map() {
+        let pts = [pt(10.0, 100.0, true, Some(1.0), true), pt(20.0, 200.0, true, Some(3.0), true)];
+        for (w, bar) in [(620u32, 103i32), (900, 120)] {
+            let style = MapStyle {
+                size: (w, 440),
+                ..MapStyle::default()
+            };
+            let svg = zwidth_map_svg_styled("m", &pts, &[], &style).unwrap();
+            let x = w as i32 - bar + 16;
+            assert!(svg.contains(&format!("<rect x=\"{x}\" y=\"60\"")), "w = {w}: bar at {x}");
+        }
+    }
+
     /// The criterion's word (the 2011 paper's maps are "stable", the 2018
     /// paper's "passive") names the legend's rows and the tooltips.
     #[test]
