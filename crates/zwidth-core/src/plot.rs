@@ -934,7 +934,10 @@ mod tests {
     /// 120 px): its frame starts 16 px into that strip.
     #[test]
     fn the_colour_bar_takes_a_sixth_of_a_narrow_map() {
-        let pts = [pt(10.0, 100.0, true, Some(1.0), true), pt(20.0, 200.0, true, Some(3.0), true)];
+        let pts = [
+            pt(10.0, 100.0, true, Some(1.0), true),
+            pt(20.0, 200.0, true, Some(3.0), true),
+        ];
         for (w, bar) in [(620u32, 103i32), (900, 120)] {
             let style = MapStyle {
                 size: (w, 440),
@@ -942,8 +945,38 @@ mod tests {
             };
             let svg = zwidth_map_svg_styled("m", &pts, &[], &style).unwrap();
             let x = w as i32 - bar + 16;
-            assert!(svg.contains(&format!("<rect x=\"{x}\" y=\"60\"")), "w = {w}: bar at {x}");
+            // From 60 px below the top to 80 px above the bottom.
+            let frame = format!(
+                "<rect x=\"{x}\" y=\"60\" width=\"20\" height=\"{}\"",
+                440 - 80 - 60
+            );
+            assert!(svg.contains(&frame), "w = {w}: {frame}");
+            // Five labels up the bar, a quarter of its height apart, from
+            // the scale's lowest (1.0) to its highest (3.0) error.
+            for (i, v) in ["1.0", "1.5", "2.0", "2.5", "3.0"].iter().enumerate() {
+                let y = 360 - 300 * i as i32 / 4 - 6;
+                let at = format!("<text x=\"{}\" y=\"{y}\"", x + 26);
+                let start = svg.find(&at).unwrap_or_else(|| panic!("w = {w}: {at}"));
+                let text = &svg[start..start + svg[start..].find("</text>").unwrap()];
+                assert!(text.contains(v), "w = {w}: {text}");
+            }
         }
+        // Below 600 px the caption is set smaller: 14 px against 18 px
+        // (plotters writes both scaled by one factor, so their ratio holds).
+        let caption = |w: u32| {
+            let style = MapStyle {
+                size: (w, 440),
+                ..MapStyle::default()
+            };
+            let svg = zwidth_map_svg_styled("Caption-T", &pts, &[], &style).unwrap();
+            let at = svg.find("Caption-T").unwrap();
+            let tag = &svg[svg[..at].rfind("<text").unwrap()..at];
+            let v = tag.split("font-size=\"").nth(1).unwrap();
+            v[..v.find('"').unwrap()].parse::<f64>().unwrap()
+        };
+        let (small, edge, big) = (caption(580), caption(600), caption(900));
+        assert!((small / edge - 14.0 / 18.0).abs() < 1e-9, "{small} {edge}");
+        assert_eq!(edge, big);
     }
 
     /// The criterion's word (the 2011 paper's maps are "stable", the 2018
