@@ -105,15 +105,7 @@ pub async fn metrics(State(st): State<AppState>) -> Result<Response, Problem> {
     out.push_str(
         "# HELP zwidth_experiments Experiments by state.\n# TYPE zwidth_experiments gauge\n",
     );
-    for state in [
-        "queued",
-        "scheduled",
-        "running",
-        "succeeded",
-        "failed",
-        "cancelled",
-        "interrupted",
-    ] {
+    for state in crate::store::STATES {
         let n = by_state
             .iter()
             .find(|(s, _)| s == state)

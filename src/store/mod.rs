@@ -139,6 +139,17 @@ pub struct NewExperiment<'a> {
 
 pub use crate::clock::now_ms;
 
+/// Every state an experiment can be stored in.
+pub const STATES: [&str; 7] = [
+    "queued",
+    "scheduled",
+    "running",
+    "succeeded",
+    "failed",
+    "cancelled",
+    "interrupted",
+];
+
 /// A stored trial as read: scope, column, index, the point (JSON).
 type TrialRow = (i64, i64, i64, String);
 

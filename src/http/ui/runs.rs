@@ -15,15 +15,7 @@ use crate::store::dashboard::ListFilter;
 /// Runs per page.
 pub const PER_PAGE: i64 = 50;
 const KINDS: [&str; 4] = ["map", "compare", "sweep", "tune"];
-pub const STATES: [&str; 7] = [
-    "queued",
-    "scheduled",
-    "running",
-    "succeeded",
-    "failed",
-    "cancelled",
-    "interrupted",
-];
+use crate::store::STATES;
 
 /// The filter from the query, each value checked.
 pub fn filter(q: &QueryArgs) -> Result<ListFilter, Problem> {
