@@ -902,3 +902,174 @@ fn results_out_of_order_change_nothing() {
     assert_eq!(outcome(&s, &id), here);
     assert_eq!(audit(&s).len(), 29, "each late repeat audited");
 }
+
+/// The trial the session was sent, and a result for it with `point`.
+fn answer(epoch: u64, t: &serde_json::Value, point: serde_json::Value, seq: u64) -> String {
+    serde_json::json!({"v":1,"seq":seq,"type":"result","epoch":epoch,"trial_id":t["trial_id"],
+        "point":point,"measured":{"peak_force_n":1.0,"peak_speed_m_s":0.1,"penetration_m":0.001}})
+    .to_string()
+}
+
+/// Issue 30, defect 3: a result is a verdict of its trial or nothing. MAP
+/// is a stability map of wall hits without replicates: its verdicts carry
+/// `stable` (and `saturated: true` when clipped), nothing else. A result
+/// without a verdict, or with fields its engine never sets, or with a
+/// number out of range, fails the experiment naming the field, is audited
+/// and never stored (before: stored as sent, `max_fidelity_error: 1e308`).
+#[test]
+fn a_result_that_is_not_a_verdict_of_its_trial_fails_the_experiment_naming_the_field() {
+    let s = serve();
+    let mut ws = dial(&s, &agent_token(&s)).unwrap();
+    say(&mut ws, &hello(|_| {}));
+    let epoch = hear(&mut ws).unwrap()["epoch"].as_u64().unwrap();
+    let cases = [
+        (serde_json::json!({}), "point.stable = (absent)"),
+        (serde_json::json!({"stable": true, "fidelity": -1e308}), "point.fidelity = (present)"),
+        (serde_json::json!({"stable": true, "realizations": 4294967295u32}), "point.realizations = (present)"),
+        (serde_json::json!({"stable": true, "saturated": false}), "point.saturated = false"),
+        (serde_json::json!({"passive": true}), "point.stable = (absent)"),
+    ];
+    for (i, (extra, want)) in cases.into_iter().enumerate() {
+        let id = submit(&s, "bench", MAP);
+        let t = hear(&mut ws).unwrap();
+        assert_eq!(t["type"], "trial", "{t}");
+        let mut point = serde_json::json!({"k": t["request"]["k"], "b": t["request"]["b"]});
+        for (k, v) in extra.as_object().unwrap() {
+            point[k] = v.clone();
+        }
+        say(&mut ws, &answer(epoch, &t, point, 2 + i as u64));
+        assert_eq!(hear(&mut ws).unwrap()["type"], "ack");
+        let v = wait_end(&s.base, &id, 30);
+        assert_eq!(v["state"], "failed", "{v}");
+        let error = v["error"].as_str().unwrap();
+        assert!(error.contains("not a verdict of its trial") && error.contains(want), "{error} lacks {want}");
+        assert_eq!(get(&format!("{}/v1/experiments/{id}/trials", s.base)), serde_json::json!([]));
+        assert!(audit(&s).iter().any(|r| r["reason"].as_str().unwrap().contains(want)), "audited");
+    }
+    // The verdict its engine gives is stored as before.
+    let id = submit(&s, "bench", MAP);
+    let t = hear(&mut ws).unwrap();
+    let point = serde_json::json!({"k": t["request"]["k"], "b": t["request"]["b"], "stable": true, "saturated": true});
+    say(&mut ws, &answer(epoch, &t, point, 10));
+    assert_eq!(hear(&mut ws).unwrap()["type"], "ack");
+    wait_for("the trial stored", 30, || {
+        get(&format!("{}/v1/experiments/{id}/trials", s.base)).as_array().unwrap().len() == 1
+    });
+}
+
+/// Issue 30, defects 2 and 6: the audit is bounded. One session's refusals
+/// are kept at most `AUDIT_BUDGET` + 1 times, each text capped, and the
+/// session is closed, saying why, once past it (before: 500 refusals of
+/// 250 KB stored 155 MB). The audit is read a page at a time; refusals of
+/// sessions naming no rig of this server (a 200 KB name, a binary first
+/// frame, no hello) are kept under `/v1/agent/audit` (before: 404).
+#[test]
+fn the_audit_is_capped_paged_and_rate_limited_and_every_refusal_is_in_it() {
+    use zwidth::store::agents::{AUDIT_MESSAGE, AUDIT_REASON};
+    let s = serve();
+    let token = agent_token(&s);
+    let mut ws = dial(&s, &token).unwrap();
+    say(&mut ws, &hello(|_| {}));
+    let epoch = hear(&mut ws).unwrap()["epoch"].as_u64().unwrap();
+    let reason = "r".repeat(250_000);
+    // 21 refusals: the budget (20) and one more, which closes the session
+    // (no more is sent: unread data would reset the link before the error).
+    for seq in 2..=22u64 {
+        let m = serde_json::json!({"v":1,"seq":seq,"type":"refused","epoch":epoch,"trial_id":format!("x/0/{seq}"),
+            "code":"busy","reason":reason});
+        say(&mut ws, &m.to_string());
+    }
+    let e = loop {
+        match hear(&mut ws) {
+            Some(m) if m["type"] == "error" => break m,
+            Some(_) => continue,
+            None => panic!("closed without an error"),
+        }
+    };
+    assert_eq!(e["type"], "error", "{e}");
+    assert!(e["message"].as_str().unwrap().contains("more than 20 refused messages"), "{e}");
+    assert!(hear(&mut ws).is_none(), "closed");
+    let rows = get(&format!("{}/v1/rigs/bench/audit?limit=500", s.base));
+    let rows = rows.as_array().unwrap();
+    assert_eq!(rows.len(), 21, "the budget and the row that says it closed");
+    for r in rows {
+        assert!(r["reason"].as_str().unwrap().len() <= AUDIT_REASON, "{}", r["reason"].as_str().unwrap().len());
+        assert!(r["message"].as_str().unwrap().len() <= AUDIT_MESSAGE);
+    }
+    assert!(rows[0]["reason"].as_str().unwrap().contains("session is closed"), "{}", rows[0]);
+    // Pages: newest first, `before` the last id of the page before.
+    let page = |q: &str| get(&format!("{}/v1/rigs/bench/audit?{q}", s.base)).as_array().unwrap().clone();
+    let first = page("limit=5");
+    assert_eq!(first, rows[..5]);
+    let next = page(&format!("limit=5&before={}", first[4]["id"]));
+    assert_eq!(next, rows[5..10]);
+    for q in ["limit=0", "limit=501", "before=x", "page=2"] {
+        let (code, ct, _) = fetch(ureq::get(&format!("{}/v1/rigs/bench/audit?{q}", s.base)).call());
+        assert_eq!((code, ct.as_str()), (422, "application/problem+json"), "{q}");
+    }
+    // Sessions that name no rig: an unknown rig of 200 KB, a binary first
+    // frame, a first message that is not hello. Each gets an error, then
+    // is readable under /v1/agent/audit.
+    let long = "n".repeat(200_000);
+    let firsts = [
+        tokio_tungstenite::tungstenite::Message::Text(hello(|_| {}).replace(r#""rig":"bench""#, &format!(r#""rig":"{long}""#)).into()),
+        tokio_tungstenite::tungstenite::Message::Binary(vec![1u8, 2, 3].into()),
+        tokio_tungstenite::tungstenite::Message::Text(r#"{"v":1,"seq":1,"type":"heartbeat","epoch":1,"state":"armed"}"#.into()),
+    ];
+    for m in firsts {
+        let mut ws = dial(&s, &token).unwrap();
+        ws.send(m).unwrap();
+        assert_eq!(hear(&mut ws).expect("an error")["type"], "error");
+    }
+    let unknown = get(&format!("{}/v1/agent/audit", s.base));
+    let reasons: Vec<&str> = unknown.as_array().unwrap().iter().map(|r| r["reason"].as_str().unwrap()).collect();
+    assert_eq!(reasons.len(), 3, "{reasons:?}");
+    assert!(reasons.iter().all(|r| r.len() <= AUDIT_REASON), "{reasons:?}");
+    assert!(reasons[0].contains("first message must be hello"), "{reasons:?}");
+    assert!(reasons[1].contains("text hello"), "{reasons:?}");
+    assert!(reasons[2].contains("not one of this server's rigs") && reasons[2].contains("200000 bytes"), "{reasons:?}");
+    // Empty agent and boot names are refused and audited too.
+    let mut ws = dial(&s, &token).unwrap();
+    say(&mut ws, &hello(|_| {}).replace(r#""agent":"raw""#, r#""agent":"""#));
+    assert!(hear(&mut ws).unwrap()["message"].as_str().unwrap().contains("1 to 128 bytes"));
+    assert!(audit(&s)[0]["reason"].as_str().unwrap().contains("1 to 128 bytes"));
+}
+
+/// Issue 30, defect 5: a session that floods results and never reads is
+/// closed (before: its task blocked on a 3.87 MB send queue for minutes,
+/// the rig never fenced), and a silent session is fenced after TTL + grace
+/// with no experiment waiting.
+#[test]
+fn a_session_that_never_reads_or_falls_silent_is_closed_and_fenced() {
+    let s = serve();
+    let token = agent_token(&s);
+    let mut ws = dial(&s, &token).unwrap();
+    say(&mut ws, &hello(|_| {}));
+    let epoch = hear(&mut ws).unwrap()["epoch"].as_u64().unwrap();
+    let t0 = std::time::Instant::now();
+    for seq in 2..3500u64 {
+        let r = serde_json::json!({"v":1,"seq":seq,"type":"result","epoch":epoch,"trial_id":format!("e/0/{seq}"),
+            "point":{"k":1.0,"b":0.0,"stable":true},"measured":{"peak_force_n":1.0,"peak_speed_m_s":0.1,"penetration_m":0.001}});
+        if ws.send(tokio_tungstenite::tungstenite::Message::Text(r.to_string().into())).is_err() {
+            break;
+        }
+    }
+    wait_for("the flooding session closed", 20, || !connected(&s));
+    // A new agent takes the rig at once.
+    let mut ws2 = dial(&s, &token).unwrap();
+    say(&mut ws2, &hello(|_| {}));
+    assert_eq!(hear(&mut ws2).unwrap()["type"], "welcome");
+    assert!(t0.elapsed() < Duration::from_secs(20));
+    // Silent from now on (no heartbeat), nothing submitted: fenced after
+    // TTL + grace (1.2 s here), the link closed with the reason.
+    let e = loop {
+        match hear(&mut ws2) {
+            Some(m) if m["type"] == "error" => break m,
+            Some(_) => continue,
+            None => panic!("closed without saying why"),
+        }
+    };
+    assert!(e["message"].as_str().unwrap().contains("fenced off"), "{e}");
+    assert!(!connected(&s));
+    drop(ws);
+}

@@ -931,3 +931,199 @@ fn a_full_disk_loses_no_acknowledged_submission_and_recovers() {
     assert_eq!(get(&format!("{url}/{id}"))["id"], id.as_str());
     drop(s);
 }
+
+/// The server's peak resident memory so far (VmHWM, bytes).
+fn peak_rss(s: &Server) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{}/status", s.child.id())).unwrap();
+    let kb: u64 = status
+        .lines()
+        .find(|l| l.starts_with("VmHWM:"))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|v| v.parse().ok())
+        .unwrap();
+    kb * 1024
+}
+
+/// A sweep of `n` exact strict-passivity maps of SMALL's device (one column
+/// each, milliseconds), succeeded: its id.
+fn sweep(s: &Server, n: usize) -> String {
+    let values: Vec<String> = (1..=n).map(|i| format!("{}", i as f64 * 0.5)).collect();
+    let body = format!(
+        r#"{{"kind":"sweep","map":{{"scene":{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000}}}},"criterion":"strict_passivity","b":[0,1]}},"parameter":{{"path":"device.damping","values":[{}]}}}}"#,
+        values.join(",")
+    );
+    let (code, v, _) = post(&format!("{}/v1/experiments", s.base), &body);
+    assert_eq!(code, 202, "{v}");
+    let id = v["id"].as_str().unwrap().to_string();
+    assert_eq!(wait_end(&s.base, &id, 120)["state"], "succeeded");
+    id
+}
+
+/// Issue 30, defect 1: a comparison is bounded before it is built. Runs
+/// holding more than `COMPARE_MAX_MAPS` maps are a 422 naming `runs` on the
+/// page and the API (before: 50 sweeps of 200 maps gave a 407 MB page and
+/// 3.65 GiB of RSS under 4 requests); a run page draws `PAGE_MAPS` maps a
+/// page, under 1 MB for the largest sweep (before: 8 MB); 4 parallel
+/// requests of each raise the server's peak RSS by less than the budget in
+/// docs/service.md (64 MiB).
+#[test]
+fn comparisons_and_run_pages_are_bounded_before_they_are_built() {
+    use zwidth::http::compare::COMPARE_MAX_MAPS;
+    let s = start();
+    let big = sweep(&s, 200);
+    let (a, b) = (sweep(&s, 20), sweep(&s, 20));
+    // Within the budget: 40 maps.
+    let ok = format!("{}/compare?runs={a},{b}", s.base);
+    let (code, ct, page) = fetch(ureq::get(&ok).call());
+    assert_eq!((code, ct.as_str()), (200, "text/html; charset=utf-8"));
+    assert!(page.len() < 2_000_000, "{} bytes", page.len());
+    // Past it: refused, naming runs and the budget, on the page and the API.
+    let before = peak_rss(&s);
+    let over = [big.as_str(), a.as_str(), b.as_str()].join(",");
+    let threads: Vec<_> = (0..4)
+        .map(|i| {
+            let url = if i % 2 == 0 {
+                format!("{}/compare?runs={over}", s.base)
+            } else {
+                format!("{}/v1/compare?runs={over}", s.base)
+            };
+            std::thread::spawn(move || fetch(ureq::get(&url).call()))
+        })
+        .collect();
+    for (i, t) in threads.into_iter().enumerate() {
+        let (code, _, body) = t.join().unwrap();
+        assert_eq!(code, 422, "{body}");
+        assert!(body.contains(&format!("at most {COMPARE_MAX_MAPS} maps")), "{body}");
+        if i % 2 == 1 {
+            let v: serde_json::Value = serde_json::from_str(&body).unwrap();
+            assert_eq!(v["field"], "runs", "{v}");
+        }
+    }
+    // The largest sweep's page: 24 maps drawn, a pager to the rest.
+    let pages: Vec<_> = (0..4)
+        .map(|i| {
+            let url = format!("{}/runs/{big}?page={}", s.base, i + 1);
+            std::thread::spawn(move || fetch(ureq::get(&url).call()))
+        })
+        .collect();
+    for p in pages {
+        let (code, _, body) = p.join().unwrap();
+        assert_eq!(code, 200);
+        assert!(body.len() < 1_000_000, "{} bytes", body.len());
+        assert!(body.contains("of 200 (24 a page)"), "a pager");
+        assert_eq!(body.matches("<figure>").count(), 24);
+    }
+    let grown = peak_rss(&s).saturating_sub(before);
+    assert!(grown < 64 << 20, "peak RSS grew {} MiB", grown >> 20);
+    // The last page holds the remaining 8; one past it is a page naming `page`.
+    let (code, _, last) = fetch(ureq::get(&format!("{}/runs/{big}?page=9", s.base)).call());
+    assert_eq!((code, last.matches("<figure>").count()), (200, 8));
+    let (code, ct, body) = fetch(ureq::get(&format!("{}/runs/{big}?page=10", s.base)).call());
+    assert_eq!((code, ct.as_str()), (422, "text/html; charset=utf-8"));
+    assert!(body.contains("page") && body.contains("1 to 9"), "{body}");
+}
+
+/// Issue 30, defect 10: the dashboard's errors are pages with the problem's
+/// title, detail and status (before: raw JSON in the browser); every
+/// response says `nosniff`; an SVG carries a policy that runs no script.
+#[test]
+fn dashboard_errors_are_pages_and_every_response_is_marked() {
+    let s = start();
+    let r = ureq::get(&format!("{}/runs/nope", s.base)).call();
+    let Err(ureq::Error::Status(404, r)) = r else { panic!("a 404") };
+    assert_eq!(r.content_type(), "text/html");
+    assert_eq!(r.header("x-content-type-options"), Some("nosniff"));
+    let body = r.into_string().unwrap();
+    assert!(body.contains("<h1>Not found</h1>") && body.contains("no experiment nope"), "{body}");
+    // Two runs on different scenes: the compare page says why, as a page.
+    let (code, v, _) = post(&format!("{}/v1/experiments", s.base), SMALL);
+    assert_eq!(code, 202, "{v}");
+    let one = v["id"].as_str().unwrap().to_string();
+    let (code, v, _) = post(&format!("{}/v1/experiments", s.base), &SMALL.replace("\"coulomb\":0", "\"coulomb\":0,\"mass\":0.5"));
+    assert_eq!(code, 202, "{v}");
+    let two = v["id"].as_str().unwrap().to_string();
+    for id in [&one, &two] {
+        assert_eq!(wait_end(&s.base, id, 60)["state"], "succeeded");
+    }
+    let (code, ct, body) = fetch(ureq::get(&format!("{}/compare?runs={one},{two}", s.base)).call());
+    assert_eq!((code, ct.as_str()), (422, "text/html; charset=utf-8"), "{body}");
+    assert!(body.contains("<!DOCTYPE html>") && body.contains("scene"), "{body}");
+    // The JSON API keeps problem+json.
+    let (code, ct, _) = fetch(ureq::get(&format!("{}/v1/experiments/nope", s.base)).call());
+    assert_eq!((code, ct.as_str()), (404, "application/problem+json"));
+    for path in ["/", "/v1/queue", "/healthz", "/v1/nothing", "/assets/style.css"] {
+        let r = match ureq::get(&format!("{}{path}", s.base)).call() {
+            Ok(r) | Err(ureq::Error::Status(_, r)) => r,
+            Err(e) => panic!("{e}"),
+        };
+        assert_eq!(r.header("x-content-type-options"), Some("nosniff"), "{path}");
+    }
+    for path in [format!("/v1/experiments/{one}/plot.svg"), format!("/v1/compare?runs={one}&format=svg")] {
+        let r = ureq::get(&format!("{}{path}", s.base)).call().unwrap();
+        assert_eq!(r.content_type(), "image/svg+xml");
+        let csp = r.header("content-security-policy").unwrap_or("");
+        assert!(csp.contains("default-src 'none'") && !csp.contains("script"), "{path}: {csp}");
+    }
+}
+
+/// Issue 30, defect 4: a client cannot hold connections it does not use.
+/// Idle connections, a partial request line and a header trickled every
+/// 2 s are all closed by the header-read timeout (10 s; before: all open
+/// after 75 s), and one address holds at most its cap (8 here) at once.
+#[test]
+fn slow_and_idle_clients_are_cut_off_and_capped() {
+    use std::io::{Read, Write};
+    use std::net::TcpStream;
+    use zwidth::http::accept::HEADER_READ_TIMEOUT;
+    let dir = temp_dir("slow");
+    let s = start_with(dir, &["--max-connections-per-client", "8"]);
+    let addr = s.base.trim_start_matches("http://").to_string();
+    let open = || {
+        let c = TcpStream::connect(&addr).unwrap();
+        c.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+        c
+    };
+    let mut idle: Vec<TcpStream> = (0..3).map(|_| open()).collect();
+    let mut partial = open();
+    partial.write_all(b"GET /v1/queue HT").unwrap();
+    let mut trickle = open();
+    trickle.write_all(b"GET /v1/queue HTTP/1.1\r\n").unwrap();
+    // The cap: 5 held, 3 more fill it, the 9th is answered 503 and closed.
+    let more: Vec<TcpStream> = (0..3).map(|_| open()).collect();
+    let mut ninth = open();
+    let mut text = String::new();
+    ninth.read_to_string(&mut text).unwrap();
+    assert!(text.starts_with("HTTP/1.1 503") && text.contains("\"status\":503"), "{text}");
+    drop(more);
+    let t0 = Instant::now();
+    let closed = |c: &mut TcpStream| {
+        let mut buf = [0u8; 512];
+        // The server closes (0 bytes) or answers 408 then closes.
+        loop {
+            match c.read(&mut buf) {
+                Ok(0) | Err(_) => return,
+                Ok(_) => continue,
+            }
+        }
+    };
+    // The trickler sends a header line every 2 s until it is cut off.
+    let trickler = std::thread::spawn(move || {
+        for i in 0..40 {
+            if trickle.write_all(format!("x-slow-{i}: 1\r\n").as_bytes()).is_err() {
+                return Instant::now();
+            }
+            std::thread::sleep(Duration::from_secs(2));
+        }
+        panic!("the trickling client was never cut off");
+    });
+    for c in idle.iter_mut() {
+        closed(c);
+    }
+    closed(&mut partial);
+    let waited = t0.elapsed();
+    assert!(waited < HEADER_READ_TIMEOUT + Duration::from_secs(5), "{waited:?}");
+    let cut = trickler.join().unwrap().duration_since(t0);
+    assert!(cut < HEADER_READ_TIMEOUT + Duration::from_secs(8), "{cut:?}");
+    // The server serves as before.
+    assert_eq!(get(&format!("{}/healthz", s.base))["status"], "ok");
+}

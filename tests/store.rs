@@ -119,6 +119,42 @@ async fn trials_are_listed_in_map_order_not_insertion_order() {
     }
 }
 
+/// Issue 30, defect 9: trials that share a place come back in one order on
+/// both databases (K, then B), whatever order they were stored in (SQLite
+/// gave its insertion order, PostgreSQL K order).
+#[tokio::test]
+async fn trials_sharing_a_place_are_listed_alike_on_both_databases() {
+    let mut orders = Vec::new();
+    for (store, _dir) in stores("ties").await {
+        let st = &store;
+        // Stored in falling K: insertion order is the reverse of K order.
+        let stored = [
+            trial(0, 7, 3, 380_989.44, false),
+            trial(0, 7, 3, 200_000.0, true),
+            trial(0, 7, 3, 1_000.0, true),
+        ];
+        let run = claim(st).await;
+        st.add_trials(&run, &stored, &[], (0, 0.0)).await.unwrap();
+        let ks: Vec<f64> = st
+            .trials("e1")
+            .await
+            .unwrap()
+            .iter()
+            .map(|t| t.point.k)
+            .collect();
+        assert_eq!(ks, [1_000.0, 200_000.0, 380_989.44], "{}", st.backend());
+        let drawn: Vec<f64> = st.map_points("e1").await.unwrap()[0]
+            .1
+            .iter()
+            .map(|p| p.k)
+            .collect();
+        assert_eq!(drawn, ks, "{}", st.backend());
+        orders.push(ks);
+    }
+    orders.dedup();
+    assert_eq!(orders.len(), 1);
+}
+
 /// An attached rig's result is stored before the search knows its place;
 /// the search's record then places it, and a late duplicate without a
 /// place changes nothing.

@@ -328,6 +328,10 @@ pub enum Command {
         /// Longest a request may take before a 503 (s).
         #[arg(long, env = "ZWIDTH_REQUEST_TIMEOUT_S", default_value_t = 30.0)]
         request_timeout_s: f64,
+        /// Most connections one client address may hold at once; more are
+        /// answered 503 and closed (1 to 100000).
+        #[arg(long, env = "ZWIDTH_MAX_CONNECTIONS_PER_CLIENT", default_value_t = crate::http::accept::PER_CLIENT)]
+        max_connections_per_client: usize,
         /// Run no experiments here, only the API (and attached rigs, whose
         /// agents connect here): `zwidth worker` processes run the rest.
         /// Needs a PostgreSQL database.

@@ -20,6 +20,7 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             agent_ttl_ms,
             agent_grace_ms,
             request_timeout_s,
+            max_connections_per_client,
             api_only,
             lease_ms,
         } => {
@@ -62,6 +63,11 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
                 .map_err(|e| CliError::Input(format!("--rigs: {e}")))?;
             let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
             check_lease_ms(lease_ms)?;
+            if !(1..=100_000).contains(&max_connections_per_client) {
+                return Err(CliError::Input(format!(
+                    "--max-connections-per-client = {max_connections_per_client}: must be 1 to 100000"
+                )));
+            }
             if api_only && db.sqlite_path().is_some() {
                 return Err(CliError::Input(format!(
                     "--api-only with --db {db}: a SQLite database is served by one process, which runs its experiments itself; give a postgres:// URL to run workers apart"
@@ -83,6 +89,7 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
                 rigs,
                 lease,
                 request_timeout_s,
+                max_connections_per_client,
                 api_only,
                 worker: crate::jobs::Worker::new(lease_ms),
             }))

@@ -14,6 +14,11 @@ use crate::report::{self, Comparison};
 
 /// Most runs one comparison takes.
 pub const COMPARE_MAX_RUNS: usize = 50;
+/// Most maps one comparison holds, over all its runs (docs/service.md,
+/// "Budgets and timeouts"): a page of 40 panels, a JSON of ~20 KB.
+pub const COMPARE_MAX_MAPS: usize = 40;
+/// Most stored points (trials) those maps may hold together.
+pub const COMPARE_MAX_POINTS: usize = 100_000;
 
 #[utoipa::path(get, path = "/v1/compare",
     params(("runs" = String, Query, description = "comma-separated ids of succeeded experiments on one scene"),
@@ -34,10 +39,7 @@ pub async fn compare_runs(
         );
     }
     let ids = run_ids(q.str("runs").unwrap_or(""))?;
-    let mut all = Vec::new();
-    for id in &ids {
-        all.extend(finished_maps(&st, id).await?.2);
-    }
+    let (_, all) = budgeted_maps(&st, &ids).await?;
     let c = report::compare(ids, all)?;
     Ok(match format {
         "svg" => (
@@ -52,6 +54,42 @@ pub async fn compare_runs(
             .into_response(),
         _ => Json(c).into_response(),
     })
+}
+
+/// The specs and maps of runs `ids`, read one run at a time and refused
+/// (422 naming `runs`) as soon as they hold more than [`COMPARE_MAX_MAPS`]
+/// maps or [`COMPARE_MAX_POINTS`] points: what a comparison holds in
+/// memory is bounded whatever runs it is given.
+pub async fn budgeted_maps(
+    st: &AppState,
+    ids: &[String],
+) -> Result<(Vec<crate::experiment::ExperimentSpec>, Vec<report::MapSummary>), Problem> {
+    let (mut specs, mut all) = (Vec::new(), Vec::new());
+    let mut points = 0;
+    for (i, id) in ids.iter().enumerate() {
+        let (spec, _, maps) = finished_maps(st, id)
+            .await
+            .map_err(|p| p.with_field("runs"))?;
+        points += maps.iter().map(|m| m.points.len()).sum::<usize>();
+        let n = all.len() + maps.len();
+        if n > COMPARE_MAX_MAPS || points > COMPARE_MAX_POINTS {
+            return Err(SpecError::new(
+                "runs",
+                format!(
+                    "{} runs: the first {} hold {n} maps and {points} points",
+                    ids.len(),
+                    i + 1
+                ),
+                format!(
+                    "a comparison holds at most {COMPARE_MAX_MAPS} maps and {COMPARE_MAX_POINTS} points: compare fewer runs"
+                ),
+            )
+            .into());
+        }
+        specs.push(spec);
+        all.extend(maps);
+    }
+    Ok((specs, all))
 }
 
 /// The ids in `runs` (comma-separated), each once, in the order given:

@@ -122,6 +122,11 @@ impl AppState {
         if let Some(why) = held {
             v.progress["held"] = json!(why);
         }
+        let waiting = waiting.or_else(|| {
+            (v.state == "queued")
+                .then(|| self.unserved(&v.rig))
+                .flatten()
+        });
         if let Some(why) = waiting {
             // No ETA while the rig is away: nothing is running.
             v.progress["waiting_for_rig"] = json!(why);

@@ -3,6 +3,7 @@
 //! and from where is `guard`. Bodies are parsed with the engines' own spec
 //! types and validated with the engines' own validation.
 
+pub mod accept;
 pub mod agent;
 pub mod compare;
 pub mod experiments;
@@ -51,6 +52,33 @@ pub struct AppState {
     pub lease: crate::rig::lease::Timing,
     /// Running experiments' observers (cancel reaches them at once).
     pub running: crate::jobs::Running,
+    /// This process runs only attached rigs (`--api-only`).
+    pub api_only: bool,
+    /// The rigs live workers run, as the `workers` table last said
+    /// ([`refresh_served`]): a queued run on another rig says it waits.
+    pub served: Arc<std::sync::RwLock<Option<std::collections::HashSet<String>>>>,
+}
+
+/// Within how long a worker's last report counts it as live (ms).
+pub const WORKER_LIVE_MS: i64 = 5_000;
+
+/// Every second until `stop`: the rigs that live workers run, from the
+/// `workers` table (so every API process, also one restarted, knows).
+pub async fn refresh_served(st: AppState, mut stop: tokio::sync::watch::Receiver<bool>) {
+    while !*stop.borrow() {
+        if let Ok(rows) = st.store.workers(WORKER_LIVE_MS).await {
+            let rigs = rows
+                .iter()
+                .flat_map(|w| w.rigs.split(',').map(|r| r.split(':').next().unwrap_or("").to_string()))
+                .filter(|r| !r.is_empty())
+                .collect();
+            *st.served.write().unwrap_or_else(|e| e.into_inner()) = Some(rigs);
+        }
+        tokio::select! {
+            _ = tokio::time::sleep(crate::jobs::worker::SEEN_EVERY) => {}
+            _ = stop.changed() => {}
+        }
+    }
 }
 
 impl AppState {
@@ -67,7 +95,7 @@ impl AppState {
     /// remembered, so writes are refused from then on.
     fn fail(&self, e: sqlx::Error) -> Problem {
         self.store.observe(&e);
-        Problem::store(e)
+        Problem::store(e, self.store.is_postgres())
     }
 
     /// A state that serves reads of `store` with the default simulated rig
@@ -84,7 +112,35 @@ impl AppState {
             start_runner: Arc::new(|_| {}),
             lease: crate::rig::lease::Timing::default(),
             running: Default::default(),
+            api_only: false,
+            served: Default::default(),
         })
+    }
+
+    /// Why a queued run on `rig` cannot start: no process runs that rig
+    /// (None while it is run here, by a live worker, or not yet known).
+    pub fn unserved(&self, rig: &str) -> Option<String> {
+        let here = self
+            .rig(rig)
+            .is_some_and(|r| !self.api_only || r.attached().is_some());
+        if here {
+            return None;
+        }
+        let served = self.served.read().unwrap_or_else(|e| e.into_inner());
+        let rigs = served.as_ref()?;
+        if rigs.contains(rig) {
+            return None;
+        }
+        let mut others: Vec<&str> = rigs.iter().map(String::as_str).collect();
+        others.sort_unstable();
+        Some(format!(
+            "no live worker runs rig {rig} (start one with `zwidth worker --rigs {rig}`); the live workers run: {}",
+            if others.is_empty() {
+                "none".to_string()
+            } else {
+                others.join(", ")
+            }
+        ))
     }
 
     fn rig_ids(&self) -> String {
@@ -110,6 +166,8 @@ pub struct ServeConfig {
     pub lease: crate::rig::lease::Timing,
     /// Longest a request may take before a 503 (s).
     pub request_timeout_s: f64,
+    /// Most connections one client address may hold at once.
+    pub max_connections_per_client: usize,
     /// Run only attached rigs here (workers run the simulated ones).
     pub api_only: bool,
     /// This process as a worker (its id on the leases it holds).
@@ -181,6 +239,27 @@ async fn uri_limit(
     next.run(req).await
 }
 
+/// On every response: no content sniffing; an SVG (a document that could
+/// hold script) gets a policy that runs none.
+async fn safe_headers(mut resp: axum::response::Response) -> axum::response::Response {
+    use axum::http::{header, HeaderValue};
+    let h = resp.headers_mut();
+    h.insert(
+        header::X_CONTENT_TYPE_OPTIONS,
+        HeaderValue::from_static("nosniff"),
+    );
+    let svg = h
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|v| v.as_bytes().starts_with(b"image/svg+xml"));
+    if svg {
+        h.insert(
+            header::CONTENT_SECURITY_POLICY,
+            HeaderValue::from_static("default-src 'none'; style-src 'unsafe-inline'; sandbox"),
+        );
+    }
+    resp
+}
+
 /// The routes, with a body-size limit, a per-request timeout (503), a
 /// request id (`x-request-id`, taken from the request or made) logged with
 /// the request and returned on the response, the write guards, and every
@@ -203,6 +282,7 @@ pub fn router(state: AppState, timeout: Duration) -> Router {
         .route("/healthz", get(queue::healthz))
         .route("/v1/rigs", get(rigs::rigs).post(rigs::register))
         .route("/v1/agent", get(agent::agent))
+        .route("/v1/agent/audit", get(rigs::agent_audit))
         .route(
             "/v1/rigs/{id}/quarantine",
             axum::routing::delete(rigs::release),
@@ -243,6 +323,7 @@ pub fn router(state: AppState, timeout: Duration) -> Router {
         // A panic in a handler is a 500 problem, not a dropped connection.
         .layer(tower_http::catch_panic::CatchPanicLayer::new())
         .layer(map_response(problem::problems_everywhere))
+        .layer(map_response(safe_headers))
         .layer(PropagateRequestIdLayer::x_request_id())
         .layer(trace)
         .layer(SetRequestIdLayer::x_request_id(MakeRequestUuid))
@@ -264,6 +345,7 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         rigs,
         lease,
         request_timeout_s,
+        max_connections_per_client,
         api_only,
         worker,
     } = cfg;
@@ -420,34 +502,32 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         start_runner,
         lease,
         running,
+        api_only,
+        served: Default::default(),
     };
+    let served = tokio::spawn(refresh_served(state.clone(), stop_rx.clone()));
     // On the signal the runners stop at once (the running experiment is
     // interrupted within a trial) while open requests drain.
     let stop_tx = Arc::new(stop_tx);
     let stop = stop_tx.clone();
-    // No Nagle delay: an agent's small messages (a trial, a result, an
-    // ack) would otherwise wait for the peer's delayed ACK, ~40 ms each.
-    use axum::serve::ListenerExt;
-    let listener = listener.tap_io(|tcp| {
-        let _ = tcp.set_nodelay(true);
-    });
-    let served = axum::serve(
+    accept::serve(
         listener,
         router(state, Duration::from_secs_f64(request_timeout_s)),
+        max_connections_per_client,
+        async move {
+            crate::jobs::worker::shutdown_signal().await;
+            tracing::info!("shutting down: stopping the runners, draining requests");
+            let _ = stop.send(true);
+        },
     )
-    .with_graceful_shutdown(async move {
-        crate::jobs::worker::shutdown_signal().await;
-        tracing::info!("shutting down: stopping the runners, draining requests");
-        let _ = stop.send(true);
-    })
-    .await
-    .map_err(|e| e.to_string());
+    .await;
     let _ = stop_tx.send(true);
     let tasks = std::mem::take(&mut *runners.lock().unwrap_or_else(|e| e.into_inner()));
     for r in tasks {
         let _ = r.await;
     }
     let _ = announce.await;
+    let _ = served.await;
     let _ = store.worker_gone(&me.id).await;
     // Everything in the WAL goes into the database file: the `.db` alone
     // is then a complete copy.
@@ -455,7 +535,7 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         Ok(()) => tracing::info!("database checkpointed and closed"),
         Err(e) => tracing::error!(error = %e, "checkpoint at shutdown failed"),
     }
-    served
+    Ok(())
 }
 
 /// The secret in `<db>.<name>`, made (random, owner-only) if missing.

@@ -66,8 +66,31 @@ impl Problem {
 
     /// A storage error, as the client can act on it: 507 when the disk is
     /// full (nothing was stored), 503 with Retry-After when the database is
-    /// busy or corrupt, else 500.
-    pub fn store(e: sqlx::Error) -> Self {
+    /// busy, unreachable or corrupt, else 500. `postgres`: the database is
+    /// a server, so a connection that cannot be had means it is unreachable,
+    /// not locked.
+    pub fn store(e: sqlx::Error, postgres: bool) -> Self {
+        // SQLSTATE class 08 (connection exception), 57P01 (the server shut
+        // down), 57P03 (cannot connect now).
+        let code = match &e {
+            sqlx::Error::Database(d) => d.code().map(|c| c.into_owned()),
+            _ => None,
+        };
+        let unreachable = postgres
+            && (matches!(
+                e,
+                sqlx::Error::PoolTimedOut | sqlx::Error::Io(_) | sqlx::Error::Tls(_)
+            ) || code.is_some_and(|c| c.starts_with("08") || c == "57P01" || c == "57P03"));
+        if unreachable {
+            tracing::warn!(error = %e, "database unreachable");
+            let mut p = Self::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "Database unreachable",
+                format!("the database server cannot be reached ({e}): nothing was stored; retry"),
+            );
+            p.retry_after_s = Some(1);
+            return p;
+        }
         match Fault::of(&e) {
             Fault::Full => {
                 tracing::error!(error = %e, "storage full");
@@ -400,6 +423,23 @@ pub async fn problems_everywhere(resp: Response) -> Response {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 30, defect 8: with PostgreSQL a connection that cannot be had
+    /// is an unreachable server, not a lock; with SQLite it is the lock.
+    #[test]
+    fn an_unreachable_server_is_not_called_locked() {
+        let pg = Problem::store(sqlx::Error::PoolTimedOut, true);
+        assert_eq!(pg.status, StatusCode::SERVICE_UNAVAILABLE);
+        assert_eq!(pg.title, "Database unreachable");
+        assert!(pg.detail.contains("cannot be reached"), "{}", pg.detail);
+        assert!(!pg.detail.contains("locked"), "{}", pg.detail);
+        let io = std::io::Error::new(std::io::ErrorKind::ConnectionRefused, "refused");
+        assert_eq!(Problem::store(sqlx::Error::Io(io), true).title, "Database unreachable");
+        let sqlite = Problem::store(sqlx::Error::PoolTimedOut, false);
+        assert_eq!(sqlite.title, "Storage busy");
+        assert!(sqlite.detail.contains("locked"), "{}", sqlite.detail);
+        assert_eq!((pg.retry_after_s, sqlite.retry_after_s), (Some(1), Some(1)));
+    }
 
     #[derive(serde::Deserialize, Debug)]
     #[allow(dead_code)]

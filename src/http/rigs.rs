@@ -156,17 +156,50 @@ pub async fn release(
     Ok(Json(rig_view(&st, &rig).await?))
 }
 
-#[utoipa::path(get, path = "/v1/rigs/{id}/audit", params(("id" = String, Path, description = "rig id")),
-    description = "Agent messages refused for this rig (stale epochs, results for trials never sent, malformed messages), newest first (at most 500).",
+#[utoipa::path(get, path = "/v1/rigs/{id}/audit",
+    params(("id" = String, Path, description = "rig id"),
+           ("limit" = Option<i64>, Query, description = "rows per page, 1 to 500 (default 100)"),
+           ("before" = Option<i64>, Query, description = "only rows with an id below this (the next page: the last row's id)")),
+    description = "Agent messages refused for this rig (stale epochs, results for trials never sent or not a verdict of their trial, malformed messages), newest first, a page at a time. Each text is capped (reason 1 KiB, message 4 KiB, ids 128 bytes) and the audit keeps each rig's newest 1000 rows of at most 30 days (docs/rigs.md, \"The audit\").",
     responses((status = 200, body = Vec<crate::store::agents::AuditRow>),
-              (status = 404, body = ProblemBody, content_type = "application/problem+json")))]
+              (status = 404, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 422, description = "bad limit or before", body = ProblemBody, content_type = "application/problem+json")))]
 pub async fn audit(
     State(st): State<AppState>,
     Path(id): Path<String>,
+    axum::extract::RawQuery(query): axum::extract::RawQuery,
 ) -> Result<Json<Vec<crate::store::agents::AuditRow>>, Problem> {
     st.rig(&id).ok_or_else(|| Problem::not_found("rig", &id))?;
+    audit_page(&st, &id, query.as_deref()).await
+}
+
+#[utoipa::path(get, path = "/v1/agent/audit",
+    params(("limit" = Option<i64>, Query, description = "rows per page, 1 to 500 (default 100)"),
+           ("before" = Option<i64>, Query, description = "only rows with an id below this (the next page: the last row's id)")),
+    description = "Refused agent sessions that named no rig of this server (not JSON, not a hello, an unknown rig: its name, cut to 128 bytes, in the reason), newest first, a page at a time; kept like a rig's audit.",
+    responses((status = 200, body = Vec<crate::store::agents::AuditRow>),
+              (status = 422, description = "bad limit or before", body = ProblemBody, content_type = "application/problem+json")))]
+pub async fn agent_audit(
+    State(st): State<AppState>,
+    axum::extract::RawQuery(query): axum::extract::RawQuery,
+) -> Result<Json<Vec<crate::store::agents::AuditRow>>, Problem> {
+    audit_page(&st, crate::store::agents::UNKNOWN_RIG, query.as_deref()).await
+}
+
+async fn audit_page(
+    st: &AppState,
+    rig: &str,
+    query: Option<&str>,
+) -> Result<Json<Vec<crate::store::agents::AuditRow>>, Problem> {
+    use crate::store::agents::AUDIT_PAGE_MAX;
+    let q = super::problem::QueryArgs::parse(query, &["limit", "before"])?;
+    let limit = q.int("limit", 1..=AUDIT_PAGE_MAX)?.unwrap_or(100);
+    let before = q.int("before", 1..=i64::MAX)?;
     Ok(Json(
-        st.store.audit_log(&id, 500).await.map_err(|e| st.fail(e))?,
+        st.store
+            .audit_log(rig, limit, before)
+            .await
+            .map_err(|e| st.fail(e))?,
     ))
 }
 

@@ -232,14 +232,20 @@ impl AttachedRig {
         }
         // The search waiting for it, or (after a server restart, before the
         // search has asked again) the trial out as the database recorded it.
-        let (experiment, scope, k, b) =
-            match g.pending.as_ref().filter(|p| p.trial_id == r.trial_id) {
-                Some(p) => (p.experiment.clone(), p.scope, p.request.k, p.request.b),
-                None => match parse_trial_id(&r.trial_id) {
-                    Some((e, s, k, b)) => (e.to_string(), s, k, b),
-                    None => return Verdict::Refuse(Refusal::NotSent.describe(r.epoch)),
-                },
-            };
+        let pending = g.pending.as_ref().filter(|p| p.trial_id == r.trial_id);
+        let (experiment, scope, k, b) = match pending {
+            Some(p) => (p.experiment.clone(), p.scope, p.request.k, p.request.b),
+            None => match parse_trial_id(&r.trial_id) {
+                Some((e, s, k, b)) => (e.to_string(), s, k, b),
+                None => return Verdict::Refuse(Refusal::NotSent.describe(r.epoch)),
+            },
+        };
+        // Exactly a verdict of the trial asked (its criterion and engine);
+        // after a restart, before the search asks again, of some trial.
+        let shape = match pending {
+            Some(p) => p.request.check_verdict(&r.point),
+            None => any_verdict_shape(&r.point),
+        };
         let advertised = g
             .agent
             .as_ref()
@@ -254,13 +260,27 @@ impl AttachedRig {
             g.lease.refused(r.epoch, &r.trial_id, now_ms());
             return Verdict::Refuse(format!("quarantined: {why}"));
         }
-        if r.point.k.to_bits() != k.to_bits() || r.point.b.to_bits() != b.to_bits() {
-            // A rig that answers another wall than it was asked cannot be
-            // trusted with this one either: the experiment fails saying so.
-            let why = format!(
+        let wrong = if r.point.k.to_bits() != k.to_bits() || r.point.b.to_bits() != b.to_bits() {
+            Some(format!(
                 "the result's (K, B) = ({}, {}) is not its trial's ({k}, {b})",
                 r.point.k, r.point.b
-            );
+            ))
+        } else if let Err(e) = shape {
+            Some(format!("the result is not a verdict of its trial: point.{e}"))
+        } else {
+            [
+                ("peak_speed_m_s", r.measured.peak_speed_m_s),
+                ("penetration_m", r.measured.penetration_m),
+                ("peak_force_n", measured),
+            ]
+            .into_iter()
+            .find(|(_, v)| !(v.is_finite() && *v >= 0.0))
+            .map(|(name, v)| format!("measured.{name} = {v} is not allowed: a finite number ≥ 0"))
+        };
+        if let Some(why) = wrong {
+            // A rig that answers another wall than it was asked, or with
+            // another kind of verdict, cannot be trusted with this one
+            // either: the experiment fails saying so.
             g.lease.done(&r.trial_id);
             if let Some(p) = g.pending.as_mut().filter(|p| p.trial_id == r.trial_id) {
                 p.failed = Some(format!("rig {}: {why}", self.id));
@@ -365,6 +385,20 @@ fn tick(g: &mut Inner) {
             g.outbox = None;
         }
     }
+}
+
+/// Whether `p` is a verdict some trial could have: of either criterion,
+/// with or without a confidence (the accuracy's largest realizations).
+fn any_verdict_shape(p: &Point) -> Result<(), SpecError> {
+    use crate::zwidth::settings::Criterion;
+    use crate::zwidth::trial::check_verdict_shape;
+    // The shape its verdict field names, else that of a stability verdict.
+    let c = if p.passive.is_some() {
+        Criterion::Impedance
+    } else {
+        Criterion::Stability
+    };
+    check_verdict_shape(p, c, false, 1000).or_else(|_| check_verdict_shape(p, c, true, 1000))
 }
 
 /// Whether the rig, as advertised, can run the trial (the dispatch check:

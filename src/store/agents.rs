@@ -26,8 +26,37 @@ pub struct AttachedRow {
     pub quarantine: Option<String>,
 }
 
-/// Longest message text kept in the audit (bytes).
-const AUDIT_TEXT: usize = 64 * 1024;
+/// Longest message text kept in the audit (bytes); the rest is cut at a
+/// character boundary and the row says how long the message was.
+pub const AUDIT_MESSAGE: usize = 4 * 1024;
+/// Longest reason kept (bytes): an agent's refusal reason is its own text.
+pub const AUDIT_REASON: usize = 1024;
+/// Longest rig or trial id kept (bytes): a hello may name anything.
+pub const AUDIT_ID: usize = 128;
+/// The audit keeps, per rig, the newest this many rows …
+pub const AUDIT_KEEP_ROWS: i64 = 1000;
+/// … and none older than this (ms): 30 days.
+pub const AUDIT_KEEP_MS: i64 = 30 * 24 * 3600 * 1000;
+/// Most rows one page of `GET /v1/rigs/{id}/audit` returns (default 100).
+pub const AUDIT_PAGE_MAX: i64 = 500;
+/// The rig under which refusals of sessions that named no rig of this
+/// server are kept (`GET /v1/agent/audit`, the name they gave in the
+/// reason); no rig can be called so (rig ids are letters, digits, `-`
+/// and `_`: `rig::check_id`).
+pub const UNKNOWN_RIG: &str = "?";
+
+/// `s` cut to at most `max` bytes at a character boundary; a cut text
+/// ends with `… (N bytes)` naming its whole length.
+pub fn clip(s: &str, max: usize) -> std::borrow::Cow<'_, str> {
+    if s.len() <= max {
+        return s.into();
+    }
+    let mut end = max.saturating_sub(24);
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    format!("{}… ({} bytes)", &s[..end], s.len()).into()
+}
 
 impl Store {
     /// The next epoch of `rig`'s sessions: larger than every one before,
@@ -43,7 +72,9 @@ impl Store {
         Ok(rows.first().copied().unwrap_or(1).max(1) as u64)
     }
 
-    /// Keep a refused message for audit.
+    /// Keep a refused message for audit: every text capped ([`AUDIT_ID`],
+    /// [`AUDIT_REASON`], [`AUDIT_MESSAGE`]), then the rig's audit trimmed
+    /// to its retention ([`AUDIT_KEEP_ROWS`] rows, [`AUDIT_KEEP_MS`]).
     pub async fn audit(
         &self,
         rig: &str,
@@ -53,27 +84,41 @@ impl Store {
         message: &str,
     ) -> Result<(), sqlx::Error> {
         self.writable()?;
-        let mut end = message.len().min(AUDIT_TEXT);
-        while !message.is_char_boundary(end) {
-            end -= 1;
-        }
+        let rig = clip(rig, AUDIT_ID);
+        let trial = trial.map(|t| clip(t, AUDIT_ID));
+        let now = now_ms();
         on_pool!(self, p => sqlx::query("INSERT INTO agent_audit (at_ms, rig, epoch, trial, reason, message) VALUES ($1, $2, $3, $4, $5, $6)")
-            .bind(now_ms())
-            .bind(rig)
+            .bind(now)
+            .bind(rig.as_ref())
             .bind(epoch.map(|e| e.min(i64::MAX as u64) as i64))
-            .bind(trial)
-            .bind(reason)
-            .bind(&message[..end])
+            .bind(trial.as_deref())
+            .bind(clip(reason, AUDIT_REASON).as_ref())
+            .bind(clip(message, AUDIT_MESSAGE).as_ref())
+            .execute(p)
+            .await
+            .map(|_| ()))?;
+        // Retention: older than the age limit, or past the newest rows.
+        on_pool!(self, p => sqlx::query("DELETE FROM agent_audit WHERE rig = $1 AND (at_ms < $2 OR id <= (SELECT id FROM agent_audit WHERE rig = $1 ORDER BY id DESC LIMIT 1 OFFSET $3))")
+            .bind(rig.as_ref())
+            .bind(now - AUDIT_KEEP_MS)
+            .bind(AUDIT_KEEP_ROWS)
             .execute(p)
             .await
             .map(|_| ()))
     }
 
-    /// The audit of `rig`, newest first.
-    pub async fn audit_log(&self, rig: &str, limit: i64) -> Result<Vec<AuditRow>, sqlx::Error> {
-        on_pool!(self, p => sqlx::query_as("SELECT * FROM agent_audit WHERE rig = $1 ORDER BY id DESC LIMIT $2")
+    /// The audit of `rig`, newest first: at most `limit` rows with ids
+    /// below `before` (a page; the next page's `before` is the last id).
+    pub async fn audit_log(
+        &self,
+        rig: &str,
+        limit: i64,
+        before: Option<i64>,
+    ) -> Result<Vec<AuditRow>, sqlx::Error> {
+        on_pool!(self, p => sqlx::query_as("SELECT * FROM agent_audit WHERE rig = $1 AND id < $2 ORDER BY id DESC LIMIT $3")
             .bind(rig)
-            .bind(limit)
+            .bind(before.unwrap_or(i64::MAX))
+            .bind(limit.clamp(1, AUDIT_PAGE_MAX))
             .fetch_all(p)
             .await)
     }

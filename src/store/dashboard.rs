@@ -207,7 +207,7 @@ impl Store {
     pub async fn map_points(&self, id: &str) -> Result<Vec<(u32, Vec<Point>)>, sqlx::Error> {
         let sql = match self.db {
             Db::Sqlite(_) => {
-                "SELECT scope, '[' || group_concat(point, ',' ORDER BY col, idx, rowid) || ']'
+                "SELECT scope, '[' || group_concat(point, ',' ORDER BY col, idx, k, b) || ']'
                  FROM trials WHERE experiment_id = $1 GROUP BY scope ORDER BY scope"
             }
             Db::Postgres(_) => {

@@ -291,6 +291,12 @@ impl Store {
     }
 
     /// What the last integrity check (or a corrupt read since) found.
+    /// Whether the database is a PostgreSQL server (reached over a
+    /// connection that can fail) rather than a SQLite file.
+    pub fn is_postgres(&self) -> bool {
+        matches!(self.db, Db::Postgres(_))
+    }
+
     pub fn health(&self) -> Health {
         self.health
             .lock()
@@ -626,12 +632,14 @@ impl Store {
         offset: i64,
         limit: i64,
     ) -> Result<Vec<StoredTrial>, sqlx::Error> {
-        // Trials stored before they had a place (0, 0) keep their
-        // insertion order in SQLite (rowid); PostgreSQL has only placed ones.
+        // Trials that share a place (those stored before places existed,
+        // all at (0, 0); a place given twice) are ordered by K, then B: the
+        // same order on both databases (docs/service.md), never the
+        // insertion order, which differs between them.
         let sql = match self.db {
             Db::Sqlite(_) => {
                 "SELECT scope, col, idx, point FROM trials WHERE experiment_id = $1 AND ($2 IS NULL OR scope = $2)
-                 ORDER BY scope, col, idx, rowid LIMIT $3 OFFSET $4"
+                 ORDER BY scope, col, idx, k, b LIMIT $3 OFFSET $4"
             }
             Db::Postgres(_) => {
                 "SELECT scope, col, idx, point FROM trials WHERE experiment_id = $1 AND ($2::BIGINT IS NULL OR scope = $2)

@@ -210,6 +210,7 @@ pub fn lines_svg(
 }
 
 /// One evaluated point of a Z-width map, for plotting.
+#[derive(Debug, Clone, Copy)]
 pub struct MapPlotPoint {
     pub b: f64,
     pub k: f64,

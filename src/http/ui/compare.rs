@@ -11,8 +11,8 @@ use serde_json::Value;
 
 use super::run::map_panels;
 use super::{run_link, state_badge, Nav};
-use crate::http::compare::run_ids;
-use crate::http::experiments::{finished_maps, no_plot};
+use crate::http::compare::{budgeted_maps, run_ids};
+use crate::http::experiments::no_plot;
 use crate::http::{AppState, Problem};
 use crate::plot::MapPlotPoint;
 use crate::report;
@@ -52,15 +52,11 @@ pub async fn page(
         return picker(&st).await;
     }
     let ids = run_ids(&joined)?;
-    let mut maps = Vec::new();
-    let mut specs = Vec::new();
-    for id in &ids {
-        let (spec, _, m) = finished_maps(&st, id)
-            .await
-            .map_err(|p| p.with_field("runs"))?;
-        specs.push(serde_json::to_value(&spec).unwrap_or(Value::Null));
-        maps.extend(m);
-    }
+    let (specs, maps) = budgeted_maps(&st, &ids).await?;
+    let specs: Vec<Value> = specs
+        .iter()
+        .map(|s| serde_json::to_value(s).unwrap_or(Value::Null))
+        .collect();
     let c = report::compare(ids.clone(), maps)?;
     // Runs by letter (A, B, …): short and unlike each other.
     let letter = |run: &str| letter(ids.iter().position(|i| i == run).unwrap_or(0));

@@ -33,7 +33,7 @@ const ICON: &str = r##"<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 16 1
 /// How often a live part asks for changes (ms).
 pub const POLL_MS: u64 = 2000;
 
-/// The dashboard's routes.
+/// The dashboard's routes; their errors are pages ([`error_page`]).
 pub fn routes() -> Router<AppState> {
     Router::new()
         .route("/", get(queue::page))
@@ -43,6 +43,43 @@ pub fn routes() -> Router<AppState> {
         .route("/ui/runs/{id}/live", get(run::live))
         .route("/compare", get(compare::page))
         .route("/assets/{name}", get(asset))
+        .layer(axum::middleware::map_response(error_page))
+}
+
+/// A problem answered to a browser: the same status, as a page with the
+/// problem's title, detail and field (the JSON API keeps problem+json).
+async fn error_page(resp: Response) -> Response {
+    let problem = resp
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|v| v.as_bytes().starts_with(super::problem::PROBLEM_JSON.as_bytes()));
+    if !problem {
+        return resp;
+    }
+    let (parts, body) = resp.into_parts();
+    let v: serde_json::Value = axum::body::to_bytes(body, 64 * 1024)
+        .await
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok())
+        .unwrap_or_default();
+    let title = v["title"].as_str().unwrap_or("Error").to_string();
+    let mut page = layout(
+        &title,
+        Nav::None,
+        html! {
+            h1 { (title) }
+            p class="error" { (v["detail"].as_str().unwrap_or("")) }
+            @if let Some(f) = v["field"].as_str() { p class="muted" { "Field: " code { (f) } } }
+            p { a href="/" { "The queue" } " · " a href="/runs" { "every run" } }
+        },
+    );
+    *page.status_mut() = parts.status;
+    for (k, val) in parts.headers.iter() {
+        if k != header::CONTENT_TYPE && k != header::CONTENT_LENGTH {
+            page.headers_mut().entry(k).or_insert(val.clone());
+        }
+    }
+    page
 }
 
 /// The script and style, cached by the browser for a day (their names
@@ -144,7 +181,8 @@ fn html_response(code: StatusCode, m: Markup) -> Response {
 /// A live part: polled every [`POLL_MS`] with its change token while
 /// `polling`; the answer to a poll whose token still holds is a bare 204.
 pub fn live_part(id: &str, url: &str, token: &str, polling: bool, inner: Markup) -> Markup {
-    let src = format!("{url}?since={}", urlencode(token));
+    let sep = if url.contains('?') { '&' } else { '?' };
+    let src = format!("{url}{sep}since={}", urlencode(token));
     html! {
         @if polling {
             section id=(id) class="live" hx-get=(src) hx-trigger={"every " (POLL_MS / 1000) "s, refresh"} hx-swap="outerHTML" data-token=(token) { (inner) }

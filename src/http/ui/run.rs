@@ -12,6 +12,7 @@ use serde_json::Value;
 
 use super::{action, duration, fragment, live_part, short, state_badge, unchanged, utc, Nav};
 use crate::experiment::ExperimentSpec;
+use crate::http::problem::QueryArgs;
 use crate::http::{AppState, Problem};
 use crate::plot::{map_extent, zwidth_map_svg_styled, FidelityScale, MapPlotPoint, MapStyle};
 use crate::report::{self, MapSummary};
@@ -21,6 +22,13 @@ use crate::zwidth::search::BoundaryPoint;
 /// Points drawn one by one with a tooltip, over all maps of a page; past
 /// it a map is drawn compactly (a 20 000-trial run page stays under 1 MB).
 pub const TOOLTIP_BUDGET: usize = 3000;
+/// Maps drawn on one page (a run's page shows the rest on further pages:
+/// `?page=2`, …); docs/dashboard.md, "Budgets".
+pub const PAGE_MAPS: usize = 24;
+/// Points drawn on one page over all its maps: past it every map's points
+/// are thinned alike (1 in n drawn, said under the maps; the boundaries
+/// and the figures stay whole).
+pub const PAGE_POINTS: usize = 20_000;
 
 const ENDED: [&str; 3] = ["succeeded", "failed", "cancelled"];
 
@@ -47,6 +55,9 @@ pub(super) fn token(r: &ExperimentRow, stored: i64, st: &AppState) -> String {
     {
         (o.held(), o.waiting()).hash(&mut h);
     }
+    if r.state == "queued" {
+        st.unserved(&r.rig).hash(&mut h);
+    }
     format!(
         "{}.{}.{}.{:.4}.{}.{:x}",
         r.state,
@@ -63,10 +74,20 @@ async fn current_token(st: &AppState, r: &ExperimentRow) -> Result<String, Probl
     Ok(token(r, stored, st))
 }
 
-pub async fn page(State(st): State<AppState>, Path(id): Path<String>) -> Result<Response, Problem> {
+/// `?page=` of a run's page: which [`PAGE_MAPS`] maps are drawn (1: the first).
+fn page_arg(q: &QueryArgs) -> Result<usize, Problem> {
+    Ok(q.int("page", 1..=10_000)?.unwrap_or(1) as usize)
+}
+
+pub async fn page(
+    State(st): State<AppState>,
+    Path(id): Path<String>,
+    RawQuery(q): RawQuery,
+) -> Result<Response, Problem> {
+    let page = page_arg(&QueryArgs::parse(q.as_deref(), &["page"])?)?;
     let r = row(&st, &id).await?;
     let spec: Option<Value> = serde_json::from_str(&r.spec).ok();
-    let live = live_markup(&st, &r).await?;
+    let live = live_markup(&st, &r, page).await?;
     let pretty = spec
         .as_ref()
         .and_then(|s| serde_json::to_string_pretty(s).ok())
@@ -98,14 +119,15 @@ pub async fn live(
     Path(id): Path<String>,
     RawQuery(q): RawQuery,
 ) -> Result<Response, Problem> {
+    let page = page_arg(&QueryArgs::parse(q.as_deref(), &["page", "since"])?)?;
     let r = row(&st, &id).await?;
     if let Some(resp) = unchanged(q.as_deref(), &current_token(&st, &r).await?) {
         return Ok(resp);
     }
-    Ok(fragment(live_markup(&st, &r).await?))
+    Ok(fragment(live_markup(&st, &r, page).await?))
 }
 
-async fn live_markup(st: &AppState, r: &ExperimentRow) -> Result<Markup, Problem> {
+async fn live_markup(st: &AppState, r: &ExperimentRow, page: usize) -> Result<Markup, Problem> {
     let spec: Option<ExperimentSpec> = serde_json::from_str(&r.spec).ok();
     let result: Option<Value> = r
         .result
@@ -136,7 +158,7 @@ async fn live_markup(st: &AppState, r: &ExperimentRow) -> Result<Markup, Problem
             let evals = st.store.evaluations(&r.id).await.map_err(|e| st.fail(e))?;
             super::tune::render(t, &evals, result.as_ref())
         }
-        Some(s) => maps_markup(st, r, s, result.as_ref()).await?,
+        Some(s) => maps_markup(st, r, s, result.as_ref(), page).await?,
         None => html! { p class="error" { "The stored spec cannot be read by this version." } },
     };
     let downloads = html! {
@@ -151,7 +173,11 @@ async fn live_markup(st: &AppState, r: &ExperimentRow) -> Result<Markup, Problem
     };
     Ok(live_part(
         "live",
-        &format!("/ui/runs/{}/live", r.id),
+        &if page > 1 {
+            format!("/ui/runs/{}/live?page={page}", r.id)
+        } else {
+            format!("/ui/runs/{}/live", r.id)
+        },
         &current_token(st, r).await?,
         !ended,
         html! { (status) (body) (downloads) },
@@ -214,6 +240,7 @@ async fn maps_markup(
     r: &ExperimentRow,
     spec: &ExperimentSpec,
     result: Option<&Value>,
+    page: usize,
 ) -> Result<Markup, Problem> {
     let mut scopes: BTreeMap<u32, Vec<MapPlotPoint>> = st
         .store
@@ -233,7 +260,18 @@ async fn maps_markup(
         .map_or(0, |s| *s as usize + 1)
         .max(finished.len());
     let names = labels(spec, &finished, n);
-    let panels: Vec<(String, Vec<MapPlotPoint>, Vec<BoundaryPoint>, String)> = (0..n)
+    let pages = n.div_ceil(PAGE_MAPS).max(1);
+    if page > pages {
+        return Err(crate::error::SpecError::new(
+            "page",
+            page,
+            format!("1 to {pages}: this run has {n} maps, {PAGE_MAPS} a page"),
+        )
+        .into());
+    }
+    let shown = (page - 1) * PAGE_MAPS..(page * PAGE_MAPS).min(n);
+    let panels: Vec<(String, Vec<MapPlotPoint>, Vec<BoundaryPoint>, String)> = shown
+        .clone()
         .map(|i| {
             let pts = scopes.remove(&(i as u32)).unwrap_or_default();
             let (boundary, criterion) = match finished.get(i) {
@@ -249,6 +287,17 @@ async fn maps_markup(
         })
         .collect();
     let figure = map_panels(&panels, !finished.is_empty())?;
+    let pager = html! {
+        @if pages > 1 {
+            nav class="pager" aria-label="maps" {
+                "Maps " (shown.start + 1) "–" (shown.end) " of " (n) " (" (PAGE_MAPS) " a page): "
+                @for p in 1..=pages {
+                    @if p == page { strong aria-current="page" { (p) } } @else { a href={"/runs/" (r.id) "?page=" (p)} { (p) } }
+                    " "
+                }
+            }
+        }
+    };
     let table = html! {
         @if !finished.is_empty() {
             table class="figures" {
@@ -270,7 +319,7 @@ async fn maps_markup(
             }
         }
     };
-    Ok(html! { (table) (figure) })
+    Ok(html! { (table) (pager) (figure) })
 }
 
 /// A map's own result JSON (a compare's or sweep's row's `map`).
@@ -308,8 +357,18 @@ pub fn map_panels(
     });
     let single = panels.len() == 1;
     let per_map = TOOLTIP_BUDGET / panels.len().max(1);
+    // Past the page's point budget, 1 point in `stride` of every map.
+    let total: usize = panels.iter().map(|p| p.1.len()).sum();
+    let stride = total.div_ceil(PAGE_POINTS).max(1);
     let mut out = Vec::new();
-    for (name, pts, boundary, criterion) in panels {
+    for (name, all, boundary, criterion) in panels {
+        let thinned: Vec<MapPlotPoint>;
+        let pts = if stride > 1 {
+            thinned = all.iter().step_by(stride).cloned().collect();
+            &thinned
+        } else {
+            all
+        };
         let style = MapStyle {
             ok_label: if criterion == "stability" {
                 "stable"
@@ -322,12 +381,13 @@ pub fn map_panels(
             size: if single { (900, 600) } else { (620, 440) },
             tooltip_limit: per_map,
         };
-        let title = format!("{name} ({} trials)", pts.len());
+        let title = format!("{name} ({} trials)", all.len());
         let s = zwidth_map_svg_styled(&title, pts, boundary, &style).map_err(Problem::internal)?;
-        out.push((name.clone(), pts.len(), s));
+        out.push((name.clone(), all.len(), s));
     }
     Ok(html! {
         @if !finished { p class="muted small" { "Drawn from the trials stored so far; the line is the largest K decided to render at each B until the run ends." } }
+        @if stride > 1 { p class="muted small" { "1 trial in " (stride) " drawn (" (total) " on this page, at most " (PAGE_POINTS) " are drawn); the boundaries and figures use them all." } }
         @if !single {
             p class="legend small" {
                 span class="key dot" {} " renders (colour: fidelity error, one scale for all) "

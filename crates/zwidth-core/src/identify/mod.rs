@@ -352,6 +352,22 @@ pub fn identify(trace: &Trace, model: Model) -> Result<Identified, SpecError> {
         blocks: per_block.len(),
         residual_rms_n: residual,
     };
+    // Every figure a number and every interval of a fitted parameter of
+    // nonzero width: what underflow or overflow in the sums would break.
+    for (name, e, fitted) in [
+        ("mass", &rigid.mass, true),
+        ("damping", &rigid.damping, true),
+        ("coulomb", &rigid.coulomb, p > 2),
+    ] {
+        let finite = [e.value, e.std_error, e.lo, e.hi].iter().all(|x| x.is_finite());
+        if !finite || (fitted && e.std_error <= 0.0) {
+            return Err(SpecError::new(
+                "trace",
+                format!("{name} = {} ± {}", e.value, e.std_error),
+                "gives no usable interval: the trace's forces and motions are out of the range the fit's arithmetic holds (rescale to SI units)",
+            ));
+        }
+    }
     match model {
         Model::TwoMass => with_mode(rigid, trace),
         _ => Ok(rigid),

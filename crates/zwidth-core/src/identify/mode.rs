@@ -350,7 +350,11 @@ pub fn fit_mode(trace: &Trace, mass: &Estimate, damping: &Estimate) -> Result<Mo
     if misfit.is_nan() || misfit > MAX_MISFIT {
         return Err(SpecError::new(
             "trace",
-            format!("misfit {:.0} %", 100.0 * misfit),
+            if misfit.is_nan() {
+                "misfit (not a number: the fit diverged)".to_string()
+            } else {
+                format!("misfit {:.0} %", 100.0 * misfit)
+            },
             format!("must fit a two-mass device with the encoder on the motor side to within {:.0} % of its response from {:.1} Hz up: with the encoder on the handle the mass split cannot be identified; friction on the motor side holds it in pre-sliding at the band's amplitude; a band response small against the encoder step ({q:e} m) leaves quantization in it (raise --band-force); check the trace is open loop", 100.0 * MAX_MISFIT, data.w[0] / (2.0 * std::f64::consts::PI), q = trace.quantization()),
         ));
     }

@@ -16,6 +16,15 @@ pub const MIN_SAMPLES: usize = 1000;
 pub const EVEN_TOLERANCE: f64 = 1e-3;
 /// A command at its extreme on more than this share of samples is clipped.
 pub const SATURATED_SHARE: f64 = 0.01;
+/// The physical range of each column, |value| at most (s, N, m): a haptic
+/// device's trace lies far inside it, and a value beyond it (a logger's
+/// overflow, a unit mix-up) is refused at its line before any fit, where
+/// it would overflow the sums (docs/identify.md, "What a trace may hold").
+pub const RANGE: [f64; 3] = [1e6, 1e5, 100.0];
+/// The force command must reach this (N) somewhere, and the handle move
+/// at least this far (m): below, the fit's sums underflow.
+pub const MIN_PEAK_FORCE_N: f64 = 1e-6;
+pub const MIN_TRAVEL_M: f64 = 1e-9;
 
 /// An evenly sampled trace (SI units).
 #[derive(Debug, Clone, PartialEq)]
@@ -74,7 +83,19 @@ impl Trace {
             let mut v = [0.0; 3];
             for (c, f) in fields.iter().enumerate() {
                 v[c] = match f.parse::<f64>() {
-                    Ok(x) if x.is_finite() => x,
+                    Ok(x) if x.is_finite() && x.abs() <= RANGE[c] => x,
+                    Ok(x) if x.is_finite() => {
+                        return Err(SpecError::new(
+                            at(ln, c),
+                            f,
+                            format!(
+                                "must be within ±{:e} {} (the physical range of a trace's {})",
+                                RANGE[c],
+                                ["s", "N", "m"][c],
+                                COLUMNS[c]
+                            ),
+                        ))
+                    }
                     _ => {
                         return Err(SpecError::new(
                             at(ln, c),
@@ -83,6 +104,10 @@ impl Trace {
                         ))
                     }
                 };
+            }
+            // Time stops increasing here: named at this line, not at the end.
+            if t.last().is_some_and(|&prev| v[0] <= prev) {
+                return Err(SpecError::new(at(ln, 0), fields[0], "times must increase"));
             }
             t.push(v[0]);
             force.push(v[1]);
@@ -97,14 +122,8 @@ impl Trace {
                 format!("needs at least {MIN_SAMPLES} evenly spaced samples (record 10 s or more)"),
             ));
         }
+        // Positive: the times increase (checked row by row above).
         let dt = (t[n - 1] - t[0]) / (n - 1) as f64;
-        if dt.is_nan() || dt <= 0.0 {
-            return Err(SpecError::new(
-                at(line_of[n - 1], 0),
-                t[n - 1],
-                "times must increase",
-            ));
-        }
         for i in 1..n {
             let step = t[i] - t[i - 1];
             if (step - dt).abs() > EVEN_TOLERANCE * dt {
@@ -117,6 +136,24 @@ impl Trace {
                     ),
                 ));
             }
+        }
+        let peak = force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
+        if peak < MIN_PEAK_FORCE_N {
+            return Err(SpecError::new(
+                format!("trace column 2 ({})", COLUMNS[1]),
+                format!("peak {peak:e} N"),
+                format!("the force command must reach {MIN_PEAK_FORCE_N:e} N somewhere: a smaller excitation cannot be identified"),
+            ));
+        }
+        let (lo, hi) = position
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+        if hi - lo < MIN_TRAVEL_M {
+            return Err(SpecError::new(
+                format!("trace column 3 ({})", COLUMNS[2]),
+                format!("travel {:e} m", hi - lo),
+                format!("the handle must move at least {MIN_TRAVEL_M:e} m"),
+            ));
         }
         let trace = Trace {
             dt,
@@ -333,5 +370,54 @@ mod tests {
         assert_eq!(e.value, "0.8");
         // The first clipped sample, 1 Hz sine reaches 0.8 at t = asin(0.8)/2π ≈ 0.1476 s: row 148, line 150.
         assert_eq!(e.field, "trace line 150, column 2 (force_n)");
+    }
+
+    /// Issue 30, defect 11: a value beyond the documented range (`RANGE`) is
+    /// refused at its line and column wherever it is (a 1e308 force was
+    /// accepted silently in 154 of 200 places); time that stops increasing
+    /// is named where it stops; a trace too small to fit is refused.
+    #[test]
+    fn extreme_values_are_refused_at_their_line() {
+        for row in [0, 1, 7, 500, 1998, 1999] {
+            for (col, value) in [(1, "1e308"), (2, "1e308"), (1, "-100001"), (2, "100.5"), (0, "1e7")] {
+                let e = err(&csv(2000, |k, r| {
+                    if k != row {
+                        return r;
+                    }
+                    let mut c: Vec<String> = r.trim().split(',').map(String::from).collect();
+                    c[col] = value.into();
+                    c.join(",") + "\n"
+                }));
+                assert_eq!(e.field, at(row + 2, col), "row {row}: {e}");
+                assert_eq!(e.value, value);
+                assert!(e.allowed.contains(&format!("±{:e}", RANGE[col])), "{e}");
+            }
+        }
+        // Just inside the range is a number like any other.
+        let ok = Trace::parse_csv(&csv(2000, |k, r| if k == 9 { "0.009,99999,0\n".into() } else { r }));
+        assert_eq!(ok.unwrap().force[9], 99999.0);
+        // A constant time column: named at its second row (line 3), not the last.
+        let e = err(&csv(2000, |k, r| {
+            let mut c: Vec<String> = r.trim().split(',').map(String::from).collect();
+            c[0] = "0.5".into();
+            let _ = k;
+            c.join(",") + "\n"
+        }));
+        assert_eq!((e.field.as_str(), e.allowed.as_str()), ("trace line 3, column 1 (t_s)", "times must increase"));
+        // Forces ×1e-300 and positions ×1e-300: nothing to identify.
+        let tiny = |col: usize| {
+            err(&csv(2000, |_, r| {
+                let mut c: Vec<String> = r.trim().split(',').map(String::from).collect();
+                let v: f64 = c[col].parse().unwrap();
+                c[col] = format!("{:e}", v * 1e-300);
+                c.join(",") + "\n"
+            }))
+        };
+        let e = tiny(1);
+        assert_eq!(e.field, "trace column 2 (force_n)");
+        assert!(e.allowed.contains("1e-6 N"), "{e}");
+        let e = tiny(2);
+        assert_eq!(e.field, "trace column 3 (position_m)");
+        assert!(!e.to_string().contains("NaN") && !e.to_string().contains("inf"), "{e}");
     }
 }

@@ -21,7 +21,7 @@ use super::cost::Cost;
 use super::hit::{replicated_hits, wall_hit, NoTrace};
 pub use super::observer::{Observer, StoredEvaluation, StoredTrial};
 use super::probe::{probe_with, ProbeSetup};
-use super::scene::{validate_wall, ProbeMethod, Scene};
+use super::scene::{validate_wall, ProbeMethod, Scene, SceneSpec};
 use super::settings::{Criterion, MapSpec, Method, Resolved, SearchKind};
 use crate::error::SpecError;
 
@@ -143,6 +143,16 @@ pub struct MapResult {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub saturation: Option<String>,
     pub elapsed_s: f64,
+}
+
+/// Whether engine `method` gives verdicts with a confidence on `scene`:
+/// the BLA probe of a scene with friction or quantization (a nonlinear
+/// frequency-domain probe), or replicated wall hits.
+pub fn noisy_verdicts(scene: &SceneSpec, method: Method) -> bool {
+    let d = &scene.device;
+    let nonlinear_probe = method == Method::Frequency && (d.coulomb > 0.0 || d.quantization > 0.0);
+    (nonlinear_probe && scene.probe.method == ProbeMethod::Bla)
+        || (method == Method::Time && scene.hit.replicates > 1)
 }
 
 /// The chosen engine for one scene and criterion.
@@ -295,7 +305,9 @@ impl Evaluator {
                         s.probe.seed,
                         100.0 * s.probe.confidence
                     )
-                } else if self.nonlinear_probe() {
+                } else if self.method == Method::Frequency
+                    && (s.device.coulomb > 0.0 || s.device.quantization > 0.0)
+                {
                     format!(
                         "frequency-domain multisine simulation (bilateral wall; the 2018 paper's tfestimate verdict: one Schroeder multisine, {} periods Welch-averaged, taken as certain: no confidence, no intervals)",
                         super::probe::tfestimate_periods(self.res.probe.periods)
@@ -446,14 +458,7 @@ impl Evaluator {
     /// Verdicts with a confidence, so boundaries with intervals: the BLA
     /// probe of a nonlinear scene, or replicated wall hits.
     pub fn noisy(&self) -> bool {
-        (self.nonlinear_probe() && self.scene.spec.probe.method == ProbeMethod::Bla)
-            || (self.method == Method::Time && self.scene.spec.hit.replicates > 1)
-    }
-
-    /// A frequency-domain probe of a scene with friction or quantization.
-    fn nonlinear_probe(&self) -> bool {
-        let d = &self.scene.spec.device;
-        self.method == Method::Frequency && (d.coulomb > 0.0 || d.quantization > 0.0)
+        noisy_verdicts(&self.scene.spec, self.method)
     }
 
     /// The farm this map's units go to, if any.

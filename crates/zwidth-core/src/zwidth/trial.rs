@@ -52,6 +52,108 @@ pub fn run(request: &TrialRequest) -> Result<Point, SpecError> {
     Ok(ev.evaluate_point(request.k, request.b))
 }
 
+impl TrialRequest {
+    /// Whether `p` is exactly a verdict this trial's criterion and engine
+    /// produce (`Evaluator::evaluate`): at (K, B) to the bit, the verdict
+    /// field the criterion sets and no other, the confidence fields when
+    /// the verdict is noisy and only then, every number finite and in its
+    /// range. An attached rig's answer is checked so before it is stored.
+    /// Err names the field.
+    pub fn check_verdict(&self, p: &Point) -> Result<(), SpecError> {
+        if p.k.to_bits() != self.k.to_bits() || p.b.to_bits() != self.b.to_bits() {
+            return Err(SpecError::new(
+                "point",
+                format!("(K, B) = ({}, {})", p.k, p.b),
+                format!("the trial's wall ({}, {})", self.k, self.b),
+            ));
+        }
+        let scene = self.scene.validate().map_err(|e| e.within("scene"))?;
+        let res = self.accuracy.resolve(&scene)?;
+        let noisy = super::search::noisy_verdicts(&scene.spec, self.method);
+        let max_realizations = match self.criterion {
+            Criterion::Stability => scene.spec.hit.replicates,
+            _ => res.probe.realizations,
+        };
+        check_verdict_shape(p, self.criterion, noisy, max_realizations)
+    }
+}
+
+/// The shape of a verdict of `criterion` (see [`TrialRequest::check_verdict`]):
+/// stability sets `stable`; impedance and strict passivity set `passive`
+/// and `fidelity` (≥ 0, N·s/m); a noisy verdict adds `decided` and
+/// `realizations` (1 to `max_realizations`), and a noisy impedance verdict
+/// `margin` and `margin_se` (≥ 0); `saturated` is absent or true.
+pub fn check_verdict_shape(
+    p: &Point,
+    criterion: Criterion,
+    noisy: bool,
+    max_realizations: u32,
+) -> Result<(), SpecError> {
+    let present = |name: &str, here: bool, wanted: bool| -> Result<(), SpecError> {
+        match (here, wanted) {
+            (true, false) => Err(SpecError::new(
+                name,
+                "(present)",
+                format!(
+                    "absent: a {} verdict{} has no {name}",
+                    format!("{criterion:?}").to_lowercase(),
+                    if noisy { " with a confidence" } else { " without a confidence" }
+                ),
+            )),
+            (false, true) => Err(SpecError::new(
+                name,
+                "(absent)",
+                format!(
+                    "present: a {} verdict{} carries it",
+                    format!("{criterion:?}").to_lowercase(),
+                    if noisy { " with a confidence" } else { "" }
+                ),
+            )),
+            _ => Ok(()),
+        }
+    };
+    let impedance = criterion != Criterion::Stability;
+    present("stable", p.stable.is_some(), !impedance)?;
+    present("passive", p.passive.is_some(), impedance)?;
+    present("fidelity", p.fidelity.is_some(), impedance)?;
+    present("decided", p.decided.is_some(), noisy)?;
+    present("realizations", p.realizations.is_some(), noisy)?;
+    present("margin", p.margin.is_some(), noisy && impedance)?;
+    present("margin_se", p.margin_se.is_some(), noisy && impedance)?;
+    let finite = |name: &str, v: Option<f64>, min: f64| match v {
+        Some(x) if !(x.is_finite() && x >= min) => Err(SpecError::new(
+            name,
+            x,
+            if min == f64::MIN {
+                "a finite number".to_string()
+            } else {
+                format!("a finite number ≥ {min}")
+            },
+        )),
+        _ => Ok(()),
+    };
+    finite("fidelity", p.fidelity, 0.0)?;
+    finite("margin", p.margin, f64::MIN)?;
+    finite("margin_se", p.margin_se, 0.0)?;
+    if let Some(r) = p.realizations {
+        if !(1..=max_realizations).contains(&r) {
+            return Err(SpecError::new(
+                "realizations",
+                r,
+                format!("1 to {max_realizations} (the trial's accuracy)"),
+            ));
+        }
+    }
+    if p.saturated == Some(false) {
+        return Err(SpecError::new(
+            "saturated",
+            false,
+            "absent, or true when the force limit clipped the wall force",
+        ));
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
