@@ -142,7 +142,7 @@ impl Conn {
         }
         let why = if over {
             format!(
-                "{why}; and the session is closed: more than {AUDIT_BUDGET} refused messages in {} s",
+                "the session is closed: more than {AUDIT_BUDGET} refused messages in {} s; the last: {why}",
                 AUDIT_WINDOW.as_secs()
             )
         } else {

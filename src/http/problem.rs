@@ -367,12 +367,17 @@ const DETAIL_MAX: usize = 500;
 /// tower-http's own rejections) into one, keeping status and text.
 pub async fn problems_everywhere(resp: Response) -> Response {
     let status = resp.status();
-    // Ours are problem+json already (or, /healthz's 503, a JSON report).
+    // Ours are problem+json already (or, /healthz's 503, a JSON report;
+    // or a dashboard's error page: the framework's own are plain text).
     let ours = resp
         .headers()
         .get(header::CONTENT_TYPE)
         .and_then(|v| v.to_str().ok())
-        .is_some_and(|ct| ct.starts_with(PROBLEM_JSON) || ct.starts_with("application/json"));
+        .is_some_and(|ct| {
+            ct.starts_with(PROBLEM_JSON)
+                || ct.starts_with("application/json")
+                || ct.starts_with("text/html")
+        });
     if !(status.is_client_error() || status.is_server_error()) || ours {
         return resp;
     }

@@ -33,15 +33,25 @@ pub async fn page(
     })?;
     let mut joined = Vec::new();
     let mut all = false;
+    let mut page = 1;
     for (k, v) in &pairs {
         match k.as_str() {
             "runs" | "run" => joined.push(v.clone()),
             "all" => all = v == "1" || v == "true",
+            "page" => {
+                page = v
+                    .parse::<usize>()
+                    .ok()
+                    .filter(|p| (1..=10_000).contains(p))
+                    .ok_or_else(|| {
+                        crate::error::SpecError::new("page", format!("{v:?}"), "a whole number 1 to 10000")
+                    })?
+            }
             other => {
                 return Err(crate::error::SpecError::new(
                     other,
                     format!("{v:?}"),
-                    "not a parameter of /compare: runs (comma-separated ids), run (repeated) and all (1: every spec field)",
+                    "not a parameter of /compare: runs (comma-separated ids), run (repeated), all (1: every spec field) and page (of the maps drawn)",
                 )
                 .into())
             }
@@ -60,8 +70,8 @@ pub async fn page(
     let c = report::compare(ids.clone(), maps)?;
     // Runs by letter (A, B, …): short and unlike each other.
     let letter = |run: &str| letter(ids.iter().position(|i| i == run).unwrap_or(0));
-    let panels: Vec<_> = c
-        .rows
+    let shown = super::run::page_range(c.rows.len(), page)?;
+    let panels: Vec<_> = c.rows[shown]
         .iter()
         .map(|r| {
             let m = &r.map;
@@ -116,6 +126,7 @@ pub async fn page(
             }
             h2 { "The maps" }
             p class="muted small" { "One axis range and one fidelity colour scale for every map." }
+            (super::run::pager(c.rows.len(), page, &format!("{here}{}&", if all { "&all=1" } else { "" })))
             (figure)
             h2 { "The boundaries" }
             figure class="overlay" { (super::chart("every map's boundary, K against B", &overlay)) }

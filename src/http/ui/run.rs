@@ -24,11 +24,11 @@ use crate::zwidth::search::BoundaryPoint;
 pub const TOOLTIP_BUDGET: usize = 3000;
 /// Maps drawn on one page (a run's page shows the rest on further pages:
 /// `?page=2`, …); docs/dashboard.md, "Budgets".
-pub const PAGE_MAPS: usize = 24;
+pub const PAGE_MAPS: usize = 12;
 /// Points drawn on one page over all its maps: past it every map's points
 /// are thinned alike (1 in n drawn, said under the maps; the boundaries
 /// and the figures stay whole).
-pub const PAGE_POINTS: usize = 20_000;
+pub const PAGE_POINTS: usize = 8_000;
 
 const ENDED: [&str; 3] = ["succeeded", "failed", "cancelled"];
 
@@ -260,16 +260,7 @@ async fn maps_markup(
         .map_or(0, |s| *s as usize + 1)
         .max(finished.len());
     let names = labels(spec, &finished, n);
-    let pages = n.div_ceil(PAGE_MAPS).max(1);
-    if page > pages {
-        return Err(crate::error::SpecError::new(
-            "page",
-            page,
-            format!("1 to {pages}: this run has {n} maps, {PAGE_MAPS} a page"),
-        )
-        .into());
-    }
-    let shown = (page - 1) * PAGE_MAPS..(page * PAGE_MAPS).min(n);
+    let shown = page_range(n, page)?;
     let panels: Vec<(String, Vec<MapPlotPoint>, Vec<BoundaryPoint>, String)> = shown
         .clone()
         .map(|i| {
@@ -287,24 +278,14 @@ async fn maps_markup(
         })
         .collect();
     let figure = map_panels(&panels, !finished.is_empty())?;
-    let pager = html! {
-        @if pages > 1 {
-            nav class="pager" aria-label="maps" {
-                "Maps " (shown.start + 1) "–" (shown.end) " of " (n) " (" (PAGE_MAPS) " a page): "
-                @for p in 1..=pages {
-                    @if p == page { strong aria-current="page" { (p) } } @else { a href={"/runs/" (r.id) "?page=" (p)} { (p) } }
-                    " "
-                }
-            }
-        }
-    };
+    let pager = pager(n, page, &format!("/runs/{}?", r.id));
     let table = html! {
         @if !finished.is_empty() {
             table class="figures" {
                 caption { "The result" }
                 thead { tr { th { "map" } th { "K-width (N/m)" } th { "B-width (N·s/m)" } th { "max fidelity error (N·s/m)" } th { "area (N/m · N·s/m)" } th { "model" } } }
                 tbody {
-                    @for (i, m) in finished.iter().enumerate() {
+                    @for (i, m) in finished.iter().enumerate().filter(|(i, _)| shown.contains(i)) {
                         @let map = result.map(|res| map_json(spec, res, i)).unwrap_or(Value::Null);
                         tr {
                             td { (m.label) }
@@ -320,6 +301,38 @@ async fn maps_markup(
         }
     };
     Ok(html! { (table) (pager) (figure) })
+}
+
+/// The maps page `page` (1-based) of `n` maps draws; a page past the last
+/// is a 422 naming `page`.
+pub fn page_range(n: usize, page: usize) -> Result<std::ops::Range<usize>, Problem> {
+    let pages = n.div_ceil(PAGE_MAPS).max(1);
+    if page > pages {
+        return Err(crate::error::SpecError::new(
+            "page",
+            page,
+            format!("1 to {pages}: {n} maps, {PAGE_MAPS} a page"),
+        )
+        .into());
+    }
+    Ok((page - 1) * PAGE_MAPS..(page * PAGE_MAPS).min(n))
+}
+
+/// Links to the other pages of `n` maps (`base` ends in `?` or `&`).
+pub fn pager(n: usize, page: usize, base: &str) -> Markup {
+    let pages = n.div_ceil(PAGE_MAPS).max(1);
+    let shown = (page - 1) * PAGE_MAPS..(page * PAGE_MAPS).min(n);
+    html! {
+        @if pages > 1 {
+            nav class="pager" aria-label="maps" {
+                "Maps " (shown.start + 1) "–" (shown.end) " of " (n) " (" (PAGE_MAPS) " a page): "
+                @for p in 1..=pages {
+                    @if p == page { strong aria-current="page" { (p) } } @else { a href={(base) "page=" (p)} { (p) } }
+                    " "
+                }
+            }
+        }
+    }
 }
 
 /// A map's own result JSON (a compare's or sweep's row's `map`).
