@@ -972,9 +972,9 @@ fn the_audit_is_capped_paged_and_rate_limited_and_every_refusal_is_in_it() {
     say(&mut ws, &hello(|_| {}));
     let epoch = hear(&mut ws).unwrap()["epoch"].as_u64().unwrap();
     let reason = "r".repeat(250_000);
-    // 21 refusals: the budget (20) and one more, which closes the session
+    // 121 refusals: the budget (120) and one more, which closes the session
     // (no more is sent: unread data would reset the link before the error).
-    for seq in 2..=22u64 {
+    for seq in 2..=122u64 {
         let m = serde_json::json!({"v":1,"seq":seq,"type":"refused","epoch":epoch,"trial_id":format!("x/0/{seq}"),
             "code":"busy","reason":reason});
         say(&mut ws, &m.to_string());
@@ -987,11 +987,11 @@ fn the_audit_is_capped_paged_and_rate_limited_and_every_refusal_is_in_it() {
         }
     };
     assert_eq!(e["type"], "error", "{e}");
-    assert!(e["message"].as_str().unwrap().contains("more than 20 refused messages"), "{e}");
+    assert!(e["message"].as_str().unwrap().contains("more than 120 refused messages"), "{e}");
     assert!(hear(&mut ws).is_none(), "closed");
     let rows = get(&format!("{}/v1/rigs/bench/audit?limit=500", s.base));
     let rows = rows.as_array().unwrap();
-    assert_eq!(rows.len(), 21, "the budget and the row that says it closed");
+    assert_eq!(rows.len(), 121, "the budget and the row that says it closed");
     for r in rows {
         assert!(r["reason"].as_str().unwrap().len() <= AUDIT_REASON, "{}", r["reason"].as_str().unwrap().len());
         assert!(r["message"].as_str().unwrap().len() <= AUDIT_MESSAGE);

@@ -575,3 +575,57 @@ fn a_cancel_reaches_units_on_other_workers() {
     );
     assert!(us.iter().any(|u| u["state"] == "cancelled"), "{us:?}");
 }
+
+/// Issue 30, defect 7: a run on a rig that no live worker runs says so
+/// (`waiting_for_rig`, in the API and on its page) instead of waiting
+/// silently; an API process started again says it too (it is read from
+/// the workers' table); a worker for that rig then runs it.
+#[test]
+fn a_run_on_a_rig_no_worker_runs_says_why_it_waits() {
+    let Some(url) = pg::fresh_database_blocking("lonely") else {
+        return;
+    };
+    let mut p = Procs {
+        children: vec![],
+        dir: fresh_dir("lonely"),
+    };
+    let api_args = [
+        "serve", "--db", &url, "--bind", "127.0.0.1:0", "--token", TOKEN, "--rigs", "sim:1,lonely:1", "--api-only",
+    ];
+    let (child, line) = spawn_ready(&api_args, &p.dir, "api.err");
+    p.children.push(child);
+    let base = line.rsplit(' ').next().unwrap().to_string();
+    register_token(&base, TOKEN);
+    worker(&mut p, &url, "15000", "w0.err");
+    let small = QUICK[0];
+    let (code, v, _) = post(&format!("{base}/v1/experiments?rig=lonely"), &small.replace('\n', ""));
+    assert_eq!(code, 202, "{v}");
+    let id = v["id"].as_str().unwrap().to_string();
+    let waiting = |base: &str| {
+        let v = get(&format!("{base}/v1/experiments/{id}"));
+        assert_eq!(v["state"], "queued", "{v}");
+        v["progress"]["waiting_for_rig"].as_str().map(str::to_owned)
+    };
+    let mut why = None;
+    wait_for("waiting_for_rig", 20, || {
+        why = waiting(&base);
+        why.is_some()
+    });
+    let why = why.unwrap();
+    assert!(why.contains("no live worker runs rig lonely") && why.contains("sim"), "{why}");
+    let page = ureq::get(&format!("{base}/runs/{id}")).call().unwrap().into_string().unwrap();
+    assert!(page.contains("waiting for the rig") && page.contains("no live worker runs rig lonely"), "{page}");
+    // The API process killed and started again: it says so again.
+    let mut old = p.children.remove(0);
+    let _ = old.kill();
+    let _ = old.wait();
+    let (child, line) = spawn_ready(&api_args, &p.dir, "api2.err");
+    p.children.push(child);
+    let base = line.rsplit(' ').next().unwrap().to_string();
+    register_token(&base, TOKEN);
+    wait_for("waiting_for_rig after a restart", 20, || waiting(&base).is_some_and(|w| w.contains("lonely")));
+    // A worker for the rig runs it.
+    let (child, _) = spawn_ready(&["worker", "--db", &url, "--rigs", "lonely:1"], &p.dir, "w1.err");
+    p.children.push(child);
+    assert_eq!(wait_end(&base, &id, 120)["state"], "succeeded");
+}

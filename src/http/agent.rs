@@ -33,8 +33,10 @@ pub const WRITE_WITHIN: Duration = Duration::from_secs(5);
 /// (Above tungstenite's 128 KiB write buffer and a trial message.)
 pub const SEND_QUEUE: usize = 512 * 1024;
 /// Audit rows one session may cause within [`AUDIT_WINDOW`]: one more
-/// closes it (audited once more, saying so).
-pub const AUDIT_BUDGET: u32 = 20;
+/// closes it (audited once more, saying so). Generous for an agent that
+/// repeats late results after a fault (each is audited); the rows kept
+/// are bounded anyway by the retention (`store::agents::AUDIT_KEEP_ROWS`).
+pub const AUDIT_BUDGET: u32 = 120;
 pub const AUDIT_WINDOW: Duration = Duration::from_secs(60);
 
 #[utoipa::path(get, path = "/v1/agent",

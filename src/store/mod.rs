@@ -599,11 +599,16 @@ impl Store {
     /// Store a trial whose place in its map is not known here (an attached
     /// rig's result, stored before the search takes it; the search's
     /// [`Store::add_trials`] places it); a trial already stored is kept.
+    /// Fenced by the experiment's state: an ended experiment takes no
+    /// trial (the rig's epoch has fenced the session before this: a stale
+    /// session's result never gets here).
     pub async fn add_trial_unplaced(&self, id: &str, t: &StoredTrial) -> Result<(), sqlx::Error> {
         self.writable()?;
         let point = serde_json::to_string(&t.point).unwrap_or_default();
         on_pool!(self, p => sqlx::query(
-            "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx) VALUES ($1, $2, $3, $4, $5, $6, $7)
+            "INSERT INTO trials (experiment_id, scope, k, b, point, col, idx)
+             SELECT $1, $2, $3, $4, $5, $6, $7
+             WHERE EXISTS (SELECT 1 FROM experiments WHERE id = $1 AND state NOT IN ('succeeded', 'failed', 'cancelled'))
              ON CONFLICT (experiment_id, scope, k, b) DO NOTHING",
         )
         .bind(id)

@@ -318,6 +318,11 @@ pub fn page_range(n: usize, page: usize) -> Result<std::ops::Range<usize>, Probl
     Ok((page - 1) * PAGE_MAPS..(page * PAGE_MAPS).min(n))
 }
 
+/// 1 point in this many is drawn when a page's maps hold `total` points.
+fn stride(total: usize) -> usize {
+    total.div_ceil(PAGE_POINTS).max(1)
+}
+
 /// Links to the other pages of `n` maps (`base` ends in `?` or `&`).
 pub fn pager(n: usize, page: usize, base: &str) -> Markup {
     let pages = n.div_ceil(PAGE_MAPS).max(1);
@@ -372,7 +377,7 @@ pub fn map_panels(
     let per_map = TOOLTIP_BUDGET / panels.len().max(1);
     // Past the page's point budget, 1 point in `stride` of every map.
     let total: usize = panels.iter().map(|p| p.1.len()).sum();
-    let stride = total.div_ceil(PAGE_POINTS).max(1);
+    let stride = stride(total);
     let mut out = Vec::new();
     for (name, all, boundary, criterion) in panels {
         let thinned: Vec<MapPlotPoint>;
@@ -419,4 +424,38 @@ pub fn map_panels(
             }
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Issue 30: accepted ⇒ bounded. Any page a run accepts draws at
+        /// most PAGE_MAPS maps, and at most PAGE_POINTS points (plus one
+        /// per map, for the rounding of `step_by`) whatever they hold.
+        #[test]
+        fn a_page_draws_within_its_budgets(
+            sizes in proptest::collection::vec(0usize..50_000, 0..400),
+            page in 1usize..40,
+        ) {
+            let n = sizes.len();
+            match page_range(n, page) {
+                Ok(shown) => {
+                    prop_assert!(shown.len() <= PAGE_MAPS);
+                    prop_assert!(page == 1 || !shown.is_empty());
+                    let total: usize = sizes[shown.clone()].iter().sum();
+                    let s = stride(total);
+                    let drawn: usize = sizes[shown.clone()].iter().map(|m| m.div_ceil(s)).sum();
+                    prop_assert!(drawn <= PAGE_POINTS + shown.len(), "{drawn}");
+                    prop_assert!(s == 1 || total > PAGE_POINTS);
+                }
+                Err(p) => {
+                    prop_assert_eq!(p.field.as_deref(), Some("page"));
+                    prop_assert!(page > n.div_ceil(PAGE_MAPS).max(1));
+                }
+            }
+        }
+    }
 }

@@ -155,6 +155,116 @@ pub fn check_verdict_shape(
 }
 
 #[cfg(test)]
+mod verdict_tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A number an agent might send: ordinary, extreme or not a number.
+    fn number() -> impl Strategy<Value = f64> {
+        prop_oneof![
+            -1e3f64..1e3,
+            Just(f64::NAN),
+            Just(f64::INFINITY),
+            Just(-1e308),
+            Just(1e308),
+            Just(0.0),
+            Just(-0.0),
+        ]
+    }
+
+    fn point() -> impl Strategy<Value = Point> {
+        (
+            (proptest::option::of(any::<bool>()), proptest::option::of(any::<bool>())),
+            (proptest::option::of(number()), proptest::option::of(any::<bool>())),
+            (proptest::option::of(number()), proptest::option::of(number())),
+            (proptest::option::of(any::<u32>()), proptest::option::of(any::<bool>())),
+        )
+            .prop_map(|((stable, passive), (fidelity, decided), (margin, margin_se), (realizations, saturated))| Point {
+                k: 1000.0,
+                b: 2.0,
+                stable,
+                passive,
+                fidelity,
+                decided,
+                margin,
+                margin_se,
+                realizations,
+                saturated,
+            })
+    }
+
+    proptest! {
+        /// Issue 30: accepted ⇒ bounded. A verdict the shape check accepts
+        /// has exactly one verdict field, every number finite and in its
+        /// range, and realizations within the trial's.
+        #[test]
+        fn an_accepted_verdict_is_finite_and_in_range(
+            p in point(),
+            impedance in any::<bool>(),
+            noisy in any::<bool>(),
+            max in 1u32..64,
+        ) {
+            let c = if impedance { Criterion::Impedance } else { Criterion::Stability };
+            if check_verdict_shape(&p, c, noisy, max).is_ok() {
+                prop_assert!(p.stable.is_some() != p.passive.is_some());
+                prop_assert_eq!(p.passive.is_some(), impedance);
+                for x in [p.fidelity, p.margin, p.margin_se].into_iter().flatten() {
+                    prop_assert!(x.is_finite());
+                }
+                prop_assert!(p.fidelity.is_none_or(|f| f >= 0.0));
+                prop_assert!(p.margin_se.is_none_or(|s| s >= 0.0));
+                prop_assert!(p.realizations.is_none_or(|r| (1..=max).contains(&r)));
+                prop_assert_eq!(p.realizations.is_some(), noisy);
+                prop_assert_ne!(p.saturated, Some(false));
+            }
+        }
+    }
+
+    /// Each rule, with the field it names (a change to any is caught).
+    #[test]
+    fn each_rule_names_its_field() {
+        let ok = Point { k: 1.0, b: 0.0, stable: Some(true), ..Point::default() };
+        assert!(check_verdict_shape(&ok, Criterion::Stability, false, 8).is_ok());
+        let noisy = Point { decided: Some(true), realizations: Some(8), ..ok.clone() };
+        assert!(check_verdict_shape(&noisy, Criterion::Stability, true, 8).is_ok());
+        let field = |p: &Point, c, n| check_verdict_shape(p, c, n, 8).unwrap_err().field;
+        assert_eq!(field(&noisy, Criterion::Stability, false), "decided");
+        assert_eq!(field(&ok, Criterion::Stability, true), "decided");
+        assert_eq!(field(&Point { realizations: Some(9), ..noisy.clone() }, Criterion::Stability, true), "realizations");
+        assert_eq!(field(&Point { realizations: Some(0), ..noisy.clone() }, Criterion::Stability, true), "realizations");
+        assert_eq!(field(&ok, Criterion::Impedance, false), "stable");
+        let imp = Point { k: 1.0, b: 0.0, passive: Some(true), fidelity: Some(0.5), ..Point::default() };
+        assert!(check_verdict_shape(&imp, Criterion::Impedance, false, 8).is_ok());
+        assert!(check_verdict_shape(&imp, Criterion::StrictPassivity, false, 8).is_ok());
+        assert_eq!(field(&Point { fidelity: None, ..imp.clone() }, Criterion::Impedance, false), "fidelity");
+        assert_eq!(field(&Point { fidelity: Some(-1e-9), ..imp.clone() }, Criterion::Impedance, false), "fidelity");
+        let bla = Point { decided: Some(false), realizations: Some(3), margin: Some(-0.1), margin_se: Some(0.2), ..imp.clone() };
+        assert!(check_verdict_shape(&bla, Criterion::Impedance, true, 8).is_ok());
+        assert_eq!(field(&Point { margin: None, ..bla.clone() }, Criterion::Impedance, true), "margin");
+        assert_eq!(field(&Point { margin: Some(f64::NAN), ..bla.clone() }, Criterion::Impedance, true), "margin");
+        assert_eq!(field(&Point { margin_se: Some(-1.0), ..bla.clone() }, Criterion::Impedance, true), "margin_se");
+        assert_eq!(field(&Point { margin_se: None, ..bla.clone() }, Criterion::Impedance, true), "margin_se");
+        assert_eq!(field(&Point { saturated: Some(false), ..ok.clone() }, Criterion::Stability, false), "saturated");
+        assert!(check_verdict_shape(&Point { saturated: Some(true), ..ok }, Criterion::Stability, false, 8).is_ok());
+        // A request checks its wall to the bit and derives noisy and the cap.
+        let scene = SceneSpec::from_json(r#"{"hit":{"replicates":3}}"#).unwrap();
+        let r = TrialRequest {
+            scope: 0,
+            k: 1.0,
+            b: 0.0,
+            scene,
+            method: Method::Time,
+            criterion: Criterion::Stability,
+            accuracy: Accuracy::default(),
+        };
+        let three = Point { k: 1.0, b: 0.0, stable: Some(true), decided: Some(true), realizations: Some(3), ..Point::default() };
+        assert!(r.check_verdict(&three).is_ok());
+        assert_eq!(r.check_verdict(&Point { realizations: Some(4), ..three.clone() }).unwrap_err().field, "realizations");
+        assert_eq!(r.check_verdict(&Point { k: 1.0 + 1e-15, ..three }).unwrap_err().field, "point");
+    }
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
     use crate::zwidth::search::{map, map_observed};
