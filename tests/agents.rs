@@ -924,10 +924,22 @@ fn a_result_that_is_not_a_verdict_of_its_trial_fails_the_experiment_naming_the_f
     let epoch = hear(&mut ws).unwrap()["epoch"].as_u64().unwrap();
     let cases = [
         (serde_json::json!({}), "point.stable = (absent)"),
-        (serde_json::json!({"stable": true, "fidelity": -1e308}), "point.fidelity = (present)"),
-        (serde_json::json!({"stable": true, "realizations": 4294967295u32}), "point.realizations = (present)"),
-        (serde_json::json!({"stable": true, "saturated": false}), "point.saturated = false"),
-        (serde_json::json!({"passive": true}), "point.stable = (absent)"),
+        (
+            serde_json::json!({"stable": true, "fidelity": -1e308}),
+            "point.fidelity = (present)",
+        ),
+        (
+            serde_json::json!({"stable": true, "realizations": 4294967295u32}),
+            "point.realizations = (present)",
+        ),
+        (
+            serde_json::json!({"stable": true, "saturated": false}),
+            "point.saturated = false",
+        ),
+        (
+            serde_json::json!({"passive": true}),
+            "point.stable = (absent)",
+        ),
     ];
     for (i, (extra, want)) in cases.into_iter().enumerate() {
         let id = submit(&s, "bench", MAP);
@@ -942,9 +954,20 @@ fn a_result_that_is_not_a_verdict_of_its_trial_fails_the_experiment_naming_the_f
         let v = wait_end(&s.base, &id, 30);
         assert_eq!(v["state"], "failed", "{v}");
         let error = v["error"].as_str().unwrap();
-        assert!(error.contains("not a verdict of its trial") && error.contains(want), "{error} lacks {want}");
-        assert_eq!(get(&format!("{}/v1/experiments/{id}/trials", s.base)), serde_json::json!([]));
-        assert!(audit(&s).iter().any(|r| r["reason"].as_str().unwrap().contains(want)), "audited");
+        assert!(
+            error.contains("not a verdict of its trial") && error.contains(want),
+            "{error} lacks {want}"
+        );
+        assert_eq!(
+            get(&format!("{}/v1/experiments/{id}/trials", s.base)),
+            serde_json::json!([])
+        );
+        assert!(
+            audit(&s)
+                .iter()
+                .any(|r| r["reason"].as_str().unwrap().contains(want)),
+            "audited"
+        );
     }
     // The verdict its engine gives is stored as before.
     let id = submit(&s, "bench", MAP);
@@ -953,7 +976,11 @@ fn a_result_that_is_not_a_verdict_of_its_trial_fails_the_experiment_naming_the_f
     say(&mut ws, &answer(epoch, &t, point, 10));
     assert_eq!(hear(&mut ws).unwrap()["type"], "ack");
     wait_for("the trial stored", 30, || {
-        get(&format!("{}/v1/experiments/{id}/trials", s.base)).as_array().unwrap().len() == 1
+        get(&format!("{}/v1/experiments/{id}/trials", s.base))
+            .as_array()
+            .unwrap()
+            .len()
+            == 1
     });
 }
 
@@ -987,34 +1014,70 @@ fn the_audit_is_capped_paged_and_rate_limited_and_every_refusal_is_in_it() {
         }
     };
     assert_eq!(e["type"], "error", "{e}");
-    assert!(e["message"].as_str().unwrap().contains("more than 120 refused messages"), "{e}");
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("more than 120 refused messages"),
+        "{e}"
+    );
     assert!(hear(&mut ws).is_none(), "closed");
     let rows = get(&format!("{}/v1/rigs/bench/audit?limit=500", s.base));
     let rows = rows.as_array().unwrap();
-    assert_eq!(rows.len(), 121, "the budget and the row that says it closed");
+    assert_eq!(
+        rows.len(),
+        121,
+        "the budget and the row that says it closed"
+    );
     for r in rows {
-        assert!(r["reason"].as_str().unwrap().len() <= AUDIT_REASON, "{}", r["reason"].as_str().unwrap().len());
+        assert!(
+            r["reason"].as_str().unwrap().len() <= AUDIT_REASON,
+            "{}",
+            r["reason"].as_str().unwrap().len()
+        );
         assert!(r["message"].as_str().unwrap().len() <= AUDIT_MESSAGE);
     }
-    assert!(rows[0]["reason"].as_str().unwrap().contains("session is closed"), "{}", rows[0]);
+    assert!(
+        rows[0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("session is closed"),
+        "{}",
+        rows[0]
+    );
     // Pages: newest first, `before` the last id of the page before.
-    let page = |q: &str| get(&format!("{}/v1/rigs/bench/audit?{q}", s.base)).as_array().unwrap().clone();
+    let page = |q: &str| {
+        get(&format!("{}/v1/rigs/bench/audit?{q}", s.base))
+            .as_array()
+            .unwrap()
+            .clone()
+    };
     let first = page("limit=5");
     assert_eq!(first, rows[..5]);
     let next = page(&format!("limit=5&before={}", first[4]["id"]));
     assert_eq!(next, rows[5..10]);
     for q in ["limit=0", "limit=501", "before=x", "page=2"] {
         let (code, ct, _) = fetch(ureq::get(&format!("{}/v1/rigs/bench/audit?{q}", s.base)).call());
-        assert_eq!((code, ct.as_str()), (422, "application/problem+json"), "{q}");
+        assert_eq!(
+            (code, ct.as_str()),
+            (422, "application/problem+json"),
+            "{q}"
+        );
     }
     // Sessions that name no rig: an unknown rig of 200 KB, a binary first
     // frame, a first message that is not hello. Each gets an error, then
     // is readable under /v1/agent/audit.
     let long = "n".repeat(200_000);
     let firsts = [
-        tokio_tungstenite::tungstenite::Message::Text(hello(|_| {}).replace(r#""rig":"bench""#, &format!(r#""rig":"{long}""#)).into()),
+        tokio_tungstenite::tungstenite::Message::Text(
+            hello(|_| {})
+                .replace(r#""rig":"bench""#, &format!(r#""rig":"{long}""#))
+                .into(),
+        ),
         tokio_tungstenite::tungstenite::Message::Binary(vec![1u8, 2, 3].into()),
-        tokio_tungstenite::tungstenite::Message::Text(r#"{"v":1,"seq":1,"type":"heartbeat","epoch":1,"state":"armed"}"#.into()),
+        tokio_tungstenite::tungstenite::Message::Text(
+            r#"{"v":1,"seq":1,"type":"heartbeat","epoch":1,"state":"armed"}"#.into(),
+        ),
     ];
     for m in firsts {
         let mut ws = dial(&s, &token).unwrap();
@@ -1022,17 +1085,40 @@ fn the_audit_is_capped_paged_and_rate_limited_and_every_refusal_is_in_it() {
         assert_eq!(hear(&mut ws).expect("an error")["type"], "error");
     }
     let unknown = get(&format!("{}/v1/agent/audit", s.base));
-    let reasons: Vec<&str> = unknown.as_array().unwrap().iter().map(|r| r["reason"].as_str().unwrap()).collect();
+    let reasons: Vec<&str> = unknown
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["reason"].as_str().unwrap())
+        .collect();
     assert_eq!(reasons.len(), 3, "{reasons:?}");
-    assert!(reasons.iter().all(|r| r.len() <= AUDIT_REASON), "{reasons:?}");
-    assert!(reasons[0].contains("first message must be hello"), "{reasons:?}");
+    assert!(
+        reasons.iter().all(|r| r.len() <= AUDIT_REASON),
+        "{reasons:?}"
+    );
+    assert!(
+        reasons[0].contains("first message must be hello"),
+        "{reasons:?}"
+    );
     assert!(reasons[1].contains("text hello"), "{reasons:?}");
-    assert!(reasons[2].contains("not one of this server's rigs") && reasons[2].contains("200000 bytes"), "{reasons:?}");
+    assert!(
+        reasons[2].contains("not one of this server's rigs") && reasons[2].contains("200000 bytes"),
+        "{reasons:?}"
+    );
     // Empty agent and boot names are refused and audited too.
     let mut ws = dial(&s, &token).unwrap();
-    say(&mut ws, &hello(|_| {}).replace(r#""agent":"raw""#, r#""agent":"""#));
-    assert!(hear(&mut ws).unwrap()["message"].as_str().unwrap().contains("1 to 128 bytes"));
-    assert!(audit(&s)[0]["reason"].as_str().unwrap().contains("1 to 128 bytes"));
+    say(
+        &mut ws,
+        &hello(|_| {}).replace(r#""agent":"raw""#, r#""agent":"""#),
+    );
+    assert!(hear(&mut ws).unwrap()["message"]
+        .as_str()
+        .unwrap()
+        .contains("1 to 128 bytes"));
+    assert!(audit(&s)[0]["reason"]
+        .as_str()
+        .unwrap()
+        .contains("1 to 128 bytes"));
 }
 
 /// Issue 30, defect 5: a session that floods results and never reads is
@@ -1050,7 +1136,12 @@ fn a_session_that_never_reads_or_falls_silent_is_closed_and_fenced() {
     for seq in 2..3500u64 {
         let r = serde_json::json!({"v":1,"seq":seq,"type":"result","epoch":epoch,"trial_id":format!("e/0/{seq}"),
             "point":{"k":1.0,"b":0.0,"stable":true},"measured":{"peak_force_n":1.0,"peak_speed_m_s":0.1,"penetration_m":0.001}});
-        if ws.send(tokio_tungstenite::tungstenite::Message::Text(r.to_string().into())).is_err() {
+        if ws
+            .send(tokio_tungstenite::tungstenite::Message::Text(
+                r.to_string().into(),
+            ))
+            .is_err()
+        {
             break;
         }
     }

@@ -529,9 +529,11 @@ fn a_driver_stopped_gracefully_hands_its_run_and_units_over() {
     );
 }
 
-/// Cancel through the API while two workers compute the run's units: the
-/// driver and every unit stop within a few heartbeats (1 s each), nothing
-/// is claimed again, and /v1/rigs shows no unit computing.
+/// Cancel through another API process than the one it was submitted to
+/// (a write to the database, not a message to a process) while two workers
+/// compute the run's units: the driver (a worker) and every unit stop
+/// within a few heartbeats (1 s each; asserted: 10 s), nothing is claimed
+/// again, /v1/rigs shows no unit computing and /metrics no busy worker.
 #[test]
 fn a_cancel_reaches_units_on_other_workers() {
     let Some(url) = pg::fresh_database_blocking("cancel") else {
@@ -542,6 +544,7 @@ fn a_cancel_reaches_units_on_other_workers() {
         dir: fresh_dir("cancel"),
     };
     let base = api(&mut p, &url, true, "api.err");
+    let other = api(&mut p, &url, true, "api2.err");
     for i in 0..2 {
         worker(&mut p, &url, "15000", &format!("w{i}.err"));
     }
@@ -550,9 +553,18 @@ fn a_cancel_reaches_units_on_other_workers() {
         let rigs = get(&format!("{base}/v1/rigs"));
         rigs[0]["units"].as_array().unwrap().len() >= 2
     });
-    let (code, v, _) = post(&format!("{base}/v1/experiments/{id}/cancel"), "");
+    let (code, v, _) = post(&format!("{other}/v1/experiments/{id}/cancel"), "");
     assert_eq!(code, 200, "{v}");
     let cancelled = Instant::now();
+    // The driver stops: no worker reports running an experiment.
+    wait_for("no busy worker", 10, || {
+        let m = ureq::get(&format!("{base}/metrics"))
+            .call()
+            .unwrap()
+            .into_string()
+            .unwrap();
+        m.contains("zwidth_workers{busy=\"true\"} 0")
+    });
     wait_for("no unit computing", 10, || {
         get(&format!("{base}/v1/rigs"))[0]["units"]
             .as_array()
@@ -590,7 +602,16 @@ fn a_run_on_a_rig_no_worker_runs_says_why_it_waits() {
         dir: fresh_dir("lonely"),
     };
     let api_args = [
-        "serve", "--db", &url, "--bind", "127.0.0.1:0", "--token", TOKEN, "--rigs", "sim:1,lonely:1", "--api-only",
+        "serve",
+        "--db",
+        &url,
+        "--bind",
+        "127.0.0.1:0",
+        "--token",
+        TOKEN,
+        "--rigs",
+        "sim:1,lonely:1",
+        "--api-only",
     ];
     let (child, line) = spawn_ready(&api_args, &p.dir, "api.err");
     p.children.push(child);
@@ -598,7 +619,10 @@ fn a_run_on_a_rig_no_worker_runs_says_why_it_waits() {
     register_token(&base, TOKEN);
     worker(&mut p, &url, "15000", "w0.err");
     let small = QUICK[0];
-    let (code, v, _) = post(&format!("{base}/v1/experiments?rig=lonely"), &small.replace('\n', ""));
+    let (code, v, _) = post(
+        &format!("{base}/v1/experiments?rig=lonely"),
+        &small.replace('\n', ""),
+    );
     assert_eq!(code, 202, "{v}");
     let id = v["id"].as_str().unwrap().to_string();
     let waiting = |base: &str| {
@@ -606,15 +630,26 @@ fn a_run_on_a_rig_no_worker_runs_says_why_it_waits() {
         assert_eq!(v["state"], "queued", "{v}");
         v["progress"]["waiting_for_rig"].as_str().map(str::to_owned)
     };
+    // (The worker's first report may come after the API's first read.)
     let mut why = None;
-    wait_for("waiting_for_rig", 20, || {
+    wait_for("waiting_for_rig naming the live worker's rig", 20, || {
         why = waiting(&base);
-        why.is_some()
+        why.as_deref().is_some_and(|w| w.contains("sim"))
     });
     let why = why.unwrap();
-    assert!(why.contains("no live worker runs rig lonely") && why.contains("sim"), "{why}");
-    let page = ureq::get(&format!("{base}/runs/{id}")).call().unwrap().into_string().unwrap();
-    assert!(page.contains("waiting for the rig") && page.contains("no live worker runs rig lonely"), "{page}");
+    assert!(
+        why.contains("no live worker runs rig lonely") && why.contains("sim"),
+        "{why}"
+    );
+    let page = ureq::get(&format!("{base}/runs/{id}"))
+        .call()
+        .unwrap()
+        .into_string()
+        .unwrap();
+    assert!(
+        page.contains("waiting for the rig") && page.contains("no live worker runs rig lonely"),
+        "{page}"
+    );
     // The API process killed and started again: it says so again.
     let mut old = p.children.remove(0);
     let _ = old.kill();
@@ -623,9 +658,15 @@ fn a_run_on_a_rig_no_worker_runs_says_why_it_waits() {
     p.children.push(child);
     let base = line.rsplit(' ').next().unwrap().to_string();
     register_token(&base, TOKEN);
-    wait_for("waiting_for_rig after a restart", 20, || waiting(&base).is_some_and(|w| w.contains("lonely")));
+    wait_for("waiting_for_rig after a restart", 20, || {
+        waiting(&base).is_some_and(|w| w.contains("lonely"))
+    });
     // A worker for the rig runs it.
-    let (child, _) = spawn_ready(&["worker", "--db", &url, "--rigs", "lonely:1"], &p.dir, "w1.err");
+    let (child, _) = spawn_ready(
+        &["worker", "--db", &url, "--rigs", "lonely:1"],
+        &p.dir,
+        "w1.err",
+    );
     p.children.push(child);
     assert_eq!(wait_end(&base, &id, 120)["state"], "succeeded");
 }

@@ -948,7 +948,9 @@ fn peak_rss(s: &Server) -> u64 {
 /// Butterworth cutoff (two columns each, milliseconds; one scene, so its
 /// runs compare), succeeded: its id.
 fn sweep(s: &Server, n: usize) -> String {
-    let values: Vec<String> = (0..n).map(|i| format!("{}", 10.0 + 2.0 * i as f64)).collect();
+    let values: Vec<String> = (0..n)
+        .map(|i| format!("{}", 10.0 + 2.0 * i as f64))
+        .collect();
     let body = format!(
         r#"{{"kind":"sweep","map":{{"scene":{{"device":{{"coulomb":0,"quantization":0}},"loop":{{"sample_hz":1000,"render_hz":1000}},"estimator":{{"kind":"butterworth","cutoff_hz":100}}}},"criterion":"impedance","b":[0,1]}},"parameter":{{"path":"estimator.cutoff_hz","values":[{}]}}}}"#,
         values.join(",")
@@ -994,7 +996,10 @@ fn comparisons_and_run_pages_are_bounded_before_they_are_built() {
     for (i, t) in threads.into_iter().enumerate() {
         let (code, _, body) = t.join().unwrap();
         assert_eq!(code, 422, "{body}");
-        assert!(body.contains(&format!("at most {COMPARE_MAX_MAPS} maps")), "{body}");
+        assert!(
+            body.contains(&format!("at most {COMPARE_MAX_MAPS} maps")),
+            "{body}"
+        );
         if i % 2 == 1 {
             let v: serde_json::Value = serde_json::from_str(&body).unwrap();
             assert_eq!(v["field"], "runs", "{v}");
@@ -1024,7 +1029,11 @@ fn comparisons_and_run_pages_are_bounded_before_they_are_built() {
     assert!(body.contains("page") && body.contains("1 to 17"), "{body}");
     // The compare page of 40 maps draws 12 a page too.
     let (_, _, second) = fetch(ureq::get(&format!("{ok}&page=2")).call());
-    assert_eq!(second.matches("<figure>").count(), 12, "12 maps (the overlay is a figure of its own class)");
+    assert_eq!(
+        second.matches("<figure>").count(),
+        12,
+        "12 maps (the overlay is a figure of its own class)"
+    );
 }
 
 /// Issue 30, defect 10: the dashboard's errors are pages with the problem's
@@ -1034,16 +1043,24 @@ fn comparisons_and_run_pages_are_bounded_before_they_are_built() {
 fn dashboard_errors_are_pages_and_every_response_is_marked() {
     let s = start();
     let r = ureq::get(&format!("{}/runs/nope", s.base)).call();
-    let Err(ureq::Error::Status(404, r)) = r else { panic!("a 404") };
+    let Err(ureq::Error::Status(404, r)) = r else {
+        panic!("a 404")
+    };
     assert_eq!(r.content_type(), "text/html");
     assert_eq!(r.header("x-content-type-options"), Some("nosniff"));
     let body = r.into_string().unwrap();
-    assert!(body.contains("<h1>Not found</h1>") && body.contains("no experiment nope"), "{body}");
+    assert!(
+        body.contains("<h1>Not found</h1>") && body.contains("no experiment nope"),
+        "{body}"
+    );
     // Two runs on different scenes: the compare page says why, as a page.
     let (code, v, _) = post(&format!("{}/v1/experiments", s.base), SMALL);
     assert_eq!(code, 202, "{v}");
     let one = v["id"].as_str().unwrap().to_string();
-    let (code, v, _) = post(&format!("{}/v1/experiments", s.base), &SMALL.replace("\"coulomb\":0", "\"coulomb\":0,\"mass\":0.5"));
+    let (code, v, _) = post(
+        &format!("{}/v1/experiments", s.base),
+        &SMALL.replace("\"coulomb\":0", "\"coulomb\":0,\"mass\":0.5"),
+    );
     assert_eq!(code, 202, "{v}");
     let two = v["id"].as_str().unwrap().to_string();
     for id in [&one, &two] {
@@ -1051,22 +1068,41 @@ fn dashboard_errors_are_pages_and_every_response_is_marked() {
     }
     let (code, ct, body) = fetch(ureq::get(&format!("{}/compare?runs={one},{two}", s.base)).call());
     assert_eq!((code, ct.as_str()), (422, "text/html"), "{body}");
-    assert!(body.contains("<!DOCTYPE html>") && body.contains("scene"), "{body}");
+    assert!(
+        body.contains("<!DOCTYPE html>") && body.contains("scene"),
+        "{body}"
+    );
     // The JSON API keeps problem+json.
     let (code, ct, _) = fetch(ureq::get(&format!("{}/v1/experiments/nope", s.base)).call());
     assert_eq!((code, ct.as_str()), (404, "application/problem+json"));
-    for path in ["/", "/v1/queue", "/healthz", "/v1/nothing", "/assets/style.css"] {
+    for path in [
+        "/",
+        "/v1/queue",
+        "/healthz",
+        "/v1/nothing",
+        "/assets/style.css",
+    ] {
         let r = match ureq::get(&format!("{}{path}", s.base)).call() {
             Ok(r) | Err(ureq::Error::Status(_, r)) => r,
             Err(e) => panic!("{e}"),
         };
-        assert_eq!(r.header("x-content-type-options"), Some("nosniff"), "{path}");
+        assert_eq!(
+            r.header("x-content-type-options"),
+            Some("nosniff"),
+            "{path}"
+        );
     }
-    for path in [format!("/v1/experiments/{one}/plot.svg"), format!("/v1/compare?runs={one}&format=svg")] {
+    for path in [
+        format!("/v1/experiments/{one}/plot.svg"),
+        format!("/v1/compare?runs={one}&format=svg"),
+    ] {
         let r = ureq::get(&format!("{}{path}", s.base)).call().unwrap();
         assert_eq!(r.content_type(), "image/svg+xml");
         let csp = r.header("content-security-policy").unwrap_or("");
-        assert!(csp.contains("default-src 'none'") && !csp.contains("script"), "{path}: {csp}");
+        assert!(
+            csp.contains("default-src 'none'") && !csp.contains("script"),
+            "{path}: {csp}"
+        );
     }
 }
 
@@ -1097,7 +1133,10 @@ fn slow_and_idle_clients_are_cut_off_and_capped() {
     let mut ninth = open();
     let mut text = String::new();
     ninth.read_to_string(&mut text).unwrap();
-    assert!(text.starts_with("HTTP/1.1 503") && text.contains("\"status\":503"), "{text}");
+    assert!(
+        text.starts_with("HTTP/1.1 503") && text.contains("\"status\":503"),
+        "{text}"
+    );
     drop(more);
     let t0 = Instant::now();
     let closed = |c: &mut TcpStream| {
@@ -1113,7 +1152,10 @@ fn slow_and_idle_clients_are_cut_off_and_capped() {
     // The trickler sends a header line every 2 s until it is cut off.
     let trickler = std::thread::spawn(move || {
         for i in 0..40 {
-            if trickle.write_all(format!("x-slow-{i}: 1\r\n").as_bytes()).is_err() {
+            if trickle
+                .write_all(format!("x-slow-{i}: 1\r\n").as_bytes())
+                .is_err()
+            {
                 return Instant::now();
             }
             std::thread::sleep(Duration::from_secs(2));
@@ -1125,9 +1167,15 @@ fn slow_and_idle_clients_are_cut_off_and_capped() {
     }
     closed(&mut partial);
     let waited = t0.elapsed();
-    assert!(waited < HEADER_READ_TIMEOUT + Duration::from_secs(5), "{waited:?}");
+    assert!(
+        waited < HEADER_READ_TIMEOUT + Duration::from_secs(5),
+        "{waited:?}"
+    );
     let cut = trickler.join().unwrap().duration_since(t0);
-    assert!(cut < HEADER_READ_TIMEOUT + Duration::from_secs(8), "{cut:?}");
+    assert!(
+        cut < HEADER_READ_TIMEOUT + Duration::from_secs(8),
+        "{cut:?}"
+    );
     // The server serves as before.
     assert_eq!(get(&format!("{}/healthz", s.base))["status"], "ok");
 }

@@ -848,3 +848,173 @@ async fn concurrent_submissions_with_one_key_store_one_experiment() {
         assert_eq!(stored, [*winner], "{at}");
     }
 }
+
+/// Everything stored about experiment `e1`: its row, trials, evaluations
+/// and units, as text (a fenced write that changed any of it shows).
+async fn snapshot(st: &Store) -> String {
+    format!(
+        "{:?}\n{:?}\n{:?}\n{:?}",
+        st.get("e1").await.unwrap(),
+        st.trials("e1").await.unwrap(),
+        st.evaluations("e1").await.unwrap(),
+        st.units("e1").await.unwrap()
+    )
+}
+
+/// Issue 31: every fenced statement of an experiment's lease, performed
+/// with the attempt a takeover made stale, changes nothing stored
+/// (heartbeat, trials, evaluations, finish in each end state, interrupt,
+/// planning units); each says the lease is lost where it can.
+#[tokio::test]
+async fn every_fenced_experiment_write_of_a_stale_attempt_changes_nothing() {
+    use zwidth::store::Fault;
+    use zwidth::zwidth::farm::Unit;
+    use zwidth::zwidth::search::StoredEvaluation;
+    for (store, _dir) in stores("fence-all").await {
+        let st = &store;
+        st.claim("sim", "w1", 300).await.unwrap().unwrap();
+        let old = Lease::of("e1", 1);
+        tokio::time::sleep(std::time::Duration::from_millis(400)).await;
+        let new = st.claim("sim", "w2", 60_000).await.unwrap().unwrap();
+        assert_eq!(new.attempt, 2, "{}", st.backend());
+        let new = Lease::of("e1", 2);
+        // The new holder's own writes, so there is something to change.
+        let eval = |key: &str| StoredEvaluation {
+            key: key.into(),
+            record: serde_json::json!({"k_width": 1.0}),
+        };
+        st.add_trials(&new, &[trial(0, 0, 0, 1.0, true)], &[], (1, 0.25))
+            .await
+            .unwrap();
+        st.add_evaluations(&new, &[eval("a")], Some(serde_json::json!({"best": 1})))
+            .await
+            .unwrap();
+        st.plan_units(&new, 0, "{}", &[Unit::Column { column: 0, b: 0.0 }])
+            .await
+            .unwrap();
+        assert_eq!(
+            st.heartbeat(&new, 1, 0.25, 60_000).await.unwrap(),
+            Held::Held
+        );
+        let before = snapshot(st).await;
+        let lost = |e: sqlx::Error| assert_eq!(Fault::of(&e), Fault::Lost, "{e}");
+        assert_eq!(
+            st.heartbeat(&old, 9, 0.9, 60_000).await.unwrap(),
+            Held::Lost
+        );
+        lost(
+            st.add_trials(&old, &[trial(0, 1, 0, 2.0, false)], &[], (9, 0.9))
+                .await
+                .unwrap_err(),
+        );
+        lost(
+            st.add_evaluations(&old, &[eval("b")], Some(serde_json::json!({"best": 2})))
+                .await
+                .unwrap_err(),
+        );
+        lost(
+            st.plan_units(&old, 1, "{}", &[Unit::Map])
+                .await
+                .unwrap_err(),
+        );
+        for end in ["succeeded", "failed", "cancelled"] {
+            assert!(
+                !st.finish(&old, end, 9, Some("{}"), Some("stale"))
+                    .await
+                    .unwrap(),
+                "{end}"
+            );
+        }
+        st.interrupt(&old, 9, 0).await.unwrap();
+        st.interrupt(&old, 9, 5_000).await.unwrap();
+        assert_eq!(snapshot(st).await, before, "{}", st.backend());
+        // The holder's end is taken; the stale one's after it changes nothing.
+        assert!(st
+            .finish(&new, "succeeded", 1, Some("{}"), None)
+            .await
+            .unwrap());
+        let ended = snapshot(st).await;
+        for end in ["succeeded", "failed", "cancelled"] {
+            assert!(!st.finish(&old, end, 9, None, Some("stale")).await.unwrap());
+        }
+        st.interrupt(&old, 9, 0).await.unwrap();
+        assert_eq!(
+            st.heartbeat(&old, 9, 0.9, 60_000).await.unwrap(),
+            Held::Lost
+        );
+        assert_eq!(snapshot(st).await, ended, "{}", st.backend());
+    }
+}
+
+/// Issue 31: the same for every fenced statement of a work unit's lease
+/// (heartbeat, trials, finish in each end state, interrupt), after the
+/// unit was taken over by a second claim.
+#[tokio::test]
+async fn every_fenced_unit_write_of_a_stale_attempt_changes_nothing() {
+    use zwidth::store::Fault;
+    use zwidth::zwidth::farm::Unit;
+    for (store, _dir) in stores("fence-unit").await {
+        let st = &store;
+        let driver = claim(st).await;
+        st.plan_units(
+            &driver,
+            0,
+            "{}",
+            &[
+                Unit::Column { column: 0, b: 0.0 },
+                Unit::Column { column: 1, b: 10.0 },
+            ],
+        )
+        .await
+        .unwrap();
+        let a = st.claim_unit("sim", "w2", 300).await.unwrap().unwrap();
+        tokio::time::sleep(std::time::Duration::from_millis(400)).await;
+        let a2 = st.claim_unit("sim", "w3", 60_000).await.unwrap().unwrap();
+        assert_eq!((a2.col, a2.attempt), (a.col, 2), "{}", st.backend());
+        let (old, new) = (a.lease(), a2.lease());
+        st.add_trials(&new, &[trial(0, 0, 0, 100.0, true)], &[], (1, 0.0))
+            .await
+            .unwrap();
+        assert_eq!(
+            st.heartbeat(&new, 1, 0.0, 60_000).await.unwrap(),
+            Held::Held
+        );
+        let before = snapshot(st).await;
+        assert_eq!(
+            st.heartbeat(&old, 9, 0.0, 60_000).await.unwrap(),
+            Held::Lost
+        );
+        let e = st
+            .add_trials(&old, &[trial(0, 0, 1, 200.0, false)], &[], (9, 0.0))
+            .await
+            .unwrap_err();
+        assert_eq!(Fault::of(&e), Fault::Lost, "{e}");
+        for end in ["succeeded", "failed", "cancelled"] {
+            assert!(
+                !st.finish(&old, end, 9, Some("null"), Some("stale"))
+                    .await
+                    .unwrap(),
+                "{end}"
+            );
+        }
+        st.interrupt(&old, 9, 0).await.unwrap();
+        st.interrupt(&old, 9, 5_000).await.unwrap();
+        assert_eq!(snapshot(st).await, before, "{}", st.backend());
+        // The holder ends it; the stale writes after that change nothing.
+        assert!(st
+            .finish(&new, "succeeded", 1, Some("null"), None)
+            .await
+            .unwrap());
+        let ended = snapshot(st).await;
+        assert_eq!(
+            st.heartbeat(&old, 9, 0.0, 60_000).await.unwrap(),
+            Held::Lost
+        );
+        assert!(!st
+            .finish(&old, "failed", 9, None, Some("stale"))
+            .await
+            .unwrap());
+        st.interrupt(&old, 9, 0).await.unwrap();
+        assert_eq!(snapshot(st).await, ended, "{}", st.backend());
+    }
+}

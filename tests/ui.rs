@@ -452,13 +452,26 @@ async fn bad_queries_are_problems_naming_the_field() {
         ] {
             let (c, kind, body) = get(&app, path).await;
             assert_eq!(c.as_u16(), code, "{path}: {body}");
-            assert!(
-                kind.starts_with("application/problem+json"),
-                "{path}: {kind}"
-            );
-            if !field.is_empty() {
-                let v: serde_json::Value = serde_json::from_str(&body).unwrap();
-                assert_eq!(v["field"], field, "{path}: {v}");
+            // The JSON API, and a target refused before routing (a NUL),
+            // answer problem+json; the dashboard's pages answer a page
+            // with the problem's title, detail and field (issue 30).
+            if path.starts_with("/v1/") || path.contains("%00") {
+                assert!(
+                    kind.starts_with("application/problem+json"),
+                    "{path}: {kind}"
+                );
+                if !field.is_empty() {
+                    let v: serde_json::Value = serde_json::from_str(&body).unwrap();
+                    assert_eq!(v["field"], field, "{path}: {v}");
+                }
+            } else {
+                assert!(kind.starts_with("text/html"), "{path}: {kind}");
+                if !field.is_empty() {
+                    assert!(
+                        body.contains(&format!("Field: <code>{field}</code>")),
+                        "{path}: {body}"
+                    );
+                }
             }
         }
     }

@@ -202,7 +202,11 @@ impl<T: AsyncRead + Unpin> AsyncRead for StallLimit<T> {
 }
 
 impl<T: AsyncWrite + Unpin> AsyncWrite for StallLimit<T> {
-    fn poll_write(self: Pin<&mut Self>, cx: &mut Context<'_>, buf: &[u8]) -> Poll<io::Result<usize>> {
+    fn poll_write(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<io::Result<usize>> {
         let this = self.get_mut();
         let r = Pin::new(&mut this.io).poll_write(cx, buf);
         this.timed(cx, r)

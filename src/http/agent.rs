@@ -208,12 +208,22 @@ async fn session(st: AppState, socket: WebSocket) {
         Ok(Some(Ok(m))) => {
             let raw = shown(&m);
             return conn
-                .refuse_audited(&st, None, "the first message must be a text hello".into(), &raw)
+                .refuse_audited(
+                    &st,
+                    None,
+                    "the first message must be a text hello".into(),
+                    &raw,
+                )
                 .await;
         }
         Ok(Some(Err(e))) => {
             return conn
-                .refuse_audited(&st, None, format!("the first message could not be read: {e}"), "")
+                .refuse_audited(
+                    &st,
+                    None,
+                    format!("the first message could not be read: {e}"),
+                    "",
+                )
                 .await
         }
         Ok(None) => return,

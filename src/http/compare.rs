@@ -63,7 +63,13 @@ pub async fn compare_runs(
 pub async fn budgeted_maps(
     st: &AppState,
     ids: &[String],
-) -> Result<(Vec<crate::experiment::ExperimentSpec>, Vec<report::MapSummary>), Problem> {
+) -> Result<
+    (
+        Vec<crate::experiment::ExperimentSpec>,
+        Vec<report::MapSummary>,
+    ),
+    Problem,
+> {
     let (mut specs, mut all) = (Vec::new(), Vec::new());
     let mut points = 0;
     for (i, id) in ids.iter().enumerate() {

@@ -69,7 +69,11 @@ pub async fn refresh_served(st: AppState, mut stop: tokio::sync::watch::Receiver
         if let Ok(rows) = st.store.workers(WORKER_LIVE_MS).await {
             let rigs = rows
                 .iter()
-                .flat_map(|w| w.rigs.split(',').map(|r| r.split(':').next().unwrap_or("").to_string()))
+                .flat_map(|w| {
+                    w.rigs
+                        .split(',')
+                        .map(|r| r.split(':').next().unwrap_or("").to_string())
+                })
                 .filter(|r| !r.is_empty())
                 .collect();
             *st.served.write().unwrap_or_else(|e| e.into_inner()) = Some(rigs);

@@ -439,7 +439,10 @@ mod tests {
         assert!(pg.detail.contains("cannot be reached"), "{}", pg.detail);
         assert!(!pg.detail.contains("locked"), "{}", pg.detail);
         let io = std::io::Error::new(std::io::ErrorKind::ConnectionRefused, "refused");
-        assert_eq!(Problem::store(sqlx::Error::Io(io), true).title, "Database unreachable");
+        assert_eq!(
+            Problem::store(sqlx::Error::Io(io), true).title,
+            "Database unreachable"
+        );
         let sqlite = Problem::store(sqlx::Error::PoolTimedOut, false);
         assert_eq!(sqlite.title, "Storage busy");
         assert!(sqlite.detail.contains("locked"), "{}", sqlite.detail);

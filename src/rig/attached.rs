@@ -266,7 +266,9 @@ impl AttachedRig {
                 r.point.k, r.point.b
             ))
         } else if let Err(e) = shape {
-            Some(format!("the result is not a verdict of its trial: point.{e}"))
+            Some(format!(
+                "the result is not a verdict of its trial: point.{e}"
+            ))
         } else {
             [
                 ("peak_speed_m_s", r.measured.peak_speed_m_s),

@@ -49,10 +49,10 @@ pub fn routes() -> Router<AppState> {
 /// A problem answered to a browser: the same status, as a page with the
 /// problem's title, detail and field (the JSON API keeps problem+json).
 async fn error_page(resp: Response) -> Response {
-    let problem = resp
-        .headers()
-        .get(header::CONTENT_TYPE)
-        .is_some_and(|v| v.as_bytes().starts_with(super::problem::PROBLEM_JSON.as_bytes()));
+    let problem = resp.headers().get(header::CONTENT_TYPE).is_some_and(|v| {
+        v.as_bytes()
+            .starts_with(super::problem::PROBLEM_JSON.as_bytes())
+    });
     if !problem {
         return resp;
     }

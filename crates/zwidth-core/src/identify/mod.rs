@@ -359,7 +359,9 @@ pub fn identify(trace: &Trace, model: Model) -> Result<Identified, SpecError> {
         ("damping", &rigid.damping, true),
         ("coulomb", &rigid.coulomb, p > 2),
     ] {
-        let finite = [e.value, e.std_error, e.lo, e.hi].iter().all(|x| x.is_finite());
+        let finite = [e.value, e.std_error, e.lo, e.hi]
+            .iter()
+            .all(|x| x.is_finite());
         if !finite || (fitted && e.std_error <= 0.0) {
             return Err(SpecError::new(
                 "trace",
@@ -602,6 +604,20 @@ mod tests {
             "{:?} vs {want}",
             id.mass
         );
+        // Issue 31: each interval is value ± t·se with t the Student
+        // quantile t(0.975, blocks − 1): 2.2621571627409915 for 10 blocks
+        // (scipy.stats.t.ppf(0.975, 9)); a normal 1.96 or 9 degrees' 2.26
+        // with 10 (2.2281) is 13 % or 1.5 % off and fails.
+        assert_eq!(id.blocks, 10);
+        let t9 = 2.262_157_162_740_991_5;
+        for e in [&id.mass, &id.damping, &id.coulomb] {
+            let half = (e.hi - e.lo) / 2.0;
+            assert!((half / (t9 * e.std_error) - 1.0).abs() < 1e-9, "{e:?}");
+            assert!(
+                ((e.hi + e.lo) / 2.0 - e.value).abs() < 1e-12 * e.value.abs(),
+                "{e:?}"
+            );
+        }
     }
 
     #[test]

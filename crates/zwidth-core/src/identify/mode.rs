@@ -573,6 +573,60 @@ mod tests {
         ] {
             assert!(e.lo < e.value && e.value < e.hi, "{e:?}");
         }
+        // Issue 31: each interval is value ± z·se with z = 1.96, the normal
+        // 97.5 % quantile (the fit's 2L − 5 ≫ 30 degrees of freedom; its
+        // lower end cut at 0 only for a physical parameter that would go
+        // negative, not the case here).
+        for e in [
+            &m.handle_mass,
+            &m.motor_mass,
+            &m.stiffness,
+            &m.cable_damping,
+            &m.motor_damping,
+            &m.handle_damping,
+            &m.amplifier_lag_s,
+        ] {
+            assert!(e.std_error > 0.0, "{e:?}");
+            if e.value - 1.96 * e.std_error > 0.0 {
+                assert!(
+                    (e.value - e.lo - 1.96 * e.std_error).abs()
+                        <= 1e-12 * e.value.abs().max(1e-300),
+                    "{e:?}"
+                );
+            }
+            assert!(
+                (e.hi - e.value - 1.96 * e.std_error).abs() <= 1e-12 * e.hi.abs(),
+                "{e:?}"
+            );
+        }
+        // The split's standard errors follow first-order propagation from
+        // the fitted ratio r = m_h/M and the rigid M (independent fits):
+        // σ(m_m)² = ((1−r)σ_M)² + (Mσ_r)², σ(m_h)² = (rσ_M)² + (Mσ_r)².
+        // σ_r is read back from m_m's and must then give m_h's; likewise the
+        // damping split b_m = βb, b_h = (1−β)b with b and σ_b from the rigid fit.
+        let (big_m, s_m) = (id.mass.value, id.mass.std_error);
+        let r = m.handle_mass.value / big_m;
+        assert!((m.motor_mass.value - (1.0 - r) * big_m).abs() < 1e-12 * big_m);
+        let s_r =
+            ((m.motor_mass.std_error.powi(2) - ((1.0 - r) * s_m).powi(2)) / big_m.powi(2)).sqrt();
+        let want = ((r * s_m).powi(2) + (big_m * s_r).powi(2)).sqrt();
+        assert!(
+            (m.handle_mass.std_error / want - 1.0).abs() < 1e-9,
+            "{} vs {want}",
+            m.handle_mass.std_error
+        );
+        let (b, s_b) = (id.damping.value, id.damping.std_error);
+        let beta = m.motor_damping.value / b;
+        let s_beta =
+            ((m.motor_damping.std_error.powi(2) - (beta * s_b).powi(2)) / b.powi(2)).sqrt();
+        let want = (((1.0 - beta) * s_b).powi(2) + (b * s_beta).powi(2)).sqrt();
+        assert!(
+            (m.handle_damping.std_error / want - 1.0).abs() < 1e-9,
+            "{} vs {want}",
+            m.handle_damping.std_error
+        );
+        // And σ_r, σ_β are not zero: the split's own uncertainty is in them.
+        assert!(s_r > 0.0 && s_beta > 0.0, "{s_r} {s_beta}");
     }
 
     #[test]

@@ -147,7 +147,9 @@ impl Trace {
         }
         let (lo, hi) = position
             .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+                (l.min(x), h.max(x))
+            });
         if hi - lo < MIN_TRAVEL_M {
             return Err(SpecError::new(
                 format!("trace column 3 ({})", COLUMNS[2]),
@@ -379,7 +381,13 @@ mod tests {
     #[test]
     fn extreme_values_are_refused_at_their_line() {
         for row in [0, 1, 7, 500, 1998, 1999] {
-            for (col, value) in [(1, "1e308"), (2, "1e308"), (1, "-100001"), (2, "100.5"), (0, "1e7")] {
+            for (col, value) in [
+                (1, "1e308"),
+                (2, "1e308"),
+                (1, "-100001"),
+                (2, "100.5"),
+                (0, "1e7"),
+            ] {
                 let e = err(&csv(2000, |k, r| {
                     if k != row {
                         return r;
@@ -394,7 +402,13 @@ mod tests {
             }
         }
         // Just inside the range is a number like any other.
-        let ok = Trace::parse_csv(&csv(2000, |k, r| if k == 9 { "0.009,99999,0\n".into() } else { r }));
+        let ok = Trace::parse_csv(&csv(2000, |k, r| {
+            if k == 9 {
+                "0.009,99999,0\n".into()
+            } else {
+                r
+            }
+        }));
         assert_eq!(ok.unwrap().force[9], 99999.0);
         // A constant time column: named at its second row (line 3), not the last.
         let e = err(&csv(2000, |k, r| {
@@ -403,7 +417,10 @@ mod tests {
             let _ = k;
             c.join(",") + "\n"
         }));
-        assert_eq!((e.field.as_str(), e.allowed.as_str()), ("trace line 3, column 1 (t_s)", "times must increase"));
+        assert_eq!(
+            (e.field.as_str(), e.allowed.as_str()),
+            ("trace line 3, column 1 (t_s)", "times must increase")
+        );
         // Forces ×1e-300 and positions ×1e-300: nothing to identify.
         let tiny = |col: usize| {
             err(&csv(2000, |_, r| {
@@ -418,6 +435,9 @@ mod tests {
         assert!(e.allowed.contains("1e-6 N"), "{e}");
         let e = tiny(2);
         assert_eq!(e.field, "trace column 3 (position_m)");
-        assert!(!e.to_string().contains("NaN") && !e.to_string().contains("inf"), "{e}");
+        assert!(
+            !e.to_string().contains("NaN") && !e.to_string().contains("inf"),
+            "{e}"
+        );
     }
 }

@@ -623,17 +623,7 @@ impl Run<'_> {
             .iter()
             .map(|e| self.score_interval(&e.metrics))
             .collect();
-        let interval = own.map(|v| {
-            let lo = v.iter().map(|x| x[0]).sum::<f64>() / n as f64;
-            let hi = v.iter().map(|x| x[1]).sum::<f64>() / n as f64;
-            if n < 2 {
-                return [lo, hi];
-            }
-            let var = scores.iter().map(|s| (s - score).powi(2)).sum::<f64>() / (n - 1) as f64;
-            // Student t, 95 % two-sided, n − 1 degrees of freedom.
-            let half = student_t_quantile(0.975, (n - 1) as f64) * (var / n as f64).sqrt();
-            [lo.min(score - half), hi.max(score + half)]
-        });
+        let interval = own.map(|v| pooled_interval(&scores, &v));
         let objectives = objectives_of(&metrics);
         Pooled {
             eval: Evaluation {
@@ -658,6 +648,24 @@ impl Run<'_> {
 /// Which finalists need another replicate: every one below `replicates`;
 /// then, up to twice that, each whose interval overlaps the best's (the
 /// best too, while any does). Empty: the ranking is decided.
+/// The interval of the mean of replicate scores: the replicates' Student
+/// t interval of the mean (95 % two-sided, n − 1 degrees of freedom:
+/// mean ± t(0.975, n − 1)·s/√n), never narrower than the mean of their
+/// own intervals `own` (replicates on one K lattice can agree exactly);
+/// one replicate: its own interval.
+fn pooled_interval(scores: &[f64], own: &[[f64; 2]]) -> [f64; 2] {
+    let n = scores.len();
+    let lo = own.iter().map(|x| x[0]).sum::<f64>() / n as f64;
+    let hi = own.iter().map(|x| x[1]).sum::<f64>() / n as f64;
+    if n < 2 {
+        return [lo, hi];
+    }
+    let score = scores.iter().sum::<f64>() / n as f64;
+    let var = scores.iter().map(|s| (s - score).powi(2)).sum::<f64>() / (n - 1) as f64;
+    let half = student_t_quantile(0.975, (n - 1) as f64) * (var / n as f64).sqrt();
+    [lo.min(score - half), hi.max(score + half)]
+}
+
 fn more_replicates(pooled: &[Pooled], replicates: usize) -> Vec<usize> {
     let below: Vec<usize> = (0..pooled.len())
         .filter(|&i| pooled[i].replicates < replicates)
@@ -757,3 +765,38 @@ mod ranking_tests;
 
 #[cfg(test)]
 mod search_path_tests;
+
+#[cfg(test)]
+mod interval_tests {
+    use super::pooled_interval;
+
+    /// Issue 31: the pooled interval's half-width is t(0.975, n − 1)·s/√n
+    /// with the exact quantile and degrees of freedom (t(0.975, 2) =
+    /// 4.302652730, t(0.975, 4) = 2.776445105: scipy.stats.t.ppf), unless
+    /// the replicates' own intervals are wider.
+    #[test]
+    fn the_pooled_interval_is_the_t_interval_of_the_mean() {
+        // Scores 10, 12, 14: mean 12, s² = 4, s/√3 = 1.1547005.
+        let [lo, hi] = pooled_interval(&[10.0, 12.0, 14.0], &[[11.9, 12.1]; 3]);
+        let half = 4.302_652_730 * (4.0f64 / 3.0).sqrt();
+        assert!((hi - lo - 2.0 * half).abs() < 1e-8, "{lo} {hi}");
+        assert!(((hi + lo) / 2.0 - 12.0).abs() < 1e-12);
+        // Five replicates 1..5: mean 3, s² = 2.5, s/√5 = 0.7071068.
+        let [lo, hi] = pooled_interval(&[1.0, 2.0, 3.0, 4.0, 5.0], &[[2.9, 3.1]; 5]);
+        assert!(
+            (hi - 3.0 - 2.776_445_105 * 0.5f64.sqrt()).abs() < 1e-8,
+            "{hi}"
+        );
+        assert!(
+            (3.0 - lo - 2.776_445_105 * 0.5f64.sqrt()).abs() < 1e-8,
+            "{lo}"
+        );
+        // Replicates that agree: the mean of their own intervals.
+        assert_eq!(
+            pooled_interval(&[5.0, 5.0], &[[4.0, 6.0], [4.5, 5.5]]),
+            [4.25, 5.75]
+        );
+        // One: its own interval.
+        assert_eq!(pooled_interval(&[5.0], &[[4.0, 6.0]]), [4.0, 6.0]);
+    }
+}

@@ -97,7 +97,11 @@ pub fn check_verdict_shape(
                 format!(
                     "absent: a {} verdict{} has no {name}",
                     format!("{criterion:?}").to_lowercase(),
-                    if noisy { " with a confidence" } else { " without a confidence" }
+                    if noisy {
+                        " with a confidence"
+                    } else {
+                        " without a confidence"
+                    }
                 ),
             )),
             (false, true) => Err(SpecError::new(
@@ -174,23 +178,42 @@ mod verdict_tests {
 
     fn point() -> impl Strategy<Value = Point> {
         (
-            (proptest::option::of(any::<bool>()), proptest::option::of(any::<bool>())),
-            (proptest::option::of(number()), proptest::option::of(any::<bool>())),
-            (proptest::option::of(number()), proptest::option::of(number())),
-            (proptest::option::of(any::<u32>()), proptest::option::of(any::<bool>())),
+            (
+                proptest::option::of(any::<bool>()),
+                proptest::option::of(any::<bool>()),
+            ),
+            (
+                proptest::option::of(number()),
+                proptest::option::of(any::<bool>()),
+            ),
+            (
+                proptest::option::of(number()),
+                proptest::option::of(number()),
+            ),
+            (
+                proptest::option::of(any::<u32>()),
+                proptest::option::of(any::<bool>()),
+            ),
         )
-            .prop_map(|((stable, passive), (fidelity, decided), (margin, margin_se), (realizations, saturated))| Point {
-                k: 1000.0,
-                b: 2.0,
-                stable,
-                passive,
-                fidelity,
-                decided,
-                margin,
-                margin_se,
-                realizations,
-                saturated,
-            })
+            .prop_map(
+                |(
+                    (stable, passive),
+                    (fidelity, decided),
+                    (margin, margin_se),
+                    (realizations, saturated),
+                )| Point {
+                    k: 1000.0,
+                    b: 2.0,
+                    stable,
+                    passive,
+                    fidelity,
+                    decided,
+                    margin,
+                    margin_se,
+                    realizations,
+                    saturated,
+                },
+            )
     }
 
     proptest! {
@@ -223,29 +246,149 @@ mod verdict_tests {
     /// Each rule, with the field it names (a change to any is caught).
     #[test]
     fn each_rule_names_its_field() {
-        let ok = Point { k: 1.0, b: 0.0, stable: Some(true), ..Point::default() };
+        let ok = Point {
+            k: 1.0,
+            b: 0.0,
+            stable: Some(true),
+            ..Point::default()
+        };
         assert!(check_verdict_shape(&ok, Criterion::Stability, false, 8).is_ok());
-        let noisy = Point { decided: Some(true), realizations: Some(8), ..ok.clone() };
+        let noisy = Point {
+            decided: Some(true),
+            realizations: Some(8),
+            ..ok.clone()
+        };
         assert!(check_verdict_shape(&noisy, Criterion::Stability, true, 8).is_ok());
         let field = |p: &Point, c, n| check_verdict_shape(p, c, n, 8).unwrap_err().field;
         assert_eq!(field(&noisy, Criterion::Stability, false), "decided");
         assert_eq!(field(&ok, Criterion::Stability, true), "decided");
-        assert_eq!(field(&Point { realizations: Some(9), ..noisy.clone() }, Criterion::Stability, true), "realizations");
-        assert_eq!(field(&Point { realizations: Some(0), ..noisy.clone() }, Criterion::Stability, true), "realizations");
+        assert_eq!(
+            field(
+                &Point {
+                    realizations: Some(9),
+                    ..noisy.clone()
+                },
+                Criterion::Stability,
+                true
+            ),
+            "realizations"
+        );
+        assert_eq!(
+            field(
+                &Point {
+                    realizations: Some(0),
+                    ..noisy.clone()
+                },
+                Criterion::Stability,
+                true
+            ),
+            "realizations"
+        );
         assert_eq!(field(&ok, Criterion::Impedance, false), "stable");
-        let imp = Point { k: 1.0, b: 0.0, passive: Some(true), fidelity: Some(0.5), ..Point::default() };
+        let imp = Point {
+            k: 1.0,
+            b: 0.0,
+            passive: Some(true),
+            fidelity: Some(0.5),
+            ..Point::default()
+        };
         assert!(check_verdict_shape(&imp, Criterion::Impedance, false, 8).is_ok());
         assert!(check_verdict_shape(&imp, Criterion::StrictPassivity, false, 8).is_ok());
-        assert_eq!(field(&Point { fidelity: None, ..imp.clone() }, Criterion::Impedance, false), "fidelity");
-        assert_eq!(field(&Point { fidelity: Some(-1e-9), ..imp.clone() }, Criterion::Impedance, false), "fidelity");
-        let bla = Point { decided: Some(false), realizations: Some(3), margin: Some(-0.1), margin_se: Some(0.2), ..imp.clone() };
+        assert_eq!(
+            field(
+                &Point {
+                    fidelity: None,
+                    ..imp.clone()
+                },
+                Criterion::Impedance,
+                false
+            ),
+            "fidelity"
+        );
+        assert_eq!(
+            field(
+                &Point {
+                    fidelity: Some(-1e-9),
+                    ..imp.clone()
+                },
+                Criterion::Impedance,
+                false
+            ),
+            "fidelity"
+        );
+        let bla = Point {
+            decided: Some(false),
+            realizations: Some(3),
+            margin: Some(-0.1),
+            margin_se: Some(0.2),
+            ..imp.clone()
+        };
         assert!(check_verdict_shape(&bla, Criterion::Impedance, true, 8).is_ok());
-        assert_eq!(field(&Point { margin: None, ..bla.clone() }, Criterion::Impedance, true), "margin");
-        assert_eq!(field(&Point { margin: Some(f64::NAN), ..bla.clone() }, Criterion::Impedance, true), "margin");
-        assert_eq!(field(&Point { margin_se: Some(-1.0), ..bla.clone() }, Criterion::Impedance, true), "margin_se");
-        assert_eq!(field(&Point { margin_se: None, ..bla.clone() }, Criterion::Impedance, true), "margin_se");
-        assert_eq!(field(&Point { saturated: Some(false), ..ok.clone() }, Criterion::Stability, false), "saturated");
-        assert!(check_verdict_shape(&Point { saturated: Some(true), ..ok }, Criterion::Stability, false, 8).is_ok());
+        assert_eq!(
+            field(
+                &Point {
+                    margin: None,
+                    ..bla.clone()
+                },
+                Criterion::Impedance,
+                true
+            ),
+            "margin"
+        );
+        assert_eq!(
+            field(
+                &Point {
+                    margin: Some(f64::NAN),
+                    ..bla.clone()
+                },
+                Criterion::Impedance,
+                true
+            ),
+            "margin"
+        );
+        assert_eq!(
+            field(
+                &Point {
+                    margin_se: Some(-1.0),
+                    ..bla.clone()
+                },
+                Criterion::Impedance,
+                true
+            ),
+            "margin_se"
+        );
+        assert_eq!(
+            field(
+                &Point {
+                    margin_se: None,
+                    ..bla.clone()
+                },
+                Criterion::Impedance,
+                true
+            ),
+            "margin_se"
+        );
+        assert_eq!(
+            field(
+                &Point {
+                    saturated: Some(false),
+                    ..ok.clone()
+                },
+                Criterion::Stability,
+                false
+            ),
+            "saturated"
+        );
+        assert!(check_verdict_shape(
+            &Point {
+                saturated: Some(true),
+                ..ok
+            },
+            Criterion::Stability,
+            false,
+            8
+        )
+        .is_ok());
         // A request checks its wall to the bit and derives noisy and the cap.
         let scene = SceneSpec::from_json(r#"{"hit":{"replicates":3}}"#).unwrap();
         let r = TrialRequest {
@@ -257,10 +400,33 @@ mod verdict_tests {
             criterion: Criterion::Stability,
             accuracy: Accuracy::default(),
         };
-        let three = Point { k: 1.0, b: 0.0, stable: Some(true), decided: Some(true), realizations: Some(3), ..Point::default() };
+        let three = Point {
+            k: 1.0,
+            b: 0.0,
+            stable: Some(true),
+            decided: Some(true),
+            realizations: Some(3),
+            ..Point::default()
+        };
         assert!(r.check_verdict(&three).is_ok());
-        assert_eq!(r.check_verdict(&Point { realizations: Some(4), ..three.clone() }).unwrap_err().field, "realizations");
-        assert_eq!(r.check_verdict(&Point { k: 1.0 + 1e-15, ..three }).unwrap_err().field, "point");
+        assert_eq!(
+            r.check_verdict(&Point {
+                realizations: Some(4),
+                ..three.clone()
+            })
+            .unwrap_err()
+            .field,
+            "realizations"
+        );
+        assert_eq!(
+            r.check_verdict(&Point {
+                k: 1.0 + 1e-15,
+                ..three
+            })
+            .unwrap_err()
+            .field,
+            "point"
+        );
     }
 }
 
