@@ -665,29 +665,35 @@ mod tests {
 
     #[test]
     fn intervals_cover_the_truth_about_95_percent_of_the_time() {
-        // 20 excitations (peak 0.8–2.2 N, periods 1–4 s, top line 10–25 Hz)
-        // on the seed device: 60 nominal-95 % intervals. Measured when
-        // written: 56 cover and the worst error is 0.16 %. A binomial(60, 0.95) count below 54 has
-        // probability ≈ 3 %: fewer than 54 means the intervals are too narrow.
+        // 200 excitations (peak 0.8–2.2 N in 10 steps, periods 1–4 s, top
+        // line 10–25 Hz) on the seed device: 600 nominal-95 % intervals.
+        // Measured when written: 565 cover (94.2 %), the worst error 0.2 %;
+        // with a 90 % quantile instead, 549.
+        // The bound (issue 31): at 95 % the count is binomial(600, 0.95),
+        // mean 570, sd 5.3, and below 555 with probability ≈ 0.3 %; at 90 %
+        // (mean 540, sd 7.3) it reaches 555 with probability ≈ 2 %. So 555
+        // tells the stated level from the next lower common one, which the
+        // old 54-of-60 bound did not (a 90 % interval passes that 70 % of
+        // the time).
         let sc = scene(r#"{"loop":{"sample_hz":1000,"render_hz":1000}}"#);
-        let (mut covered, mut worst) = (0, 0.0f64);
-        for peak in [0.8, 1.0, 1.3, 1.7, 2.2] {
-            for (period_s, f_max_hz) in [(2.0, 20.0), (1.0, 15.0), (4.0, 25.0), (2.5, 10.0)] {
-                let ex = Excitation {
-                    peak_force: peak,
-                    period_s,
-                    f_max_hz,
-                    duration_s: 20.0,
-                    band: None,
-                };
-                let id = identify(&record(&sc, &ex), Model::MassDamperCoulomb).unwrap();
-                for (e, want) in [(id.mass, 0.52), (id.damping, 13.2), (id.coulomb, 0.19)] {
-                    covered += usize::from(e.lo <= want && want <= e.hi);
-                    worst = worst.max((e.value / want - 1.0).abs());
-                }
+        let (mut covered, mut worst, mut n) = (0, 0.0f64, 0);
+        for i in 0..200 {
+            let ex = Excitation {
+                peak_force: 0.8 + 1.4 * (i % 10) as f64 / 9.0,
+                period_s: [1.0, 1.5, 2.0, 2.5, 3.0, 4.0][(i / 10) % 6],
+                f_max_hz: [10.0, 12.0, 15.0, 18.0, 20.0, 25.0, 14.0][(i / 3) % 7],
+                duration_s: 20.0,
+                band: None,
+            };
+            let id = identify(&record(&sc, &ex), Model::MassDamperCoulomb).unwrap();
+            for (e, want) in [(id.mass, 0.52), (id.damping, 13.2), (id.coulomb, 0.19)] {
+                covered += usize::from(e.lo <= want && want <= e.hi);
+                worst = worst.max((e.value / want - 1.0).abs());
+                n += 1;
             }
         }
-        assert!(covered >= 54, "{covered} of 60 intervals cover");
+        assert_eq!(n, 600);
+        assert!(covered >= 555, "{covered} of 600 intervals cover");
         assert!(worst < 0.01, "worst relative error {worst}");
     }
 }
