@@ -190,7 +190,7 @@ async fn a_trial_stored_without_its_place_takes_it_from_the_search() {
             ..t.clone()
         };
         st.add_trials(&run, &[other], &[], (0, 0.0)).await.unwrap();
-        assert_eq!(st.trials("e1").await.unwrap(), [t.clone()]);
+        assert_eq!(st.trials("e1").await.unwrap(), std::slice::from_ref(&t));
         // An ended experiment takes no late result (issue 30, item 12).
         assert!(st.cancel("e1").await.unwrap());
         let late = trial(0, 0, 0, 1234.0, true);
