@@ -422,6 +422,39 @@ fn dial(s: &Server, token: &str) -> Result<Ws, String> {
     }
 }
 
+/// `dial` over a socket with a small receive buffer (4 KiB, set before
+/// connecting): a client that does not read fills the server's send
+/// queue after a few kilobytes, as a slow or stalled agent would.
+fn dial_small(s: &Server, token: &str) -> Ws {
+    use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+    let addr: std::net::SocketAddr = s.base.trim_start_matches("http://").parse().unwrap();
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let tcp = rt.block_on(async {
+        let sock = tokio::net::TcpSocket::new_v4().unwrap();
+        sock.set_recv_buffer_size(4096).unwrap();
+        sock.connect(addr).await.unwrap()
+    });
+    let tcp = tcp.into_std().unwrap();
+    tcp.set_nonblocking(false).unwrap();
+    tcp.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+    // A server that stops reading must not hang the test's own writes.
+    tcp.set_write_timeout(Some(Duration::from_secs(5))).unwrap();
+    let mut req = format!("{}/v1/agent", s.base.replacen("http", "ws", 1))
+        .into_client_request()
+        .unwrap();
+    req.headers_mut()
+        .insert("authorization", format!("Bearer {token}").parse().unwrap());
+    let (ws, _) = tokio_tungstenite::tungstenite::client(
+        req,
+        tokio_tungstenite::tungstenite::stream::MaybeTlsStream::Plain(tcp),
+    )
+    .unwrap();
+    ws
+}
+
 fn agent_token(s: &Server) -> String {
     std::fs::read_to_string(s._dir.join("test.db.agent-token"))
         .unwrap()
@@ -1121,30 +1154,51 @@ fn the_audit_is_capped_paged_and_rate_limited_and_every_refusal_is_in_it() {
         .contains("1 to 128 bytes"));
 }
 
-/// Issue 30, defect 5: a session that floods results and never reads is
-/// closed (before: its task blocked on a 3.87 MB send queue for minutes,
-/// the rig never fenced), and a silent session is fenced after TTL + grace
-/// with no experiment waiting.
+/// Issue 30, defect 5: a session that floods results and never reads (a
+/// 4 KiB receive buffer) is closed (before: its task blocked on a full
+/// send queue, the rig never fenced: this test fails on the old build),
+/// and a silent session is fenced after TTL + grace with no experiment
+/// waiting.
 #[test]
 fn a_session_that_never_reads_or_falls_silent_is_closed_and_fenced() {
     let s = serve();
     let token = agent_token(&s);
-    let mut ws = dial(&s, &token).unwrap();
+    let mut ws = dial_small(&s, &token);
     say(&mut ws, &hello(|_| {}));
     let epoch = hear(&mut ws).unwrap()["epoch"].as_u64().unwrap();
     let t0 = std::time::Instant::now();
-    for seq in 2..3500u64 {
-        let r = serde_json::json!({"v":1,"seq":seq,"type":"result","epoch":epoch,"trial_id":format!("e/0/{seq}"),
+    // 60 000 results with 200-byte trial ids: their acks (~15 MB) are
+    // more than the server's send buffer (at most 4 MiB here) and the
+    // client's 8 KiB window hold.
+    let pad = "x".repeat(200);
+    let mut ended = None;
+    for seq in 2..60_000u64 {
+        let r = serde_json::json!({"v":1,"seq":seq,"type":"result","epoch":epoch,"trial_id":format!("e/0/{seq}/{pad}"),
             "point":{"k":1.0,"b":0.0,"stable":true},"measured":{"peak_force_n":1.0,"peak_speed_m_s":0.1,"penetration_m":0.001}});
-        if ws
-            .send(tokio_tungstenite::tungstenite::Message::Text(
-                r.to_string().into(),
-            ))
-            .is_err()
-        {
+        if let Err(e) = ws.send(tokio_tungstenite::tungstenite::Message::Text(
+            r.to_string().into(),
+        )) {
+            ended = Some(e);
             break;
         }
     }
+    // The server closed the socket (a reset: it left our data unread),
+    // not a write of ours timing out against a server that stopped reading
+    // (the old build: blocked on its acks, after 17 s).
+    let e = ended.expect("the server closed the session");
+    let io = match &e {
+        tokio_tungstenite::tungstenite::Error::Io(io) => io.kind(),
+        other => panic!("{other}"),
+    };
+    assert!(
+        matches!(
+            io,
+            std::io::ErrorKind::ConnectionReset | std::io::ErrorKind::BrokenPipe
+        ),
+        "{e} after {:?}",
+        t0.elapsed()
+    );
+    assert!(t0.elapsed() < Duration::from_secs(10), "{:?}", t0.elapsed());
     wait_for("the flooding session closed", 20, || !connected(&s));
     // A new agent takes the rig at once.
     let mut ws2 = dial(&s, &token).unwrap();
