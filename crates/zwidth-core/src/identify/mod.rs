@@ -267,6 +267,17 @@ fn fit(rows: &[&Row], p: usize) -> Option<[f64; 3]> {
 }
 
 /// Identify `model` from `trace` (already checked by [`Trace::parse_csv`]).
+/// An estimate worth reporting: every figure finite and, for a parameter
+/// the model fits, a standard error above zero (an interval of zero width
+/// would claim a certainty the arithmetic lost). A parameter the model
+/// leaves out is 0 ± 0.
+fn usable(e: &Estimate, fitted: bool) -> bool {
+    let finite = [e.value, e.std_error, e.lo, e.hi]
+        .iter()
+        .all(|x| x.is_finite());
+    finite && (!fitted || e.std_error > 0.0)
+}
+
 pub fn identify(trace: &Trace, model: Model) -> Result<Identified, SpecError> {
     let p = match model {
         Model::MassDamperCoulomb | Model::TwoMass => 3,
@@ -359,10 +370,7 @@ pub fn identify(trace: &Trace, model: Model) -> Result<Identified, SpecError> {
         ("damping", &rigid.damping, true),
         ("coulomb", &rigid.coulomb, p > 2),
     ] {
-        let finite = [e.value, e.std_error, e.lo, e.hi]
-            .iter()
-            .all(|x| x.is_finite());
-        if !finite || (fitted && e.std_error <= 0.0) {
+        if !usable(e, fitted) {
             return Err(SpecError::new(
                 "trace",
                 format!("{name} = {} ± {}", e.value, e.std_error),
@@ -661,6 +669,46 @@ mod tests {
         let e = identify(&record(&sc, &ex), Model::MassDamperCoulomb).unwrap_err();
         assert_eq!(e.field, "trace");
         assert!(e.allowed.contains("at least 30 windows each way"), "{e}");
+    }
+
+    /// Issue 30: what an estimate must be to be reported (each clause).
+    #[test]
+    fn only_finite_estimates_with_a_spread_are_usable() {
+        let e = |value: f64, std_error: f64| Estimate {
+            value,
+            std_error,
+            lo: value - std_error,
+            hi: value + std_error,
+        };
+        assert!(usable(&e(1.0, 0.1), true));
+        assert!(!usable(&e(1.0, 0.0), true), "zero width, fitted");
+        assert!(usable(&e(0.0, 0.0), false), "left out: 0 ± 0");
+        assert!(!usable(&e(f64::NAN, 0.1), true));
+        assert!(!usable(&e(f64::NAN, 0.0), false));
+        assert!(!usable(&e(1.0, f64::INFINITY), false));
+        assert!(!usable(
+            &Estimate {
+                hi: f64::INFINITY,
+                ..e(1.0, 0.1)
+            },
+            true
+        ));
+        assert!(!usable(
+            &Estimate {
+                lo: f64::NEG_INFINITY,
+                ..e(1.0, 0.1)
+            },
+            false
+        ));
+        // The coulomb term is fitted by the models with friction only.
+        let tr = super::record::record(
+            &scene(
+                r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+            ),
+            &Excitation::default(),
+        );
+        let id = identify(&tr, Model::MassDamper).unwrap();
+        assert_eq!((id.coulomb.value, id.coulomb.std_error), (0.0, 0.0));
     }
 
     #[test]

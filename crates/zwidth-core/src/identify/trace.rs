@@ -401,6 +401,53 @@ mod tests {
                 assert!(e.allowed.contains(&format!("±{:e}", RANGE[col])), "{e}");
             }
         }
+        // Not a number or infinite: said so, not "out of range".
+        for bad in ["inf", "-inf", "NaN"] {
+            let e = err(&csv(2000, |k, r| {
+                if k == 3 {
+                    format!("0.003,{bad},0\n")
+                } else {
+                    r
+                }
+            }));
+            assert_eq!(
+                (e.field.as_str(), e.allowed.as_str()),
+                (
+                    "trace line 5, column 2 (force_n)",
+                    "must be a finite number (SI units)"
+                )
+            );
+        }
+        // A trace that starts late: the interval is the span over the rows.
+        let late = csv(2000, |_, r| {
+            let mut c: Vec<String> = r.trim().split(',').map(String::from).collect();
+            c[0] = format!("{}", 5.0 + c[0].parse::<f64>().unwrap());
+            c.join(",") + "\n"
+        });
+        let tr = Trace::parse_csv(&late).unwrap();
+        assert!((tr.dt - 1e-3).abs() < 1e-12, "{}", tr.dt);
+        // The least force and travel accepted: exactly at the bounds.
+        let edge = |force: f64, x: f64| {
+            Trace::parse_csv(&csv(2000, |k, r| {
+                let mut c: Vec<String> = r.trim().split(',').map(String::from).collect();
+                c[1] = format!("{:e}", if k == 7 { force } else { 0.0 });
+                c[2] = format!("{:e}", if k == 9 { x } else { 0.0 });
+                c.join(",") + "\n"
+            }))
+        };
+        assert!(edge(MIN_PEAK_FORCE_N, MIN_TRAVEL_M).is_ok());
+        assert_eq!(
+            edge(MIN_PEAK_FORCE_N * 0.999, MIN_TRAVEL_M)
+                .unwrap_err()
+                .field,
+            "trace column 2 (force_n)"
+        );
+        assert_eq!(
+            edge(MIN_PEAK_FORCE_N, MIN_TRAVEL_M * 0.999)
+                .unwrap_err()
+                .field,
+            "trace column 3 (position_m)"
+        );
         // Just inside the range is a number like any other.
         let ok = Trace::parse_csv(&csv(2000, |k, r| {
             if k == 9 {

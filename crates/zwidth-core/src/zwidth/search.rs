@@ -1095,6 +1095,54 @@ mod tests {
         }
     }
 
+    /// Which verdict a frequency-domain model says it gives: the BLA's
+    /// with a confidence on a scene with friction or quantization, the
+    /// 2018 paper's tfestimate when asked for, neither on a linear scene
+    /// (whatever the probe method), and replicated hits in the time domain.
+    #[test]
+    fn the_model_description_names_its_verdict() {
+        let describe = |json: &str, method: Method, criterion: Criterion| {
+            let scene = SceneSpec::from_json(json).unwrap().validate().unwrap();
+            let res = crate::zwidth::settings::Accuracy::default()
+                .resolve(&scene)
+                .unwrap();
+            let ev = Evaluator::new(scene, method, criterion, res).unwrap();
+            (ev.model_description(), ev.noisy())
+        };
+        let imp = |json: &str| describe(json, Method::Frequency, Criterion::Impedance);
+        let friction = r#"{"device":{"coulomb":0.1,"quantization":0}}"#;
+        let quantized = r#"{"device":{"coulomb":0,"quantization":1e-6}}"#;
+        let linear = r#"{"device":{"coulomb":0,"quantization":0}}"#;
+        for nonlinear in [friction, quantized] {
+            let (d, noisy) = imp(nonlinear);
+            assert!(noisy && d.contains("best linear approximation"), "{d}");
+            let tf = nonlinear.replace("}}", r#"},"probe":{"method":"tfestimate"}}"#);
+            let (d, noisy) = imp(&tf);
+            assert!(!noisy && d.contains("tfestimate verdict"), "{d}");
+        }
+        for probe in ["bla", "tfestimate"] {
+            let lin = linear.replace("}}", &format!(r#"}},"probe":{{"method":"{probe}"}}}}"#));
+            let (d, noisy) = imp(&lin);
+            assert!(!noisy, "{d}");
+            assert!(
+                d.contains("frequency-domain multisine simulation (bilateral wall)"),
+                "{d}"
+            );
+            assert!(
+                !d.contains("tfestimate") && !d.contains("best linear"),
+                "{d}"
+            );
+        }
+        let (d, noisy) = describe(
+            r#"{"hit":{"replicates":3}}"#,
+            Method::Time,
+            Criterion::Stability,
+        );
+        assert!(noisy && d.contains("3 replicate hits"), "{d}");
+        let (d, noisy) = describe(friction, Method::Time, Criterion::Stability);
+        assert!(!noisy && !d.contains("replicate"), "{d}");
+    }
+
     #[test]
     fn b_width_upper_end_counts_columns_not_surely_empty() {
         // k_floor = 100 N/m (the smallest K searched). B = 20: nothing
