@@ -89,29 +89,23 @@ pub fn check_verdict_shape(
     noisy: bool,
     max_realizations: u32,
 ) -> Result<(), SpecError> {
+    // "a stability verdict with a confidence", named once for both errors.
+    let kind = format!(
+        "a {} verdict {} a confidence",
+        format!("{criterion:?}").to_lowercase(),
+        if noisy { "with" } else { "without" }
+    );
     let present = |name: &str, here: bool, wanted: bool| -> Result<(), SpecError> {
         match (here, wanted) {
             (true, false) => Err(SpecError::new(
                 name,
                 "(present)",
-                format!(
-                    "absent: a {} verdict{} has no {name}",
-                    format!("{criterion:?}").to_lowercase(),
-                    if noisy {
-                        " with a confidence"
-                    } else {
-                        " without a confidence"
-                    }
-                ),
+                format!("absent: {kind} has no {name}"),
             )),
             (false, true) => Err(SpecError::new(
                 name,
                 "(absent)",
-                format!(
-                    "present: a {} verdict{} carries it",
-                    format!("{criterion:?}").to_lowercase(),
-                    if noisy { " with a confidence" } else { "" }
-                ),
+                format!("present: {kind} carries it"),
             )),
             _ => Ok(()),
         }
