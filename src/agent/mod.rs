@@ -54,6 +54,9 @@ pub struct Faults {
     pub delay_result_ms: u64,
     /// Exit (as if killed) halfway through the Nth trial (1-based).
     pub exit_mid_trial: Option<u32>,
+    /// Stop itself (SIGSTOP, as if frozen) at the start of the Nth trial,
+    /// after taking it: a test resumes it with SIGCONT (unix).
+    pub stop_mid_trial: Option<u32>,
     /// Exit (as if killed) after the Nth result is in the outbox, before
     /// it is sent.
     pub exit_before_send: Option<u32>,
@@ -351,6 +354,7 @@ impl Agent {
                 self.running = Some((trial_id.clone(), cancel.clone()));
                 self.trials_started += 1;
                 let exit_now = self.cfg.faults.exit_mid_trial == Some(self.trials_started);
+                let stop_now = self.cfg.faults.stop_mid_trial == Some(self.trials_started);
                 let driver = self.driver.clone();
                 let done = self.done_tx.clone();
                 let report_force = self.cfg.faults.report_peak_force_n;
@@ -379,6 +383,13 @@ impl Agent {
                         // The fault: killed halfway through the trial.
                         std::thread::sleep(Duration::from_millis(50));
                         std::process::exit(137);
+                    }
+                    if stop_now {
+                        // The fault: frozen with the trial taken (the
+                        // whole process, until a SIGCONT).
+                        let _ = std::process::Command::new("kill")
+                            .args(["-STOP", &std::process::id().to_string()])
+                            .status();
                     }
                     let out = d.run(&request, &limits, &cancel);
                     let msg = match out {
