@@ -1,0 +1,61 @@
+//! The complex arithmetic of the filter design, written out as
+//! `num-complex` 0.4 evaluates it (so the coefficients keep their bits).
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cx {
+    pub re: f64,
+    pub im: f64,
+}
+
+impl Cx {
+    pub const ZERO: Cx = Cx { re: 0.0, im: 0.0 };
+
+    pub const fn new(re: f64, im: f64) -> Self {
+        Self { re, im }
+    }
+
+    /// r·(cos θ + j sin θ).
+    pub fn from_polar(r: f64, theta: f64) -> Self {
+        Self::new(r * crate::math::cos(theta), r * crate::math::sin(theta))
+    }
+
+    pub fn add(self, o: Cx) -> Cx {
+        Cx::new(self.re + o.re, self.im + o.im)
+    }
+
+    pub fn sub(self, o: Cx) -> Cx {
+        Cx::new(self.re - o.re, self.im - o.im)
+    }
+
+    pub fn mul(self, o: Cx) -> Cx {
+        Cx::new(
+            self.re * o.re - self.im * o.im,
+            self.re * o.im + self.im * o.re,
+        )
+    }
+
+    /// Division through |o|², as num-complex's `Div`.
+    pub fn div(self, o: Cx) -> Cx {
+        let n = o.re * o.re + o.im * o.im;
+        Cx::new(
+            (self.re * o.re + self.im * o.im) / n,
+            (self.im * o.re - self.re * o.im) / n,
+        )
+    }
+
+    pub fn scale(self, k: f64) -> Cx {
+        Cx::new(self.re * k, self.im * k)
+    }
+
+    pub fn neg(self) -> Cx {
+        Cx::new(-self.re, -self.im)
+    }
+
+    pub fn conj(self) -> Cx {
+        Cx::new(self.re, -self.im)
+    }
+
+    pub fn norm(self) -> f64 {
+        crate::math::hypot(self.re, self.im)
+    }
+}
