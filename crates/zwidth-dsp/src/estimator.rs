@@ -5,8 +5,8 @@
 
 use crate::fingerprint::Fingerprint;
 use crate::{
-    Butterworth, Discretization, Error, Fdm, Foaw, FoawFit, ImplicitOutput, Kalman, Levant,
-    Median, QModel,
+    Butterworth, Discretization, Error, Fdm, Foaw, FoawFit, ImplicitOutput, Kalman, Levant, Median,
+    QModel,
 };
 
 /// The kind and its resolved parameters.
@@ -146,7 +146,11 @@ impl<const F: usize> Kind<F> {
         match self {
             Kind::Fdm(e) => h.u64(1).f64(e.inv_t()),
             Kind::Butterworth(e) => {
-                let h = e.sections().iter().flatten().fold(h.u64(2), |h, &c| h.f64(c));
+                let h = e
+                    .sections()
+                    .iter()
+                    .flatten()
+                    .fold(h.u64(2), |h, &c| h.f64(c));
                 h.f64(e.inv_t())
             }
             Kind::Kalman(e) => {
@@ -184,11 +188,7 @@ impl<const F: usize, const M: usize> Estimator<F, M> {
         let median = |name: &'static str, w: Option<usize>| -> Result<Option<Median<M>>, Error> {
             w.map(|w| {
                 Median::new(w).map_err(|e| match e {
-                    Error::Capacity { value, cap, .. } => Error::Capacity {
-                        name,
-                        value,
-                        cap,
-                    },
+                    Error::Capacity { value, cap, .. } => Error::Capacity { name, value, cap },
                     Error::Parameter { value, allowed, .. } => Error::Parameter {
                         name,
                         value,

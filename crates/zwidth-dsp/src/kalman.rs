@@ -250,3 +250,31 @@ impl Kalman {
         (self.z, self.p, self.innovation_cov)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn covariance_is_reported_in_si_units() {
+        // The filter's state is scaled (x, ẋT, ẍT²) (the 2018 paper's
+        // white-jerk model in sample units), so its covariance entries
+        // scale by T^{-(i+j)}: P_xv = p01/T, P_xa = p02/T², P_vv = p11/T²,
+        // P_va = p12/T³, P_aa = p22/T⁴.
+        let t = 0.01;
+        let mut k = Kalman::new(1e4, QModel::WhiteJerk, None, 1.0 / t, 1e-6).unwrap();
+        k.p = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
+        let c = k.covariance();
+        let want = [
+            1.0,
+            2.0 / t,
+            3.0 / (t * t),
+            4.0 / (t * t),
+            5.0 / (t * t * t),
+            6.0 / (t * t * t * t),
+        ];
+        for (g, w) in c.iter().zip(want) {
+            assert!(crate::math::abs(g / w - 1.0) < 1e-12, "{c:?} vs {want:?}");
+        }
+    }
+}

@@ -85,7 +85,25 @@ impl Levant {
             }
         }
         crate::error::positive("period", t)?;
-        Ok(Self {
+        Ok(Self::from_validated(
+            alpha,
+            lambda,
+            discretization,
+            output,
+            t,
+        ))
+    }
+
+    /// The same from values the caller has checked as [`Levant::new`] does
+    /// (`zwidth-core` validates the JSON spec with its own messages).
+    pub fn from_validated(
+        alpha: f64,
+        lambda: f64,
+        discretization: Discretization,
+        output: ImplicitOutput,
+        t: f64,
+    ) -> Self {
+        Self {
             alpha,
             lambda,
             discretization,
@@ -94,7 +112,7 @@ impl Levant {
             x: 0.0,
             u1: 0.0,
             started: false,
-        })
+        }
     }
 
     pub fn gains(&self) -> (f64, f64) {

@@ -1,25 +1,19 @@
 //! FDM cascaded with a digital Butterworth low-pass (2011 paper §2.1,
-//! 2018 paper §II-A). The design is the analog Butterworth prototype, scaled
-//! to the prewarped cutoff `ω_a = 2·fs·tan(π·fc/fs)` and mapped by the bilinear
-//! transform `z = (2fs + s)/(2fs − s)`, then grouped into second-order sections
-//! with the "nearest" pole–zero pairing, so the coefficients equal
+//! 2018 paper §II-A): the analog prototype at the prewarped cutoff
+//! `ω_a = 2·fs·tan(π·fc/fs)`, the bilinear transform, second-order sections
+//! paired "nearest", so the coefficients equal
 //! `scipy.signal.butter(order, fc, fs=fs, output='sos')` and the filtering
-//! equals `scipy.signal.sosfilt` (transposed direct form II, zero initial state).
+//! `scipy.signal.sosfilt`. The design and the filter are
+//! `zwidth_dsp::butterworth` (one implementation, here and on the rig); this
+//! module checks the spec with the service's messages.
 
-use num_complex::Complex64 as C;
-
-use super::{Fdm, Sampling, VelocityEstimator};
+use super::{Sampling, VelocityEstimator};
 use crate::error::SpecError;
 
-/// Highest order accepted: beyond this the sections become so sharp that
-/// their rounding, not the design, dominates.
-pub const MAX_ORDER: u32 = 10;
+pub use zwidth_dsp::butterworth::{sos_step, Sos, MAX_ORDER};
 
-/// One second-order section `[b0, b1, b2, a0=1, a1, a2]`, as scipy's rows.
-pub type Sos = [f64; 6];
-
-/// Design the low-pass (see module doc). `cutoff_hz` in (0, fs/2), `order` in 1..=MAX_ORDER.
-pub fn design_lowpass(order: u32, cutoff_hz: f64, fs: f64) -> Result<Vec<Sos>, SpecError> {
+/// Check `order` and `cutoff_hz` against the sample rate `fs`.
+fn check(order: u32, cutoff_hz: f64, fs: f64) -> Result<(), SpecError> {
     if !(1..=MAX_ORDER).contains(&order) {
         return Err(SpecError::new(
             "order",
@@ -35,180 +29,42 @@ pub fn design_lowpass(order: u32, cutoff_hz: f64, fs: f64) -> Result<Vec<Sos>, S
             format!("must be > 0 and below the Nyquist frequency {nyq} Hz (half the sample rate {fs} Hz)"),
         ));
     }
-    let n = order as usize;
-    let fs2 = 2.0 * fs;
-    // Prewarped analog cutoff (rad/s).
-    let warped = fs2 * (std::f64::consts::PI * cutoff_hz / fs).tan();
-    // Analog prototype poles −exp(jπm/(2N)), m = −N+1, −N+3, …, N−1, scaled by ω_a.
-    let analog: Vec<C> = (0..n)
-        .map(|i| {
-            let m = -(n as f64) + 1.0 + 2.0 * i as f64;
-            -C::from_polar(1.0, std::f64::consts::PI * m / (2.0 * n as f64)) * warped
-        })
-        .collect();
-    // Bilinear transform of poles; all N zeros go to z = −1.
-    let poles: Vec<C> = analog.iter().map(|&p| (fs2 + p) / (fs2 - p)).collect();
-    let denom: C = analog.iter().map(|&p| fs2 - p).product();
-    let gain = warped.powi(order as i32) / denom.re;
-    let zeros = vec![C::new(-1.0, 0.0); n];
-    Ok(zpk_to_sos_nearest(zeros, poles, gain))
+    Ok(())
 }
 
-/// Keep one of each conjugate pair (imag > 0) and the real roots; tiny
-/// imaginary parts from rounding are treated as real.
-fn cplx_real(roots: Vec<C>) -> Vec<C> {
-    let tol = 100.0 * f64::EPSILON;
-    let mut out: Vec<C> = roots
-        .into_iter()
-        .filter_map(|r| {
-            if r.im.abs() <= tol * r.norm().max(1.0) {
-                Some(C::new(r.re, 0.0))
-            } else if r.im > 0.0 {
-                Some(r)
-            } else {
-                None
-            }
-        })
-        .collect();
-    // Complex first (by real part), then reals (by value), as scipy's _cplxreal.
-    out.sort_by(|a, b| {
-        (a.im == 0.0)
-            .cmp(&(b.im == 0.0))
-            .then(a.re.total_cmp(&b.re))
-    });
-    out
-}
-
-fn is_real(c: C) -> bool {
-    c.im == 0.0
-}
-
-/// Index of the root nearest `to`, restricted to real roots when `real_only`.
-fn nearest(roots: &[C], to: C, real_only: bool) -> Option<usize> {
-    roots
-        .iter()
-        .enumerate()
-        .filter(|(_, r)| !real_only || is_real(**r))
-        .min_by(|a, b| (*a.1 - to).norm().total_cmp(&(*b.1 - to).norm()))
-        .map(|(i, _)| i)
-}
-
-/// Index of the pole nearest the unit circle ("worst" first), optionally among reals.
-fn worst(poles: &[C], real_only: bool) -> usize {
-    poles
-        .iter()
-        .enumerate()
-        .filter(|(_, p)| !real_only || is_real(**p))
-        .min_by(|a, b| {
-            (1.0 - a.1.norm())
-                .abs()
-                .total_cmp(&(1.0 - b.1.norm()).abs())
-        })
-        .map(|(i, _)| i)
-        .expect("a pole remains")
-}
-
-/// Monic quadratic coefficients `[1, c1, c2]` of `(x − r1)(x − r2)` with one
-/// root, a conjugate pair or two reals; a missing root is a root at 0.
-fn quad(r1: C, r2: C) -> [f64; 3] {
-    [1.0, -(r1 + r2).re, (r1 * r2).re]
-}
-
-/// scipy's `zpk2sos(..., pairing='nearest')` for digital filters with as many
-/// zeros as poles: the poles nearest the unit circle go in the last section,
-/// each paired with the zeros nearest to it; the gain goes in the first.
-fn zpk_to_sos_nearest(zeros: Vec<C>, poles: Vec<C>, gain: f64) -> Vec<Sos> {
-    let (mut z, mut p) = (zeros, poles);
-    let n_sections = p.len().div_ceil(2);
-    if p.len() % 2 == 1 {
-        p.push(C::new(0.0, 0.0));
-        z.push(C::new(0.0, 0.0));
-    }
-    let mut z = cplx_real(z);
-    let mut p = cplx_real(p);
-    let zero = C::new(0.0, 0.0);
-    let mut sos = vec![[0.0; 6]; n_sections];
-    for si in (0..n_sections).rev() {
-        let p1 = p.remove(worst(&p, false));
-        let (pz, pp): ((C, C), (C, C));
-        if is_real(p1) && !p.iter().any(|&x| is_real(x)) {
-            // The last real pole: one real zero, padded with roots at 0.
-            let z1 = z.remove(nearest(&z, p1, true).expect("a real zero remains"));
-            pz = (z1, zero);
-            pp = (p1, zero);
-        } else {
-            let p2 = if is_real(p1) {
-                p.remove(worst(&p, true))
-            } else {
-                p1.conj()
-            };
-            pp = (p1, p2);
-            let z1 = z.remove(nearest(&z, p1, false).expect("a zero remains"));
-            pz = if !is_real(z1) {
-                (z1, z1.conj())
-            } else {
-                let z2 = z.remove(nearest(&z, p1, true).expect("a real zero remains"));
-                (z1, z2)
-            };
-        }
-        let b = quad(pz.0, pz.1);
-        let a = quad(pp.0, pp.1);
-        sos[si] = [b[0], b[1], b[2], a[0], a[1], a[2]];
-    }
-    for c in &mut sos[0][..3] {
-        *c *= gain;
-    }
-    sos
+/// Design the low-pass (see module doc). `cutoff_hz` in (0, fs/2), `order` in 1..=MAX_ORDER.
+pub fn design_lowpass(order: u32, cutoff_hz: f64, fs: f64) -> Result<Vec<Sos>, SpecError> {
+    check(order, cutoff_hz, fs)?;
+    let (sos, n) =
+        zwidth_dsp::butterworth::design_lowpass(order, cutoff_hz, fs).map_err(super::spec_error)?;
+    Ok(sos[..n].to_vec())
 }
 
 /// The estimator: FDM, then the sections in cascade.
 #[derive(Debug, Clone)]
-pub struct Butterworth {
-    fdm: Fdm,
-    sos: Vec<Sos>,
-    /// Transposed direct form II state, two per section.
-    state: Vec<[f64; 2]>,
-}
+pub struct Butterworth(zwidth_dsp::Butterworth);
 
 impl Butterworth {
     pub fn new(cutoff_hz: f64, order: u32, s: Sampling) -> Result<Self, SpecError> {
-        let sos = design_lowpass(order, cutoff_hz, s.rate_hz)?;
-        let state = vec![[0.0; 2]; sos.len()];
-        Ok(Self {
-            fdm: Fdm::new(s.period()),
-            sos,
-            state,
-        })
+        check(order, cutoff_hz, s.rate_hz)?;
+        zwidth_dsp::Butterworth::new(cutoff_hz, order, s.rate_hz)
+            .map(Self)
+            .map_err(super::spec_error)
     }
 
     pub fn sections(&self) -> &[Sos] {
-        &self.sos
+        self.0.sections()
     }
-}
-
-/// Filter one sample through the cascade (transposed direct form II).
-#[inline]
-pub fn sos_step(sos: &[Sos], state: &mut [[f64; 2]], x: f64) -> f64 {
-    let mut x = x;
-    for (c, s) in sos.iter().zip(state.iter_mut()) {
-        let y = c[0] * x + s[0];
-        s[0] = c[1] * x - c[4] * y + s[1];
-        s[1] = c[2] * x - c[5] * y;
-        x = y;
-    }
-    x
 }
 
 impl VelocityEstimator for Butterworth {
     #[inline]
     fn update(&mut self, y: f64) -> f64 {
-        let v = self.fdm.update(y);
-        sos_step(&self.sos, &mut self.state, v)
+        self.0.step(y)
     }
 
     fn reset(&mut self) {
-        self.fdm.reset();
-        self.state.iter_mut().for_each(|s| *s = [0.0; 2]);
+        self.0.reset();
     }
 }
 

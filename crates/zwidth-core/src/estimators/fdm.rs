@@ -1,41 +1,28 @@
 //! Finite-difference method: `v_k = (y_k − y_{k−1})/T` (2011 paper eq. 2;
-//! Janabi-Sharifi et al. 2000 eq. 2). The first output is 0.
+//! Janabi-Sharifi et al. 2000 eq. 2). The first output is 0. The
+//! implementation is `zwidth_dsp::Fdm` (one implementation, here and on
+//! the rig).
 
 use super::VelocityEstimator;
 
 #[derive(Debug, Clone)]
-pub struct Fdm {
-    inv_t: f64,
-    prev: f64,
-    started: bool,
-}
+pub struct Fdm(zwidth_dsp::Fdm);
 
 impl Fdm {
     /// `t`: sample period (s), already validated > 0.
     pub fn new(t: f64) -> Self {
-        Self {
-            inv_t: 1.0 / t,
-            prev: 0.0,
-            started: false,
-        }
+        Self(zwidth_dsp::Fdm::new(t))
     }
 }
 
 impl VelocityEstimator for Fdm {
     #[inline]
     fn update(&mut self, y: f64) -> f64 {
-        let v = if self.started {
-            (y - self.prev) * self.inv_t
-        } else {
-            0.0
-        };
-        self.prev = y;
-        self.started = true;
-        v
+        self.0.step(y)
     }
 
     fn reset(&mut self) {
-        self.started = false;
+        self.0.reset();
     }
 }
 

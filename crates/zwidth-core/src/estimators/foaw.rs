@@ -31,24 +31,20 @@
 //! intersection that grows by one sample per n: O(N) per sample for a window
 //! of N. `best_r` (and outlier tolerance) rescan the window for each n, O(N²),
 //! in a branch-free loop over contiguous slices.
+//!
+//! The estimator is `zwidth_dsp::Foaw` (one implementation, here and on the
+//! rig): windows up to the rig's cap in place, longer ones boxed.
 
 use serde::{Deserialize, Serialize};
 
 use super::VelocityEstimator;
 use crate::error::SpecError;
+use zwidth_dsp::estimator::RIG_FOAW_WINDOW;
+
+pub use zwidth_dsp::foaw::{BAND_SLACK, DEFAULT_MAX_WINDOW};
 
 /// Largest `max_window` accepted (samples).
 pub const MAX_WINDOW_LIMIT: usize = 4096;
-
-/// Relative slack on the band ±d: residuals within d·(1 + 1e-9) count as
-/// inside. A quantized position n·q carries a rounding error of about
-/// 1e-16·|y| (1e-16 m at 1 m from the origin: 1e-10 of a 1 µm step), so
-/// ties decided by rounding fall inside the slack for |y| up to ~10 m,
-/// while 1e-9 of a 1 µm step is a femtometre: no physical difference.
-pub const BAND_SLACK: f64 = 1e-9;
-
-/// `max_window` default: 15, the bound Janabi-Sharifi et al. used (§IV-C).
-pub const DEFAULT_MAX_WINDOW: usize = 15;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
@@ -59,6 +55,14 @@ pub enum FoawFit {
 }
 
 impl FoawFit {
+    pub fn dsp(self) -> zwidth_dsp::FoawFit {
+        match self {
+            FoawFit::End => zwidth_dsp::FoawFit::End,
+            FoawFit::Best => zwidth_dsp::FoawFit::Best,
+            FoawFit::BestR => zwidth_dsp::FoawFit::BestR,
+        }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             FoawFit::End => "end",
@@ -87,25 +91,11 @@ fn default_max_window() -> usize {
     DEFAULT_MAX_WINDOW
 }
 
+/// FOAW: windows up to the rig's cap in place, longer ones boxed.
 #[derive(Debug, Clone)]
-pub struct Foaw {
-    fit: FoawFit,
-    d: f64,
-    max_window: usize,
-    outlier_tolerance: bool,
-    t: f64,
-    /// Mirrored ring of the last `cap = max_window + 1` samples: sample j is at
-    /// `j % cap` and `j % cap + cap`, so the newest `cap` are contiguous.
-    buf: Vec<f64>,
-    cap: usize,
-    /// Scratch: u_i = y_{k−i} − y_k; and the constants i and 1/i as f64.
-    u: Vec<f64>,
-    idx: Vec<f64>,
-    inv_idx: Vec<f64>,
-    /// 6/(n(n+1)(n+2)), eq. 17's denominator.
-    inv_lsq: Vec<f64>,
-    count: usize,
-    last_window: usize,
+pub enum Foaw {
+    Small(zwidth_dsp::Foaw<{ RIG_FOAW_WINDOW + 1 }>),
+    Large(Box<zwidth_dsp::Foaw<{ MAX_WINDOW_LIMIT + 1 }>>),
 }
 
 impl Foaw {
@@ -118,157 +108,20 @@ impl Foaw {
                 format!("must be 1 to {MAX_WINDOW_LIMIT} samples"),
             ));
         }
-        let cap = spec.max_window + 1;
-        Ok(Self {
-            fit: spec.fit,
-            // The band is closed (eq. 13: |residual| ≤ d). On quantized data
-            // with d one encoder step, residuals of exactly d are common and
-            // rounding would decide them, differently in metres and in
-            // counts; a relative slack far below any physical length makes
-            // the closed band exact (`BAND_SLACK`).
-            d: d * (1.0 + BAND_SLACK),
-            max_window: spec.max_window,
-            outlier_tolerance: spec.outlier_tolerance,
-            t,
-            buf: vec![0.0; 2 * cap],
-            cap,
-            u: vec![0.0; cap],
-            idx: (0..cap).map(|i| i as f64).collect(),
-            inv_idx: (0..cap)
-                .map(|i| if i == 0 { 0.0 } else { 1.0 / i as f64 })
-                .collect(),
-            inv_lsq: (0..cap)
-                .map(|n| {
-                    if n == 0 {
-                        0.0
-                    } else {
-                        6.0 / (n * (n + 1) * (n + 2)) as f64
-                    }
-                })
-                .collect(),
-            count: 0,
-            last_window: 0,
-        })
+        let (fit, w, tol) = (spec.fit.dsp(), spec.max_window, spec.outlier_tolerance);
+        let built = if w <= RIG_FOAW_WINDOW {
+            zwidth_dsp::Foaw::new(fit, d, w, tol, t).map(Foaw::Small)
+        } else {
+            zwidth_dsp::Foaw::new(fit, d, w, tol, t).map(|f| Foaw::Large(Box::new(f)))
+        };
+        built.map_err(super::spec_error)
     }
 
     /// Window length n used for the last estimate (0 before the second sample).
     pub fn last_window(&self) -> usize {
-        self.last_window
-    }
-
-    /// `end` and `best` without outlier tolerance. The line y_k − s·i fits
-    /// sample i iff s ∈ [(−d − u_i)/i, (d − u_i)/i], so a window fits iff its
-    /// slope lies in the intersection over its samples, which grows by one
-    /// sample per n: O(max_window) per sample instead of O(n²).
-    /// Returns (slope as rise per sample, window length).
-    #[inline]
-    fn anchored_window(&self, avail: usize) -> (f64, usize) {
-        let d = self.d;
-        let u = &self.u[1..=avail];
-        let idx = &self.idx[1..=avail];
-        let inv = &self.inv_idx[1..=avail];
-        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
-        let mut best = (-u[0], 1);
-        match self.fit {
-            FoawFit::End => {
-                // Window n = j + 1 checks the interior i = 1..n−1: add i = n−1 = j.
-                for j in 1..u.len() {
-                    let (a, b) = ((-d - u[j - 1]) * inv[j - 1], (d - u[j - 1]) * inv[j - 1]);
-                    lo = if a > lo { a } else { lo };
-                    hi = if b < hi { b } else { hi };
-                    // Line through y_k and y_{k−n} (eq. 14).
-                    let step = -u[j] * inv[j];
-                    if !(lo <= step && step <= hi) {
-                        break;
-                    }
-                    best = (step, j + 1);
-                }
-            }
-            _ => {
-                let lsq = &self.inv_lsq[1..=avail];
-                let (mut s0, mut s1) = (0.0, 0.0);
-                // Window n = j + 1 checks i = 1..n: add i = n.
-                for j in 0..u.len() {
-                    s0 += u[j];
-                    s1 += idx[j] * u[j];
-                    // Eq. 17: b_n·T = (n Σ u_i − 2 Σ i u_i) · 6/(n(n+1)(n+2)).
-                    let step = (idx[j] * s0 - 2.0 * s1) * lsq[j];
-                    let (a, b) = ((-d - u[j]) * inv[j], (d - u[j]) * inv[j]);
-                    lo = if a > lo { a } else { lo };
-                    hi = if b < hi { b } else { hi };
-                    if !(lo <= step && step <= hi) {
-                        break;
-                    }
-                    best = (step, j + 1);
-                }
-            }
-        }
-        best
-    }
-
-    /// `best_r`, or any fit with outlier tolerance: every window is rescanned.
-    fn rescanned_window(&self, avail: usize) -> (f64, usize) {
-        let (u, idx) = (&self.u[..=avail], &self.idx[..=avail]);
-        let mut best = (-u[1], 1);
-        let (mut s0, mut s1) = (0.0, 0.0);
-        let mut failed_once = false;
-        for n in 1..=avail {
-            let nf = idx[n];
-            s0 += u[n];
-            s1 += nf * u[n];
-            let step = match self.fit {
-                FoawFit::End => -u[n] * self.inv_idx[n],
-                FoawFit::Best | FoawFit::BestR => (nf * s0 - 2.0 * s1) * self.inv_lsq[n],
-            };
-            // Residual r_i = u_i + step·i − c over the checked samples.
-            let ok = match self.fit {
-                FoawFit::End => self.fits(&u[1..n], &idx[1..n], step, 0.0),
-                FoawFit::Best => self.fits(&u[1..=n], &idx[1..=n], step, 0.0),
-                // Through the centroid: c = ū + step·n/2.
-                FoawFit::BestR => self.fits(
-                    &u[..=n],
-                    &idx[..=n],
-                    step,
-                    s0 / (nf + 1.0) + 0.5 * step * nf,
-                ),
-            };
-            if !ok {
-                // With tolerance a single failing length (an outlier at the
-                // far end of the window) is skipped; two in a row stop growth.
-                if self.outlier_tolerance && !failed_once {
-                    failed_once = true;
-                    continue;
-                }
-                break;
-            }
-            failed_once = false;
-            best = (step, n);
-        }
-        best
-    }
-
-    /// Does every residual `u_i + step·i − c` fit in ±d? With outlier
-    /// tolerance, only two consecutive misses fail.
-    #[inline]
-    fn fits(&self, u: &[f64], idx: &[f64], step: f64, c: f64) -> bool {
-        let d = self.d;
-        if !self.outlier_tolerance {
-            // No early exit, so the loop vectorizes.
-            let mut ok = true;
-            for (&ui, &i) in u.iter().zip(idx) {
-                ok &= (ui + step * i - c).abs() <= d;
-            }
-            ok
-        } else {
-            let mut prev_miss = false;
-            for (&ui, &i) in u.iter().zip(idx) {
-                let miss = (ui + step * i - c).abs() > d;
-                if miss && prev_miss {
-                    return false;
-                }
-                prev_miss = miss;
-            }
-            true
+        match self {
+            Foaw::Small(f) => f.last_window(),
+            Foaw::Large(f) => f.last_window(),
         }
     }
 }
@@ -276,35 +129,17 @@ impl Foaw {
 impl VelocityEstimator for Foaw {
     #[inline]
     fn update(&mut self, y: f64) -> f64 {
-        let slot = self.count % self.cap;
-        self.buf[slot] = y;
-        self.buf[slot + self.cap] = y;
-        self.count += 1;
-        let avail = (self.count - 1).min(self.max_window);
-        if avail == 0 {
-            self.last_window = 0;
-            return 0.0;
+        match self {
+            Foaw::Small(f) => f.step(y),
+            Foaw::Large(f) => f.step(y),
         }
-        // u_i = y_{k−i} − y_k, i = 0..=avail: positions relative to the newest
-        // sample (small numbers even 10 m from the origin). Every line below
-        // is written in these terms; a slope is "rise per sample" (m).
-        let base = slot + self.cap;
-        for i in 0..=avail {
-            self.u[i] = self.buf[base - i] - y;
-        }
-        let (best, best_n) = if !self.outlier_tolerance && self.fit != FoawFit::BestR {
-            self.anchored_window(avail)
-        } else {
-            self.rescanned_window(avail)
-        };
-        self.last_window = best_n;
-        best / self.t
     }
 
     fn reset(&mut self) {
-        self.count = 0;
-        self.last_window = 0;
-        self.buf.iter_mut().for_each(|v| *v = 0.0);
+        match self {
+            Foaw::Small(f) => f.reset(),
+            Foaw::Large(f) => f.reset(),
+        }
     }
 }
 

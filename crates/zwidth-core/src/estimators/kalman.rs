@@ -31,13 +31,16 @@
 //! `N_k = C_k − H Q Hᵀ − r`, `M_k = H A P_{k−1} Aᵀ Hᵀ`,
 //! `λ_k = max(1, N_k / M_k)` (eq. 9 with scalar N, M); then
 //! `P_{k,k−1} = λ_k A P_{k−1} Aᵀ + Q` (eq. 8). `ρ` defaults to 0.95.
+//!
+//! The filter is `zwidth_dsp::Kalman` (one implementation, here and on the
+//! rig); this module checks the spec with the service's messages.
 
 use serde::{Deserialize, Serialize};
 
-use super::{Fdm, Sampling, VelocityEstimator};
+use super::{Sampling, VelocityEstimator};
 use crate::error::{require_positive, SpecError};
 
-pub const DEFAULT_RHO: f64 = 0.95;
+pub use zwidth_dsp::kalman::DEFAULT_RHO;
 
 /// Which process-noise covariance (see module doc).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]
@@ -55,31 +58,17 @@ impl QModel {
             QModel::Diagonal => "diagonal",
         }
     }
-}
 
-/// Upper triangle of a symmetric 3×3 matrix: `[p00, p01, p02, p11, p12, p22]`.
-type Sym3 = [f64; 6];
+    pub fn dsp(self) -> zwidth_dsp::QModel {
+        match self {
+            QModel::WhiteJerk => zwidth_dsp::QModel::WhiteJerk,
+            QModel::Diagonal => zwidth_dsp::QModel::Diagonal,
+        }
+    }
+}
 
 #[derive(Debug, Clone)]
-pub struct Kalman {
-    t: f64,
-    /// Scaled process noise.
-    q: Sym3,
-    /// Measurement variance r = d²/3 (m²).
-    r: f64,
-    /// Scaled initial covariance.
-    p0: Sym3,
-    /// Fading: forgetting factor ρ of the innovation covariance, if adaptive.
-    rho: Option<f64>,
-    // --- state ---
-    fdm: Fdm,
-    warmup: [f64; 3],
-    count: u8,
-    z: [f64; 3],
-    p: Sym3,
-    innovation_cov: Option<f64>,
-    last_lambda: f64,
-}
+pub struct Kalman(zwidth_dsp::Kalman);
 
 impl Kalman {
     /// `q` > 0; `rho` in (0, 1) for the adaptive filter.
@@ -94,134 +83,35 @@ impl Kalman {
                 ));
             }
         }
-        let t = s.period();
-        let d2 = s.quantization * s.quantization;
-        let q = match model {
-            QModel::WhiteJerk => {
-                let s5 = q * t.powi(5);
-                [s5 / 20.0, s5 / 8.0, s5 / 6.0, s5 / 3.0, s5 / 2.0, s5]
-            }
-            QModel::Diagonal => [0.0, 0.0, 0.0, 0.0, 0.0, q * t.powi(4)],
-        };
-        if q.iter().any(|v| !v.is_finite()) {
-            return Err(SpecError::new("q", q[5], "q·T⁵ overflows; use a smaller q"));
-        }
-        Ok(Self {
-            t,
-            q,
-            r: d2 / 3.0,
-            p0: [d2 / 3.0, 0.0, 0.0, 2.0 * d2 / 3.0, 0.0, 2.0 * d2],
-            rho,
-            fdm: Fdm::new(t),
-            warmup: [0.0; 3],
-            count: 0,
-            z: [0.0; 3],
-            p: [0.0; 6],
-            innovation_cov: None,
-            last_lambda: 1.0,
-        })
+        zwidth_dsp::Kalman::new(q, model.dsp(), rho, s.rate_hz, s.quantization)
+            .map(Self)
+            .map_err(|e| match e {
+                zwidth_dsp::Error::Parameter {
+                    name: "q", value, ..
+                } => SpecError::new("q", value, "q·T⁵ overflows; use a smaller q"),
+                e => super::spec_error(e),
+            })
     }
 
     /// Current covariance of `(x, ẋ, ẍ)` in SI units (m², m²/s², m²/s⁴), upper triangle.
     pub fn covariance(&self) -> [f64; 6] {
-        let (t, t2) = (self.t, self.t * self.t);
-        let p = &self.p;
-        [
-            p[0],
-            p[1] / t,
-            p[2] / t2,
-            p[3] / t2,
-            p[4] / (t * t2),
-            p[5] / (t2 * t2),
-        ]
+        self.0.covariance()
     }
 
     /// The fading factor used at the last step (1 for the plain filter).
     pub fn last_lambda(&self) -> f64 {
-        self.last_lambda
-    }
-
-    #[inline]
-    fn step(&mut self, y: f64) -> f64 {
-        let [z0, z1, z2] = self.z;
-        let p = self.p;
-        // Prediction x̂_{k,k−1} = A x̂ (scaled A).
-        let zp = [z0 + z1 + 0.5 * z2, z1 + z2, z2];
-        // M = A P Aᵀ, unrolled (rows of A: [1,1,½], [0,1,1], [0,0,1]).
-        let b00 = p[0] + p[1] + 0.5 * p[2];
-        let b01 = p[1] + p[3] + 0.5 * p[4];
-        let b02 = p[2] + p[4] + 0.5 * p[5];
-        let b11 = p[3] + p[4];
-        let b12 = p[4] + p[5];
-        let m = [b00 + b01 + 0.5 * b02, b01 + b02, b02, b11 + b12, b12, p[5]];
-        let gamma = y - zp[0];
-        let lambda = match self.rho {
-            None => 1.0,
-            Some(rho) => {
-                let c = match self.innovation_cov {
-                    None => gamma * gamma,
-                    Some(c) => (rho * c + gamma * gamma) / (1.0 + rho),
-                };
-                self.innovation_cov = Some(c);
-                let n = c - self.q[0] - self.r;
-                if m[0] > 0.0 && n > m[0] {
-                    n / m[0]
-                } else {
-                    1.0
-                }
-            }
-        };
-        self.last_lambda = lambda;
-        let mut pp = [0.0; 6];
-        for i in 0..6 {
-            pp[i] = lambda * m[i] + self.q[i];
-        }
-        // Update with scalar innovation variance s = H P Hᵀ + r.
-        let s = pp[0] + self.r;
-        let inv_s = 1.0 / s;
-        let k = [pp[0] * inv_s, pp[1] * inv_s, pp[2] * inv_s];
-        self.z = [
-            zp[0] + k[0] * gamma,
-            zp[1] + k[1] * gamma,
-            zp[2] + k[2] * gamma,
-        ];
-        self.p = [
-            pp[0] * self.r * inv_s,
-            pp[1] - k[0] * pp[1],
-            pp[2] - k[0] * pp[2],
-            pp[3] - k[1] * pp[1],
-            pp[4] - k[1] * pp[2],
-            pp[5] - k[2] * pp[2],
-        ];
-        self.z[1] / self.t
+        self.0.last_lambda()
     }
 }
 
 impl VelocityEstimator for Kalman {
     #[inline]
     fn update(&mut self, y: f64) -> f64 {
-        if self.count >= 3 {
-            return self.step(y);
-        }
-        let v = self.fdm.update(y);
-        self.warmup[self.count as usize] = y;
-        self.count += 1;
-        if self.count == 3 {
-            let [y0, y1, y2] = self.warmup;
-            // Scaled initial state (x, T·v, T²·a) from eq. 18's estimates.
-            self.z = [y2, y2 - y1, y2 - 2.0 * y1 + y0];
-            self.p = self.p0;
-        }
-        v
+        self.0.step(y)
     }
 
     fn reset(&mut self) {
-        self.fdm.reset();
-        self.count = 0;
-        self.z = [0.0; 3];
-        self.p = [0.0; 6];
-        self.innovation_cov = None;
-        self.last_lambda = 1.0;
+        self.0.reset();
     }
 }
 
@@ -327,29 +217,6 @@ mod tests {
             out.push(x[1]);
         }
         (out, lambdas)
-    }
-
-    #[test]
-    fn covariance_is_reported_in_si_units() {
-        // The filter's state is scaled (x, ẋT, ẍT²) (the 2018 paper's
-        // white-jerk model in sample units), so its covariance entries
-        // scale by T^{-(i+j)}: P_xv = p01/T, P_xa = p02/T², P_vv = p11/T²,
-        // P_va = p12/T³, P_aa = p22/T⁴.
-        let t = 0.01;
-        let mut k = Kalman::new(1e4, QModel::WhiteJerk, None, sampling(1.0 / t, 1e-6)).unwrap();
-        k.p = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0];
-        let c = k.covariance();
-        let want = [
-            1.0,
-            2.0 / t,
-            3.0 / (t * t),
-            4.0 / (t * t),
-            5.0 / t.powi(3),
-            6.0 / t.powi(4),
-        ];
-        for (g, w) in c.iter().zip(want) {
-            assert!((g / w - 1.0).abs() < 1e-12, "{c:?} vs {want:?}");
-        }
     }
 
     #[test]

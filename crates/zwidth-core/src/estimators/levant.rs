@@ -275,102 +275,84 @@ impl std::fmt::Display for GainReport {
     }
 }
 
-/// sign with sign(0) = 0 (Rust's `f64::signum(0.0)` is 1).
-#[inline]
-fn sign(e: f64) -> f64 {
-    if e > 0.0 {
-        1.0
-    } else if e < 0.0 {
-        -1.0
-    } else {
-        0.0
+impl Discretization {
+    pub fn dsp(self) -> zwidth_dsp::Discretization {
+        match self {
+            Discretization::Explicit => zwidth_dsp::Discretization::Explicit,
+            Discretization::Implicit => zwidth_dsp::Discretization::Implicit,
+        }
     }
 }
 
+impl ImplicitOutput {
+    pub fn dsp(self) -> zwidth_dsp::ImplicitOutput {
+        match self {
+            ImplicitOutput::State => zwidth_dsp::ImplicitOutput::State,
+            ImplicitOutput::Eq7 => zwidth_dsp::ImplicitOutput::Eq7,
+        }
+    }
+}
+
+/// The differentiator: `zwidth_dsp::Levant` (one implementation, here and
+/// on the rig) with the gains it was built from.
 #[derive(Debug, Clone)]
 pub struct Levant {
     gains: LevantGains,
     discretization: Discretization,
-    output: ImplicitOutput,
     t: f64,
-    x: f64,
-    u1: f64,
-    started: bool,
+    inner: zwidth_dsp::Levant,
 }
 
 impl Levant {
-    /// Gains already validated (`LevantSpec::gains`).
+    /// Gains already validated (`LevantSpec::gains`); `t` > 0.
     pub fn new(gains: LevantGains, discretization: Discretization, t: f64) -> Self {
         Self {
             gains,
             discretization,
-            output: ImplicitOutput::State,
             t,
-            x: 0.0,
-            u1: 0.0,
-            started: false,
+            inner: zwidth_dsp::Levant::from_validated(
+                gains.alpha,
+                gains.lambda,
+                discretization.dsp(),
+                ImplicitOutput::State.dsp(),
+                t,
+            ),
         }
     }
 
     /// What the implicit scheme outputs.
-    pub fn with_output(mut self, output: ImplicitOutput) -> Self {
-        self.output = output;
-        self
+    pub fn with_output(self, output: ImplicitOutput) -> Self {
+        let g = self.gains;
+        Self {
+            inner: zwidth_dsp::Levant::from_validated(
+                g.alpha,
+                g.lambda,
+                self.discretization.dsp(),
+                output.dsp(),
+                self.t,
+            ),
+            ..self
+        }
     }
 
     pub fn gains(&self) -> LevantGains {
         self.gains
+    }
+
+    /// The estimate of the position x and the integrator u1 (m, m/s).
+    pub fn state(&self) -> (f64, f64) {
+        self.inner.state()
     }
 }
 
 impl VelocityEstimator for Levant {
     #[inline]
     fn update(&mut self, y: f64) -> f64 {
-        let (a, l, t) = (self.gains.alpha, self.gains.lambda, self.t);
-        if !self.started {
-            self.started = true;
-            self.x = y;
-            self.u1 = 0.0;
-            if self.discretization == Discretization::Implicit {
-                return 0.0;
-            }
-        }
-        match self.discretization {
-            Discretization::Explicit => {
-                // 2011 paper eqs. 6–8, explicit Euler.
-                let e = self.x - y;
-                let s = sign(e);
-                let u = self.u1 - l * e.abs().sqrt() * s;
-                self.x += t * u;
-                self.u1 -= t * a * s;
-                u
-            }
-            Discretization::Implicit => {
-                let band = t * t * a;
-                let w = self.x + t * self.u1 - y;
-                let (s, r2) = if w.abs() <= band {
-                    (w / band, 0.0)
-                } else {
-                    // r² + Tλ r − c = 0, c = |w| − T²α > 0, in the cancellation-free form.
-                    let c = w.abs() - band;
-                    let r = 2.0 * c / (t * l + (t * t * l * l + 4.0 * c).sqrt());
-                    (sign(w), r * r)
-                };
-                self.u1 -= t * a * s;
-                self.x = y + s * r2;
-                match self.output {
-                    ImplicitOutput::State => self.u1,
-                    // e_{k+1} = x_{k+1} − y_{k+1} = s·r², so √|e|·sign(e) = s·√r².
-                    ImplicitOutput::Eq7 => self.u1 - l * r2.sqrt() * s,
-                }
-            }
-        }
+        self.inner.step(y)
     }
 
     fn reset(&mut self) {
-        self.started = false;
-        self.x = 0.0;
-        self.u1 = 0.0;
+        self.inner.reset();
     }
 }
 
@@ -401,8 +383,8 @@ mod tests {
         assert_eq!(l.update(1.0), 3.0);
         let u = l.update(1.0);
         assert!((u - (1.0 - 3.0 * 0.5f64.sqrt())).abs() < 1e-15, "{u}");
-        assert!((l.x - (1.5 + 0.5 * u)).abs() < 1e-15);
-        assert_eq!(l.u1, 0.0);
+        assert!((l.state().0 - (1.5 + 0.5 * u)).abs() < 1e-15);
+        assert_eq!(l.state().1, 0.0);
     }
 
     fn implicit(alpha: f64, lambda: f64, t: f64) -> Levant {
@@ -416,14 +398,14 @@ mod tests {
     fn assert_backward_euler(before: (f64, f64), l: &Levant, y: f64) {
         let (x0, u0) = before;
         let (a, lam, t) = (l.gains.alpha, l.gains.lambda, l.t);
-        let e = l.x - y;
-        let s = (u0 - l.u1) / (t * a);
+        let e = l.state().0 - y;
+        let s = (u0 - l.state().1) / (t * a);
         assert!(s.abs() <= 1.0 + 1e-12, "s = {s}");
         if e != 0.0 {
             assert!((s - e.signum()).abs() < 1e-12, "s = {s}, e = {e}");
         }
-        let x1 = x0 + t * (l.u1 - lam * e.abs().sqrt() * s);
-        assert!((l.x - x1).abs() < 1e-12, "{} vs {x1}", l.x);
+        let x1 = x0 + t * (l.state().1 - lam * e.abs().sqrt() * s);
+        assert!((l.state().0 - x1).abs() < 1e-12, "{} vs {x1}", l.state().0);
     }
 
     #[test]
@@ -434,24 +416,28 @@ mod tests {
                                         // y1 = 1: w = 0 + 0 − 1 = −1, outside the band: s = −1 and
                                         // r = √|e| solves r² + 1.5 r − 0.5 = 0, r = (−1.5 + √4.25)/2;
                                         // u1 = 0 + 0.5·2 = 1; x = 1 − r².
-        let before = (l.x, l.u1);
+        let before = (l.state().0, l.state().1);
         assert_eq!(l.update(1.0), 1.0);
         let r = (-1.5 + 4.25f64.sqrt()) / 2.0;
-        assert!((l.x - (1.0 - r * r)).abs() < 1e-15, "{}", l.x);
+        assert!(
+            (l.state().0 - (1.0 - r * r)).abs() < 1e-15,
+            "{}",
+            l.state().0
+        );
         assert_backward_euler(before, &l, 1.0);
         // y2 = 1.2: w = (1 − r²) + 0.5 − 1.2 = 0.3 − r² = 0.22116…, inside
         // the band: sliding, s = w/0.5, e = 0, u1 = 1 − 0.5·2·s, x = y2.
-        let before = (l.x, l.u1);
+        let before = (l.state().0, l.state().1);
         let w = 0.3 - r * r;
         let u = l.update(1.2);
         assert!((u - (1.0 - w / 0.5)).abs() < 1e-15, "{u}");
-        assert_eq!(l.x, 1.2);
+        assert_eq!(l.state().0, 1.2);
         assert_backward_euler(before, &l, 1.2);
         // y3 = −2: w = 1.2 + 0.5·u − (−2) > 0.5: s = +1, e > 0.
-        let before = (l.x, l.u1);
+        let before = (l.state().0, l.state().1);
         let u3 = l.update(-2.0);
         assert!((u3 - (u - 1.0)).abs() < 1e-15, "{u3}");
-        assert!(l.x > -2.0);
+        assert!(l.state().0 > -2.0);
         assert_backward_euler(before, &l, -2.0);
     }
 
@@ -472,7 +458,7 @@ mod tests {
         let (ua, ub) = (a.update(1.2), b.update(1.2));
         assert_eq!(ua, ub);
         // The state itself is the same either way.
-        assert_eq!((a.x, a.u1), (b.x, b.u1));
+        assert_eq!(a.state(), b.state());
         // The spec field reaches the estimator; the default is not written out.
         let spec: LevantSpec = serde_json::from_str(
             r#"{"alpha":2,"lambda":3,"discretization":"implicit","implicit_output":"eq7"}"#,
@@ -494,11 +480,11 @@ mod tests {
         for k in 0..30_000 {
             let y =
                 (0.01 * (2.0 * std::f64::consts::PI * k as f64 * 1e-4).sin() * 1e6).round() * 1e-6;
-            let before = (l.x, l.u1);
+            let before = (l.state().0, l.state().1);
             l.update(y);
             if k > 0 {
                 assert_backward_euler(before, &l, y);
-                if l.x == y {
+                if l.state().0 == y {
                     sliding += 1
                 } else {
                     outside += 1

@@ -21,6 +21,21 @@ pub use kalman::{Kalman, QModel};
 pub use levant::{Discretization, GainReport, GainRule, Levant, LevantGains, LevantSpec};
 pub use median::RunningMedian;
 
+/// A refusal of `zwidth-dsp` (what the spec checks above it did not
+/// already name: a capacity, a period) as the service's error.
+pub(crate) fn spec_error(e: zwidth_dsp::Error) -> SpecError {
+    match e {
+        zwidth_dsp::Error::Parameter {
+            name,
+            value,
+            allowed,
+        } => SpecError::new(name, value, allowed),
+        zwidth_dsp::Error::Capacity { name, value, cap } => {
+            SpecError::new(name, value, format!("must be at most {cap}"))
+        }
+    }
+}
+
 /// A streaming velocity estimator.
 pub trait VelocityEstimator {
     /// Feed the next position sample `y` (m); returns the velocity estimate (m/s).
@@ -192,13 +207,56 @@ impl EstimatorSpec {
         s
     }
 
+    /// The plain spec `zwidth-dsp` builds from (the Levant gains resolved
+    /// from their form): what a rig's controller runs for this spec.
+    pub fn to_dsp(&self) -> Result<zwidth_dsp::Spec, SpecError> {
+        use zwidth_dsp::KindSpec as K;
+        let kind = match &self.kind {
+            EstimatorKind::Fdm {} => K::Fdm,
+            EstimatorKind::Butterworth { cutoff_hz, order } => K::Butterworth {
+                cutoff_hz: *cutoff_hz,
+                order: *order,
+            },
+            EstimatorKind::Kalman { q, q_model } => K::Kalman {
+                q: *q,
+                model: q_model.dsp(),
+                rho: None,
+            },
+            EstimatorKind::AdaptiveKalman { q, q_model, rho } => K::Kalman {
+                q: *q,
+                model: q_model.dsp(),
+                rho: Some(*rho),
+            },
+            EstimatorKind::Foaw(f) => K::Foaw {
+                fit: f.fit.dsp(),
+                d: f.d,
+                max_window: f.max_window,
+                outlier_tolerance: f.outlier_tolerance,
+            },
+            EstimatorKind::Levant(l) => {
+                let g = l.gains()?;
+                K::Levant {
+                    alpha: g.alpha,
+                    lambda: g.lambda,
+                    discretization: l.discretization.dsp(),
+                    output: l.implicit_output.dsp(),
+                }
+            }
+        };
+        Ok(zwidth_dsp::Spec {
+            kind,
+            median_position: self.median_position,
+            median_velocity: self.median_velocity,
+        })
+    }
+
     /// Validate against the sampling and build the streaming estimator.
     pub fn build(&self, sampling: Sampling) -> Result<Estimator, SpecError> {
         let core = self.kind.build(sampling)?;
         let median = |field: &str, w: Option<usize>| -> Result<Option<RunningMedian>, SpecError> {
             match w {
                 None => Ok(None),
-                Some(w) if (1..=MAX_MEDIAN_WINDOW).contains(&w) => Ok(Some(RunningMedian::new(w))),
+                Some(w) if (1..=MAX_MEDIAN_WINDOW).contains(&w) => RunningMedian::new(w).map(Some),
                 Some(w) => Err(SpecError::new(
                     field,
                     w,
