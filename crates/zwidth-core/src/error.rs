@@ -69,6 +69,23 @@ impl fmt::Display for SpecError {
     }
 }
 
+/// A number as a message shows it: never "NaN" or "inf" (an input from
+/// the command line, the C ABI or Python can be either).
+pub fn shown(value: f64) -> String {
+    if value.is_nan() {
+        "(not a number)".into()
+    } else if value.is_infinite() {
+        if value > 0.0 {
+            "(+infinity)"
+        } else {
+            "(−infinity)"
+        }
+        .into()
+    } else {
+        value.to_string()
+    }
+}
+
 /// `Ok(())` when `value` is finite and strictly positive.
 pub fn require_positive(field: &str, value: f64, unit: &str) -> Result<(), SpecError> {
     if value.is_finite() && value > 0.0 {
@@ -76,7 +93,7 @@ pub fn require_positive(field: &str, value: f64, unit: &str) -> Result<(), SpecE
     } else {
         Err(SpecError::new(
             field,
-            value,
+            shown(value),
             format!("must be a finite number > 0 ({unit})"),
         ))
     }
@@ -89,7 +106,7 @@ pub fn require_non_negative(field: &str, value: f64, unit: &str) -> Result<(), S
     } else {
         Err(SpecError::new(
             field,
-            value,
+            shown(value),
             format!("must be a finite number >= 0 ({unit})"),
         ))
     }
@@ -109,7 +126,7 @@ pub fn require_range(
     } else {
         Err(SpecError::new(
             field,
-            value,
+            shown(value),
             format!("must be {lo:e} to {hi:e} ({unit})"),
         ))
     }

@@ -93,13 +93,11 @@ pub fn design_lowpass(
     let mut denom = Cx::new(1.0, 0.0);
     for i in 0..n {
         let m = -(n as f64) + 1.0 + 2.0 * i as f64;
-        let p = Cx::from_polar(1.0, pi * m / (2.0 * n as f64))
-            .neg()
-            .scale(warped);
+        let p = (-Cx::from_polar(1.0, pi * m / (2.0 * n as f64))).scale(warped);
         // As num-complex evaluates `fs2 ± p` (f64 − Complex: 0 − im).
         let minus = Cx::new(fs2 - p.re, 0.0 - p.im);
-        poles.push(Cx::new(fs2 + p.re, p.im).div(minus));
-        denom = denom.mul(minus);
+        poles.push(Cx::new(fs2 + p.re, p.im) / minus);
+        denom = denom * minus;
         zeros.push(Cx::new(-1.0, 0.0));
     }
     let gain = math::powi(warped, order as i32) / denom.re;
@@ -148,7 +146,7 @@ fn nearest(roots: &Roots, to: Cx, real_only: bool) -> Option<usize> {
         if real_only && !is_real(*r) {
             continue;
         }
-        let d = r.sub(to).norm();
+        let d = (*r - to).norm();
         if best.is_none_or(|(_, b)| d.total_cmp(&b).is_lt()) {
             best = Some((i, d));
         }
@@ -174,7 +172,7 @@ fn worst(poles: &Roots, real_only: bool) -> Option<usize> {
 
 /// Monic quadratic coefficients `[1, c1, c2]` of `(x − r1)(x − r2)`.
 fn quad(r1: Cx, r2: Cx) -> [f64; 3] {
-    [1.0, -(r1.add(r2)).re, r1.mul(r2).re]
+    [1.0, -(r1 + r2).re, (r1 * r2).re]
 }
 
 /// scipy's `zpk2sos(..., pairing='nearest')` for digital filters with as

@@ -19,36 +19,8 @@ impl Cx {
         Self::new(r * crate::math::cos(theta), r * crate::math::sin(theta))
     }
 
-    pub fn add(self, o: Cx) -> Cx {
-        Cx::new(self.re + o.re, self.im + o.im)
-    }
-
-    pub fn sub(self, o: Cx) -> Cx {
-        Cx::new(self.re - o.re, self.im - o.im)
-    }
-
-    pub fn mul(self, o: Cx) -> Cx {
-        Cx::new(
-            self.re * o.re - self.im * o.im,
-            self.re * o.im + self.im * o.re,
-        )
-    }
-
-    /// Division through |o|², as num-complex's `Div`.
-    pub fn div(self, o: Cx) -> Cx {
-        let n = o.re * o.re + o.im * o.im;
-        Cx::new(
-            (self.re * o.re + self.im * o.im) / n,
-            (self.im * o.re - self.re * o.im) / n,
-        )
-    }
-
     pub fn scale(self, k: f64) -> Cx {
         Cx::new(self.re * k, self.im * k)
-    }
-
-    pub fn neg(self) -> Cx {
-        Cx::new(-self.re, -self.im)
     }
 
     pub fn conj(self) -> Cx {
@@ -57,5 +29,48 @@ impl Cx {
 
     pub fn norm(self) -> f64 {
         crate::math::hypot(self.re, self.im)
+    }
+}
+
+impl core::ops::Add for Cx {
+    type Output = Cx;
+    fn add(self, o: Cx) -> Cx {
+        Cx::new(self.re + o.re, self.im + o.im)
+    }
+}
+
+impl core::ops::Sub for Cx {
+    type Output = Cx;
+    fn sub(self, o: Cx) -> Cx {
+        Cx::new(self.re - o.re, self.im - o.im)
+    }
+}
+
+impl core::ops::Mul for Cx {
+    type Output = Cx;
+    fn mul(self, o: Cx) -> Cx {
+        Cx::new(
+            self.re * o.re - self.im * o.im,
+            self.re * o.im + self.im * o.re,
+        )
+    }
+}
+
+/// Division through |o|², as num-complex's `Div`.
+impl core::ops::Div for Cx {
+    type Output = Cx;
+    fn div(self, o: Cx) -> Cx {
+        let n = o.re * o.re + o.im * o.im;
+        Cx::new(
+            (self.re * o.re + self.im * o.im) / n,
+            (self.im * o.re - self.re * o.im) / n,
+        )
+    }
+}
+
+impl core::ops::Neg for Cx {
+    type Output = Cx;
+    fn neg(self) -> Cx {
+        Cx::new(-self.re, -self.im)
     }
 }

@@ -33,7 +33,8 @@
 //! in a branch-free loop over contiguous slices.
 //!
 //! The estimator is `zwidth_dsp::Foaw` (one implementation, here and on the
-//! rig): windows up to the rig's cap in place, longer ones boxed.
+//! rig): windows up to the rig's cap in the rig's state, longer ones in
+//! the simulator's.
 
 use serde::{Deserialize, Serialize};
 
@@ -91,10 +92,12 @@ fn default_max_window() -> usize {
     DEFAULT_MAX_WINDOW
 }
 
-/// FOAW: windows up to the rig's cap in place, longer ones boxed.
+/// FOAW: windows up to the rig's cap in its state (3 KiB), longer ones
+/// in the simulator's (4097 samples, 192 KiB); boxed, so an estimator
+/// stays small.
 #[derive(Debug, Clone)]
 pub enum Foaw {
-    Small(zwidth_dsp::Foaw<{ RIG_FOAW_WINDOW + 1 }>),
+    Small(Box<zwidth_dsp::Foaw<{ RIG_FOAW_WINDOW + 1 }>>),
     Large(Box<zwidth_dsp::Foaw<{ MAX_WINDOW_LIMIT + 1 }>>),
 }
 
@@ -110,7 +113,7 @@ impl Foaw {
         }
         let (fit, w, tol) = (spec.fit.dsp(), spec.max_window, spec.outlier_tolerance);
         let built = if w <= RIG_FOAW_WINDOW {
-            zwidth_dsp::Foaw::new(fit, d, w, tol, t).map(Foaw::Small)
+            zwidth_dsp::Foaw::new(fit, d, w, tol, t).map(|f| Foaw::Small(Box::new(f)))
         } else {
             zwidth_dsp::Foaw::new(fit, d, w, tol, t).map(|f| Foaw::Large(Box::new(f)))
         };

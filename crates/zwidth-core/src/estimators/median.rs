@@ -1,6 +1,7 @@
 //! Causal running median of the last W samples (Janabi-Sharifi et al. 2000,
 //! §III-B). The implementation is `zwidth_dsp::Median`: windows up to the
-//! rig's cap in place, longer ones (up to `MAX_MEDIAN_WINDOW`) boxed.
+//! rig's cap in the rig's state, longer ones (up to `MAX_MEDIAN_WINDOW`)
+//! in the simulator's; boxed, so an estimator stays small.
 
 use super::MAX_MEDIAN_WINDOW;
 use crate::error::SpecError;
@@ -8,7 +9,7 @@ use zwidth_dsp::estimator::RIG_MEDIAN;
 
 #[derive(Debug, Clone)]
 pub enum RunningMedian {
-    Small(zwidth_dsp::Median<RIG_MEDIAN>),
+    Small(Box<zwidth_dsp::Median<RIG_MEDIAN>>),
     Large(Box<zwidth_dsp::Median<MAX_MEDIAN_WINDOW>>),
 }
 
@@ -16,7 +17,7 @@ impl RunningMedian {
     /// `window` from 1 to `MAX_MEDIAN_WINDOW`.
     pub fn new(window: usize) -> Result<Self, SpecError> {
         let m = if window <= RIG_MEDIAN {
-            zwidth_dsp::Median::new(window).map(Self::Small)
+            zwidth_dsp::Median::new(window).map(|m| Self::Small(Box::new(m)))
         } else {
             zwidth_dsp::Median::new(window).map(|m| Self::Large(Box::new(m)))
         };

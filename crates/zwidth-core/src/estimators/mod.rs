@@ -29,7 +29,7 @@ pub(crate) fn spec_error(e: zwidth_dsp::Error) -> SpecError {
             name,
             value,
             allowed,
-        } => SpecError::new(name, value, allowed),
+        } => SpecError::new(name, crate::error::shown(value), allowed),
         zwidth_dsp::Error::Capacity { name, value, cap } => {
             SpecError::new(name, value, format!("must be at most {cap}"))
         }

@@ -1,0 +1,581 @@
+//! The C ABI of zwidth's velocity estimators (`include/zwidth.h`, written
+//! by cbindgen 0.29.4; `tests/header.rs` fails when it drifts).
+//!
+//! - **Caller-owned state.** A `zw_estimator` is a plain struct of
+//!   `ZW_ESTIMATOR_WORDS` 64-bit words: a lab puts it on the stack, in a
+//!   static or in a Simulink DWork. Nothing here allocates after `init`
+//!   (and the per-kind inits not at all); `step` is bounded work
+//!   (zwidth-dsp's header).
+//! - **Status codes**, never a panic across the boundary (each call runs
+//!   under `catch_unwind`): null pointers, a bad parameter (named in the
+//!   optional `zw_error`), a window or order beyond this build's capacity,
+//!   malformed JSON, a struct no `init` has filled, a non-finite position
+//!   (refused, the state unchanged).
+//! - The same estimators, bit for bit, as the simulator: `zw_init_json`
+//!   takes the JSON estimator spec the API takes (`{"kind":"butterworth",
+//!   "cutoff_hz":100,"order":2}`), checked with the service's messages.
+
+#![allow(non_camel_case_types)]
+
+use std::ffi::{c_char, CStr};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+use zwidth_dsp::estimator::{RIG_FOAW_WINDOW, RIG_MEDIAN};
+use zwidth_dsp::{
+    Discretization, Error, FoawFit, ImplicitOutput, KindSpec, QModel, RigEstimator, Spec,
+};
+
+/// The ABI's version: a change of any signature, struct or meaning
+/// increments it.
+pub const ZW_ABI_VERSION: u32 = 1;
+
+/// 64-bit words of a `zw_estimator` (8 KiB: the estimator at its caps
+/// takes under 6 KiB; the rest keeps the ABI when the state grows).
+pub const ZW_ESTIMATOR_WORDS: usize = 1024;
+
+/// The longest FOAW window this build holds (samples).
+pub const ZW_FOAW_MAX_WINDOW: u32 = 64;
+
+/// The longest median window this build holds (samples).
+pub const ZW_MEDIAN_MAX_WINDOW: u32 = 63;
+
+/// The highest Butterworth order.
+pub const ZW_BUTTERWORTH_MAX_ORDER: u32 = 10;
+
+const _: () = assert!(
+    ZW_FOAW_MAX_WINDOW as usize == RIG_FOAW_WINDOW
+        && ZW_MEDIAN_MAX_WINDOW as usize == RIG_MEDIAN
+        && ZW_BUTTERWORTH_MAX_ORDER == zwidth_dsp::butterworth::MAX_ORDER
+);
+
+/// An estimator's state and coefficients, owned by the caller. Fill it with
+/// one of the `zw_init_*` functions before any other call; a zeroed struct
+/// is refused with `ZW_NOT_INITIALIZED`.
+#[repr(C)]
+pub struct zw_estimator {
+    pub words: [u64; ZW_ESTIMATOR_WORDS],
+}
+
+/// What a call did.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum zw_status {
+    ZwOk = 0,
+    /// A pointer argument was null.
+    ZwNull = 1,
+    /// A parameter is out of its range (named in `zw_error`), or a
+    /// position is not a finite number (the state is unchanged).
+    ZwBadParameter = 2,
+    /// A window or order beyond this build's capacity (named, with the cap).
+    ZwCapacity = 3,
+    /// The JSON spec is not JSON (or not UTF-8).
+    ZwParse = 4,
+    /// The struct was not filled by a `zw_init_*` function.
+    ZwNotInitialized = 5,
+    /// A bug in this library (it did not panic across the boundary).
+    ZwInternal = 6,
+}
+
+/// Why an init refused: the parameter and a sentence naming its value and
+/// what is allowed, NUL-terminated (cut to fit).
+#[repr(C)]
+pub struct zw_error {
+    pub parameter: [c_char; 32],
+    pub message: [c_char; 224],
+}
+
+/// The Kalman filter's process-noise model.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum zw_q_model {
+    ZwWhiteJerk = 0,
+    ZwDiagonal = 1,
+}
+
+/// The FOAW line fit.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum zw_foaw_fit {
+    ZwFoawEnd = 0,
+    ZwFoawBest = 1,
+    ZwFoawBestR = 2,
+}
+
+/// Levant's discretization and output.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum zw_levant_scheme {
+    ZwLevantExplicit = 0,
+    /// Implicit Euler, the integrator state as output.
+    ZwLevantImplicit = 1,
+    /// Implicit Euler, the 2011 paper's eq. 7 as output.
+    ZwLevantImplicitEq7 = 2,
+}
+
+/// "zwidth" and the ABI version: the first word of a filled struct.
+const MAGIC: u64 = 0x7a77_6964_7468_0000 | ZW_ABI_VERSION as u64;
+
+/// The struct's contents once filled.
+struct Slot {
+    magic: u64,
+    est: RigEstimator,
+}
+
+const _: () = assert!(
+    std::mem::size_of::<Slot>() <= 8 * ZW_ESTIMATOR_WORDS
+        && std::mem::align_of::<Slot>() <= std::mem::align_of::<zw_estimator>()
+);
+
+/// Run `f`, turning a panic into `ZW_INTERNAL`.
+fn guarded(f: impl FnOnce() -> zw_status) -> zw_status {
+    catch_unwind(AssertUnwindSafe(f)).unwrap_or(zw_status::ZwInternal)
+}
+
+/// The filled estimator behind `e`.
+///
+/// # Safety
+/// `e` is null or points to a `zw_estimator` the caller owns.
+unsafe fn filled<'a>(e: *mut zw_estimator) -> Result<&'a mut RigEstimator, zw_status> {
+    if e.is_null() {
+        return Err(zw_status::ZwNull);
+    }
+    let slot = e.cast::<Slot>();
+    // SAFETY: `e` is a valid, 8-aligned zw_estimator of at least
+    // size_of::<Slot>() bytes (the assertion above); the magic word tells a
+    // filled one from a zeroed one.
+    unsafe {
+        if std::ptr::addr_of!((*slot).magic).read() != MAGIC {
+            return Err(zw_status::ZwNotInitialized);
+        }
+        Ok(&mut (*slot).est)
+    }
+}
+
+/// The filled estimator behind `e`, read only.
+///
+/// # Safety
+/// `e` is null or points to a `zw_estimator` the caller owns.
+unsafe fn filled_ref<'a>(e: *const zw_estimator) -> Result<&'a RigEstimator, zw_status> {
+    if e.is_null() {
+        return Err(zw_status::ZwNull);
+    }
+    let slot = e.cast::<Slot>();
+    // SAFETY: as `filled`.
+    unsafe {
+        if std::ptr::addr_of!((*slot).magic).read() != MAGIC {
+            return Err(zw_status::ZwNotInitialized);
+        }
+        Ok(&(*slot).est)
+    }
+}
+
+/// Copy `text` into `dst`, cut to fit, NUL-terminated.
+fn copy_c(dst: &mut [c_char], text: &str) {
+    let n = text.len().min(dst.len().saturating_sub(1));
+    // Cut on a character boundary.
+    let n = (0..=n)
+        .rev()
+        .find(|&i| text.is_char_boundary(i))
+        .unwrap_or(0);
+    for (d, s) in dst.iter_mut().zip(text.as_bytes()[..n].iter()) {
+        *d = *s as c_char;
+    }
+    if let Some(z) = dst.get_mut(n) {
+        *z = 0;
+    }
+}
+
+/// Say why in `err` (when not null) and return `status`.
+///
+/// # Safety
+/// `err` is null or points to a `zw_error` the caller owns.
+unsafe fn explain(
+    err: *mut zw_error,
+    status: zw_status,
+    parameter: &str,
+    message: &str,
+) -> zw_status {
+    // SAFETY: as the function's contract.
+    if let Some(err) = unsafe { err.as_mut() } {
+        copy_c(&mut err.parameter, parameter);
+        copy_c(&mut err.message, message);
+    }
+    status
+}
+
+/// Fill `e` from a resolved spec, or explain the refusal.
+///
+/// # Safety
+/// `e` is null or points to a `zw_estimator`; `err` null or a `zw_error`.
+unsafe fn fill(
+    e: *mut zw_estimator,
+    spec: &Spec,
+    rate_hz: f64,
+    quantization_m: f64,
+    err: *mut zw_error,
+) -> zw_status {
+    if e.is_null() {
+        // SAFETY: `err` as the contract.
+        return unsafe {
+            explain(
+                err,
+                zw_status::ZwNull,
+                "estimator",
+                "the estimator pointer is null",
+            )
+        };
+    }
+    match RigEstimator::new(spec, rate_hz, quantization_m) {
+        Ok(est) => {
+            // SAFETY: `e` is valid for a write of a Slot (size and alignment
+            // asserted above); the old contents need no drop (plain data).
+            unsafe {
+                e.cast::<Slot>().write(Slot { magic: MAGIC, est });
+            }
+            // SAFETY: `err` as the contract.
+            unsafe { explain(err, zw_status::ZwOk, "", "") }
+        }
+        Err(x) => {
+            let status = match x {
+                Error::Capacity { .. } => zw_status::ZwCapacity,
+                Error::Parameter { .. } => zw_status::ZwBadParameter,
+            };
+            // SAFETY: `err` as the contract.
+            unsafe { explain(err, status, x.parameter(), &x.to_string()) }
+        }
+    }
+}
+
+/// The ABI version this library implements (`ZW_ABI_VERSION`).
+#[no_mangle]
+pub extern "C" fn zw_abi_version() -> u32 {
+    ZW_ABI_VERSION
+}
+
+/// The estimator library's version, NUL-terminated (static storage).
+#[no_mangle]
+pub extern "C" fn zw_version() -> *const c_char {
+    concat!(env!("CARGO_PKG_VERSION"), "\0").as_ptr().cast()
+}
+
+/// `sizeof(zw_estimator)` as this library sees it (a check for callers
+/// whose header and library might differ).
+#[no_mangle]
+pub extern "C" fn zw_estimator_size() -> usize {
+    std::mem::size_of::<zw_estimator>()
+}
+
+/// Fill `e` from the JSON estimator spec the API takes, at `rate_hz` with
+/// the encoder step `quantization_m`. `err` may be null.
+///
+/// # Safety
+/// `e` null or a `zw_estimator`; `spec_json` null or a NUL-terminated
+/// string; `err` null or a `zw_error`.
+#[no_mangle]
+pub unsafe extern "C" fn zw_init_json(
+    e: *mut zw_estimator,
+    spec_json: *const c_char,
+    rate_hz: f64,
+    quantization_m: f64,
+    err: *mut zw_error,
+) -> zw_status {
+    guarded(|| {
+        if spec_json.is_null() {
+            // SAFETY: `err` as the contract.
+            return unsafe {
+                explain(
+                    err,
+                    zw_status::ZwNull,
+                    "spec_json",
+                    "the spec pointer is null",
+                )
+            };
+        }
+        // SAFETY: a NUL-terminated string, as the contract.
+        let Ok(text) = unsafe { CStr::from_ptr(spec_json) }.to_str() else {
+            // SAFETY: `err` as the contract.
+            return unsafe {
+                explain(
+                    err,
+                    zw_status::ZwParse,
+                    "spec_json",
+                    "the spec is not UTF-8",
+                )
+            };
+        };
+        if let Err(x) = serde_json::from_str::<serde_json::Value>(text) {
+            // SAFETY: `err` as the contract.
+            return unsafe {
+                explain(
+                    err,
+                    zw_status::ZwParse,
+                    "spec_json",
+                    &format!("not JSON: {x}"),
+                )
+            };
+        }
+        let checked =
+            zwidth_core::estimators::Sampling::new(rate_hz, quantization_m).and_then(|s| {
+                let spec = zwidth_core::estimators::EstimatorSpec::from_json(text)?;
+                // The service's checks and messages first.
+                spec.build(s)?;
+                spec.to_dsp()
+            });
+        match checked {
+            // SAFETY: as the contract.
+            Ok(spec) => unsafe { fill(e, &spec, rate_hz, quantization_m, err) },
+            // SAFETY: `err` as the contract.
+            Err(x) => unsafe { explain(err, zw_status::ZwBadParameter, &x.field, &x.to_string()) },
+        }
+    })
+}
+
+/// Fill `e` with the finite-difference method (2011 paper eq. 2).
+///
+/// # Safety
+/// `e` null or a `zw_estimator`; `err` null or a `zw_error`.
+#[no_mangle]
+pub unsafe extern "C" fn zw_init_fdm(
+    e: *mut zw_estimator,
+    rate_hz: f64,
+    err: *mut zw_error,
+) -> zw_status {
+    // SAFETY: as the contract (the quantization is unused by FDM).
+    guarded(|| unsafe { fill(e, &KindSpec::Fdm.into(), rate_hz, 1.0, err) })
+}
+
+/// Fill `e` with FDM and a Butterworth low-pass of `order` (1 to
+/// `ZW_BUTTERWORTH_MAX_ORDER`) at `cutoff_hz` (below rate_hz/2).
+///
+/// # Safety
+/// `e` null or a `zw_estimator`; `err` null or a `zw_error`.
+#[no_mangle]
+pub unsafe extern "C" fn zw_init_butterworth(
+    e: *mut zw_estimator,
+    rate_hz: f64,
+    cutoff_hz: f64,
+    order: u32,
+    err: *mut zw_error,
+) -> zw_status {
+    let spec = KindSpec::Butterworth { cutoff_hz, order }.into();
+    // SAFETY: as the contract.
+    guarded(|| unsafe { fill(e, &spec, rate_hz, 1.0, err) })
+}
+
+/// Fill `e` with the Kalman filter: `model` a `zw_q_model`; `rho` ≤ 0: the
+/// plain filter; in (0, 1): the fading-factor filter with that
+/// forgetting factor.
+///
+/// # Safety
+/// `e` null or a `zw_estimator`; `err` null or a `zw_error`.
+#[no_mangle]
+pub unsafe extern "C" fn zw_init_kalman(
+    e: *mut zw_estimator,
+    rate_hz: f64,
+    quantization_m: f64,
+    q: f64,
+    model: i32,
+    rho: f64,
+    err: *mut zw_error,
+) -> zw_status {
+    let model = match model {
+        m if m == zw_q_model::ZwWhiteJerk as i32 => QModel::WhiteJerk,
+        m if m == zw_q_model::ZwDiagonal as i32 => QModel::Diagonal,
+        // SAFETY: `err` as the contract.
+        _ => {
+            return unsafe {
+                explain(
+                    err,
+                    zw_status::ZwBadParameter,
+                    "model",
+                    "model must be ZW_WHITE_JERK or ZW_DIAGONAL",
+                )
+            }
+        }
+    };
+    let rho = if rho <= 0.0 { None } else { Some(rho) };
+    let spec = KindSpec::Kalman { q, model, rho }.into();
+    // SAFETY: as the contract.
+    guarded(|| unsafe { fill(e, &spec, rate_hz, quantization_m, err) })
+}
+
+/// Fill `e` with FOAW: `fit` a `zw_foaw_fit`, band half-width `d_m` ≥ 0 (usually the encoder
+/// step), windows of 1 to `max_window` ≤ `ZW_FOAW_MAX_WINDOW` samples.
+///
+/// # Safety
+/// `e` null or a `zw_estimator`; `err` null or a `zw_error`.
+#[no_mangle]
+pub unsafe extern "C" fn zw_init_foaw(
+    e: *mut zw_estimator,
+    rate_hz: f64,
+    fit: i32,
+    d_m: f64,
+    max_window: u32,
+    outlier_tolerance: bool,
+    err: *mut zw_error,
+) -> zw_status {
+    let fit = match fit {
+        f if f == zw_foaw_fit::ZwFoawEnd as i32 => FoawFit::End,
+        f if f == zw_foaw_fit::ZwFoawBest as i32 => FoawFit::Best,
+        f if f == zw_foaw_fit::ZwFoawBestR as i32 => FoawFit::BestR,
+        // SAFETY: `err` as the contract.
+        _ => {
+            return unsafe {
+                explain(
+                    err,
+                    zw_status::ZwBadParameter,
+                    "fit",
+                    "fit must be ZW_FOAW_END, ZW_FOAW_BEST or ZW_FOAW_BEST_R",
+                )
+            }
+        }
+    };
+    let spec = KindSpec::Foaw {
+        fit,
+        d: Some(d_m),
+        max_window: max_window as usize,
+        outlier_tolerance,
+    }
+    .into();
+    // SAFETY: as the contract.
+    guarded(|| unsafe { fill(e, &spec, rate_hz, 1.0, err) })
+}
+
+/// Fill `e` with Levant's differentiator (`scheme` a `zw_levant_scheme`), gains `alpha` (m/s²) and
+/// `lambda` (m^½/s), each 1e-12 to 1e12.
+///
+/// # Safety
+/// `e` null or a `zw_estimator`; `err` null or a `zw_error`.
+#[no_mangle]
+pub unsafe extern "C" fn zw_init_levant(
+    e: *mut zw_estimator,
+    rate_hz: f64,
+    alpha: f64,
+    lambda: f64,
+    scheme: i32,
+    err: *mut zw_error,
+) -> zw_status {
+    use zw_levant_scheme as S;
+    let (discretization, output) = match scheme {
+        s if s == S::ZwLevantExplicit as i32 => (Discretization::Explicit, ImplicitOutput::State),
+        s if s == S::ZwLevantImplicit as i32 => (Discretization::Implicit, ImplicitOutput::State),
+        s if s == S::ZwLevantImplicitEq7 as i32 => (Discretization::Implicit, ImplicitOutput::Eq7),
+        // SAFETY: `err` as the contract.
+        _ => {
+            return unsafe {
+                explain(err, zw_status::ZwBadParameter, "scheme", "scheme must be ZW_LEVANT_EXPLICIT, ZW_LEVANT_IMPLICIT or ZW_LEVANT_IMPLICIT_EQ7")
+            }
+        }
+    };
+    let spec = KindSpec::Levant {
+        alpha,
+        lambda,
+        discretization,
+        output,
+    }
+    .into();
+    // SAFETY: as the contract.
+    guarded(|| unsafe { fill(e, &spec, rate_hz, 1.0, err) })
+}
+
+/// One position `y` (m) in, the velocity estimate (m/s) into `*v`. A
+/// non-finite `y` is refused (`ZW_BAD_PARAMETER`) and changes nothing.
+///
+/// # Safety
+/// `e` null or a `zw_estimator`; `v` null or a `double`.
+#[no_mangle]
+pub unsafe extern "C" fn zw_step(e: *mut zw_estimator, y: f64, v: *mut f64) -> zw_status {
+    guarded(|| {
+        if v.is_null() {
+            return zw_status::ZwNull;
+        }
+        // SAFETY: as the contract.
+        let est = match unsafe { filled(e) } {
+            Ok(est) => est,
+            Err(s) => return s,
+        };
+        if !y.is_finite() {
+            return zw_status::ZwBadParameter;
+        }
+        // SAFETY: `v` is a valid double, as the contract.
+        unsafe { v.write(est.step(y)) };
+        zw_status::ZwOk
+    })
+}
+
+/// `zw_step` over `n` positions: `v[i]` from `y[i]`. A non-finite position
+/// refuses the whole block before any step (`ZW_BAD_PARAMETER`).
+///
+/// # Safety
+/// `e` null or a `zw_estimator`; `y` and `v` null or arrays of `n` doubles
+/// (they may be the same array).
+#[no_mangle]
+pub unsafe extern "C" fn zw_step_n(
+    e: *mut zw_estimator,
+    y: *const f64,
+    v: *mut f64,
+    n: usize,
+) -> zw_status {
+    guarded(|| {
+        if n == 0 {
+            return zw_status::ZwOk;
+        }
+        if y.is_null() || v.is_null() {
+            return zw_status::ZwNull;
+        }
+        // SAFETY: as the contract.
+        let est = match unsafe { filled(e) } {
+            Ok(est) => est,
+            Err(s) => return s,
+        };
+        // Read through raw pointers: `y` and `v` may alias (in place).
+        // SAFETY: `y` holds n doubles, as the contract.
+        if (0..n).any(|i| !unsafe { y.add(i).read() }.is_finite()) {
+            return zw_status::ZwBadParameter;
+        }
+        for i in 0..n {
+            // SAFETY: both hold n doubles, as the contract.
+            unsafe { v.add(i).write(est.step(y.add(i).read())) };
+        }
+        zw_status::ZwOk
+    })
+}
+
+/// Forget all history, as if newly filled.
+///
+/// # Safety
+/// `e` null or a `zw_estimator`.
+#[no_mangle]
+pub unsafe extern "C" fn zw_reset(e: *mut zw_estimator) -> zw_status {
+    // SAFETY: as the contract.
+    guarded(|| match unsafe { filled(e) } {
+        Ok(est) => {
+            est.reset();
+            zw_status::ZwOk
+        }
+        Err(s) => s,
+    })
+}
+
+/// The fingerprint of the built coefficients (FNV-1a over their bits):
+/// equal fingerprints, equal velocities from equal positions.
+///
+/// # Safety
+/// `e` null or a `zw_estimator`; `out` null or a `uint64_t`.
+#[no_mangle]
+pub unsafe extern "C" fn zw_fingerprint(e: *const zw_estimator, out: *mut u64) -> zw_status {
+    guarded(|| {
+        if out.is_null() {
+            return zw_status::ZwNull;
+        }
+        // SAFETY: as the contract; only read.
+        match unsafe { filled_ref(e) } {
+            Ok(est) => {
+                // SAFETY: `out` is a valid uint64_t, as the contract.
+                unsafe { out.write(est.fingerprint()) };
+                zw_status::ZwOk
+            }
+            Err(s) => s,
+        }
+    })
+}
