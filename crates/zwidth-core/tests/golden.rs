@@ -128,6 +128,15 @@ fn every_estimator_equals_its_golden_vectors_bit_for_bit_both_ways() {
         let mut v = vec![0.0; s.positions.len()];
         rig.step_n(&s.positions, &mut v);
         check(case, &v, "RigEstimator");
+        // The fingerprint without the state (how the agent and Python name
+        // it) is the built estimator's.
+        let dsp = spec.to_dsp().unwrap();
+        assert_eq!(
+            zwidth_dsp::estimator::fingerprint(&dsp, s.rate_hz, s.quantization).unwrap(),
+            rig.fingerprint(),
+            "{}",
+            case.estimator
+        );
     }
 }
 
@@ -165,4 +174,28 @@ fn a_long_rest_reaches_exactly_zero_and_never_a_subnormal() {
             k => assert_eq!(last, 0.0, "{k}"),
         }
     }
+}
+
+/// The 15 estimators of a signal have 15 fingerprints, and a spec's
+/// fingerprint changes with the rate (its coefficients do).
+#[test]
+fn fingerprints_tell_the_estimators_apart() {
+    let (signals, cases) = load();
+    for s in &signals {
+        let prints: std::collections::BTreeSet<u64> = cases
+            .iter()
+            .filter(|c| c.signal == s.name)
+            .map(|c| {
+                let spec = EstimatorSpec::from_json(&c.spec).unwrap().to_dsp().unwrap();
+                zwidth_dsp::estimator::fingerprint(&spec, s.rate_hz, s.quantization).unwrap()
+            })
+            .collect();
+        assert_eq!(prints.len(), 15, "{}", s.name);
+    }
+    let fdm = EstimatorSpec::from_json(r#"{"kind":"fdm"}"#)
+        .unwrap()
+        .to_dsp()
+        .unwrap();
+    let at = |rate| zwidth_dsp::estimator::fingerprint(&fdm, rate, 1e-6).unwrap();
+    assert_ne!(at(1e3), at(1e4));
 }

@@ -161,12 +161,7 @@ impl<const F: usize> Kind<F> {
             Kind::Foaw(e) => {
                 let (d, t) = e.coefficients();
                 let (fit, window, tolerant) = e.shape();
-                h.u64(4)
-                    .f64(d)
-                    .f64(t)
-                    .u64(fit as u64)
-                    .u64(window as u64)
-                    .u64(u64::from(tolerant))
+                foaw_fingerprint(d, t, fit, window, tolerant)
             }
             Kind::Levant(e) => {
                 let (a, l) = e.gains();
@@ -180,6 +175,50 @@ impl<const F: usize> Kind<F> {
             }
         }
     }
+}
+
+fn foaw_fingerprint(d: f64, t: f64, fit: FoawFit, window: usize, tolerant: bool) -> Fingerprint {
+    Fingerprint::default()
+        .u64(4)
+        .f64(d)
+        .f64(t)
+        .u64(fit as u64)
+        .u64(window as u64)
+        .u64(u64::from(tolerant))
+}
+
+/// The medians' part of a fingerprint.
+fn with_medians(h: Fingerprint, spec: &Spec) -> u64 {
+    h.u64(spec.median_position.unwrap_or(0) as u64)
+        .u64(spec.median_velocity.unwrap_or(0) as u64)
+        .finish()
+}
+
+/// The fingerprint an estimator built from `spec` has (equal to
+/// [`Estimator::fingerprint`] whatever the caps), without building its
+/// state: how a host with longer windows than a rig names the same
+/// coefficients.
+pub fn fingerprint(spec: &Spec, rate_hz: f64, quantization: f64) -> Result<u64, Error> {
+    let h = match spec.kind {
+        KindSpec::Foaw {
+            fit,
+            d,
+            max_window,
+            outlier_tolerance,
+        } => {
+            crate::error::positive("rate_hz", rate_hz)?;
+            crate::error::positive("quantization", quantization)?;
+            foaw_fingerprint(
+                crate::foaw::band(d.unwrap_or(quantization)),
+                1.0 / rate_hz,
+                fit,
+                max_window,
+                outlier_tolerance,
+            )
+        }
+        other => Kind::<1>::new(&other, rate_hz, quantization)?.fingerprint(),
+    };
+    Ok(with_medians(h, spec))
 }
 
 impl<const F: usize, const M: usize> Estimator<F, M> {
@@ -200,11 +239,7 @@ impl<const F: usize, const M: usize> Estimator<F, M> {
         };
         let median_position = median("median_position", spec.median_position)?;
         let median_velocity = median("median_velocity", spec.median_velocity)?;
-        let fingerprint = kind
-            .fingerprint()
-            .u64(spec.median_position.unwrap_or(0) as u64)
-            .u64(spec.median_velocity.unwrap_or(0) as u64)
-            .finish();
+        let fingerprint = with_medians(kind.fingerprint(), spec);
         Ok(Self {
             kind,
             median_position,

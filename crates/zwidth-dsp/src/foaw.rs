@@ -41,6 +41,11 @@ use crate::Error;
 /// while 1e-9 of a 1 µm step is a femtometre: no physical difference.
 pub const BAND_SLACK: f64 = 1e-9;
 
+/// The band's half-width with its slack (see [`BAND_SLACK`]).
+pub fn band(d: f64) -> f64 {
+    d * (1.0 + BAND_SLACK)
+}
+
 /// `max_window`'s default: 15, the bound Janabi-Sharifi et al. used (§IV-C).
 pub const DEFAULT_MAX_WINDOW: usize = 15;
 
@@ -125,7 +130,7 @@ impl<const CAP: usize> Foaw<CAP> {
             // rounding would decide them, differently in metres and in
             // counts; a relative slack far below any physical length makes
             // the closed band exact (`BAND_SLACK`).
-            d: d * (1.0 + BAND_SLACK),
+            d: band(d),
             max_window,
             outlier_tolerance,
             t,

@@ -1,0 +1,116 @@
+//! The `zwidth` Python package's native module: the estimators through
+//! zwidth-core (the JSON spec the API takes, with its messages), built
+//! from zwidth-dsp: the same bits as the simulator and the C ABI.
+
+use numpy::{PyArray1, PyReadonlyArray1};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyString};
+
+use zwidth_core::estimators::{Estimator as Built, EstimatorSpec, Sampling, VelocityEstimator};
+
+/// A velocity estimator: `Estimator(spec, rate_hz, quantization)`.
+///
+/// `spec` is the API's JSON estimator spec, as a str or a dict
+/// (`{"kind": "kalman", "q": 1e4}`); `rate_hz` the sample rate (Hz);
+/// `quantization` the encoder step (m). `step(y)` takes one position (m)
+/// and returns the velocity (m/s); `run(positions)` a 1-D array of them
+/// (the GIL released); `reset()` forgets the history.
+#[pyclass(module = "zwidth")]
+struct Estimator {
+    built: Built,
+    label: String,
+    fingerprint: u64,
+}
+
+/// The spec as JSON text: a str as it is, a dict through `json.dumps`.
+fn spec_text(spec: &Bound<'_, PyAny>) -> PyResult<String> {
+    if spec.is_instance_of::<PyString>() {
+        return spec.extract::<String>();
+    }
+    if spec.is_instance_of::<PyDict>() {
+        let json = spec.py().import("json")?;
+        return json.call_method1("dumps", (spec,))?.extract();
+    }
+    Err(PyValueError::new_err(format!(
+        "spec = {} is not allowed: a JSON estimator spec, as a str or a dict",
+        spec.get_type().name()?
+    )))
+}
+
+fn value_error(e: impl std::fmt::Display) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+/// A position that is not a finite number, named with its index.
+fn check_finite(ys: &[f64]) -> PyResult<()> {
+    match ys.iter().position(|y| !y.is_finite()) {
+        None => Ok(()),
+        Some(i) => Err(PyValueError::new_err(format!(
+            "positions[{i}] is not allowed: every position must be a finite number (m)"
+        ))),
+    }
+}
+
+#[pymethods]
+impl Estimator {
+    #[new]
+    fn new(spec: &Bound<'_, PyAny>, rate_hz: f64, quantization: f64) -> PyResult<Self> {
+        let text = spec_text(spec)?;
+        let sampling = Sampling::new(rate_hz, quantization).map_err(value_error)?;
+        let spec = EstimatorSpec::from_json(&text).map_err(value_error)?;
+        let built = spec.build(sampling).map_err(value_error)?;
+        let dsp = spec.to_dsp().map_err(value_error)?;
+        // The fingerprint a rig would report for this spec (the kind's
+        // coefficients, as the C ABI and the agent compute it).
+        let fingerprint =
+            zwidth_dsp::estimator::fingerprint(&dsp, rate_hz, quantization).map_err(value_error)?;
+        Ok(Self {
+            built,
+            label: spec.label(),
+            fingerprint,
+        })
+    }
+
+    /// One position (m) in, the velocity estimate (m/s) out.
+    fn step(&mut self, y: f64) -> PyResult<f64> {
+        check_finite(&[y])?;
+        Ok(self.built.update(y))
+    }
+
+    /// Velocities (m/s) for a 1-D array of positions (m), in order.
+    fn run<'py>(
+        &mut self,
+        py: Python<'py>,
+        positions: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let ys = positions.as_slice().map_err(value_error)?.to_vec();
+        check_finite(&ys)?;
+        let built = &mut self.built;
+        let out = py.detach(move || ys.iter().map(|&y| built.update(y)).collect::<Vec<f64>>());
+        Ok(PyArray1::from_vec(py, out))
+    }
+
+    /// Forget all history, as if newly built.
+    fn reset(&mut self) {
+        self.built.reset();
+    }
+
+    /// FNV-1a of the built coefficients' bits (what a rig reports).
+    #[getter]
+    fn fingerprint(&self) -> u64 {
+        self.fingerprint
+    }
+
+    fn __repr__(&self) -> String {
+        format!("Estimator({})", self.label)
+    }
+}
+
+#[pymodule]
+fn _zwidth(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Estimator>()?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("dsp_version", zwidth_dsp::VERSION)?;
+    Ok(())
+}
