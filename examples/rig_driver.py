@@ -10,35 +10,69 @@ line from our stdout (docs/rigs.md, "the driver protocol"):
                                         answering it with an error)
 Replace `wall_hit` with your controller's (QuaRC, a microcontroller bridge…).
 Here it is a toy device: a mass with viscous and Coulomb friction, an
-encoder of 1 µm, a backward-difference velocity estimate, one sample of
+encoder of 1 µm, the trial's own velocity estimator, one sample of
 computation delay, the wall
 F = -K x - B v̂ for x > 0 (2011 paper §2.4: push into the wall, settle,
 then judge the last seconds), the force clamped to the trial's limit.
+
+The estimator is zwidth's own through the Python package (`pip install
+./python`, README "The estimators outside Rust"): every kind, bit for bit
+as the simulator, and the capabilities say so (`dsp`). Without the package
+the script falls back to a backward difference of its own and advertises
+`fdm` only (and no `dsp`: the server then warns that the rig's estimators
+are not known to be its own).
 """
 import json
 import math
 import sys
 
+try:
+    import zwidth
+except ImportError:  # the package is not installed: FDM of our own
+    zwidth = None
+
 CAPS = {"peak_force_n": 10.0, "continuous_force_n": 4.0, "k_max": 1e6, "b_max": 1e4,
         "travel_m": 0.1, "speed_m_s": 1.0, "encoder_m": 1e-6,
         "sample_hz": [1000.0, 2000.0], "estimators": ["fdm"], "probes": ["wall_hit"]}
+if zwidth is not None:
+    CAPS.update(estimators=["fdm", "butterworth", "kalman", "adaptive_kalman", "foaw", "levant"],
+                dsp=zwidth.dsp_identity())
+
+
+class BackwardDifference:
+    """(y_k - y_{k-1}) / T (2011 paper eq. 2): the fallback estimator."""
+
+    def __init__(self, rate_hz):
+        self.T, self.prev = 1.0 / rate_hz, None
+
+    def step(self, y):
+        v = 0.0 if self.prev is None else (y - self.prev) / self.T
+        self.prev = y
+        return v
+
+
+def estimator(scene, rate_hz, q):
+    """The trial's estimator: the scene's spec through zwidth, else FDM."""
+    if zwidth is None:
+        return BackwardDifference(rate_hz)
+    return zwidth.Estimator(scene.get("estimator", {"kind": "fdm"}), rate_hz, q)
 
 
 def wall_hit(req, limits):
     dev, loop = req["scene"]["device"], req["scene"]["loop"]
     m, b, fc = dev["mass"], dev["damping"], dev.get("coulomb", 0.0)
     T, K, B = 1.0 / loop["sample_hz"], req["k"], req["b"]
-    f_max, q = limits["force_limit_n"], 1e-6
+    f_max, q = limits["force_limit_n"], dev.get("quantization", 1e-6)
+    est = estimator(req["scene"], loop["sample_hz"], q)
     push = 0.36                                   # N, toward the wall
-    x, v, y_prev = -0.002, 0.0, -0.002            # m, m/s
+    x, v = -0.002, 0.0                            # m, m/s
     f_out = 0.0                                   # N, applied one sample late
     peak_f = peak_v = depth = 0.0
     settle, measure = int(4.0 / T), int(2.0 / T)
     lo, hi = math.inf, -math.inf
     for n in range(settle + measure):
         y = round(x / q) * q                      # the encoder
-        v_hat = (y - y_prev) / T                  # backward difference
-        y_prev = y
+        v_hat = est.step(y)                       # the trial's estimator
         f = -K * y - B * v_hat if y > 0 else 0.0  # the virtual wall
         f = max(-f_max, min(f_max, f))            # the controller's clamp
         f, f_out = f_out, f                       # one sample of computation delay
@@ -60,7 +94,11 @@ for line in sys.stdin:
         out = dict(CAPS, type="capabilities")
     elif msg["type"] == "trial":
         req = msg["request"]
-        stable, measured = wall_hit(req, msg["limits"])
+        try:
+            stable, measured = wall_hit(req, msg["limits"])
+        except ValueError as e:  # the estimator refused its spec, naming the field
+            print(json.dumps({"type": "error", "message": f"estimator: {e}"}), flush=True)
+            continue
         if stable is None:
             out = {"type": "error", "message": "aborted: past the speed or travel limit"}
         else:

@@ -778,6 +778,177 @@ fn a_driver_process_in_python_is_a_rig() {
     assert!((5e4..1e5).contains(&k0), "{k0}");
 }
 
+/// Whether `tool` runs here. Without it a test says so and passes, unless
+/// `ZWIDTH_REQUIRE_TOOLS` is set (CI sets it and installs the tools).
+fn have(tool: &str) -> bool {
+    let ok = Command::new(tool)
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        assert!(
+            std::env::var_os("ZWIDTH_REQUIRE_TOOLS").is_none(),
+            "{tool} is needed (ZWIDTH_REQUIRE_TOOLS is set)"
+        );
+        eprintln!("skipped: {tool} is not installed (CI installs it)");
+    }
+    ok
+}
+
+/// examples/rig_driver_c built as docs/rigs.md says, against this
+/// profile's static library (built here: `cargo test` builds the FFI crate
+/// only as an rlib).
+fn c_driver(dir: &std::path::Path) -> std::path::PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    let profile = exe.parent().unwrap().parent().unwrap().to_path_buf();
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let mut build = Command::new(cargo);
+    build.args(["build", "-p", "zwidth-ffi", "--lib"]);
+    if profile.file_name().is_some_and(|n| n == "release") {
+        build.arg("--release");
+    }
+    let out = build
+        .env("CARGO_TARGET_DIR", profile.parent().unwrap())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let root = env!("CARGO_MANIFEST_DIR");
+    let driver = dir.join("rig_driver_c");
+    let out = Command::new("cc")
+        .args(["-std=c11", "-Wall", "-Wextra", "-Werror", "-O2", "-I"])
+        .arg(format!("{root}/crates/zwidth-ffi/include"))
+        .arg(format!("{root}/examples/rig_driver_c/driver.c"))
+        .arg(profile.join("libzwidth_ffi.a"))
+        .args(["-lm", "-lpthread", "-ldl", "-o"])
+        .arg(&driver)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    driver
+}
+
+#[test]
+fn a_driver_in_c_maps_with_the_trials_own_estimator_bit_for_bit() {
+    // Issue 32's closed loop: a C driver (examples/rig_driver_c) runs each
+    // trial's estimator through the C ABI. Four estimators' maps complete
+    // through the real agent, and the velocities the driver's estimator
+    // gave on its last trial's positions equal `zwidth estimate` (the
+    // simulator's estimators, in Rust) on the same positions, bit for bit.
+    if !have("cc") {
+        return;
+    }
+    let s = serve();
+    let driver = c_driver(&s._dir);
+    let trace = s._dir.join("trace.txt");
+    let cmd = format!("{} --trace {}", driver.display(), trace.display());
+    let _a = agent(&s, "c", &["--driver", &cmd]);
+    wait_for("the agent", 20, || connected(&s));
+    let attached = rig(&s, "bench")["attached"].clone();
+    assert_eq!(
+        attached["capabilities"]["estimators"]
+            .as_array()
+            .map(Vec::len),
+        Some(6),
+        "{attached}"
+    );
+    assert_eq!(attached["estimators"]["identical"], true, "{attached}");
+    let specs = [
+        r#"{"kind":"butterworth","cutoff_hz":200,"order":2}"#,
+        r#"{"kind":"adaptive_kalman","q":1e5}"#,
+        r#"{"kind":"foaw","fit":"best_r","max_window":24,"outlier_tolerance":true}"#,
+        r#"{"kind":"levant","mu1":1.06,"mu2":0.65,"lipschitz":20,"discretization":"implicit"}"#,
+    ];
+    for spec in specs {
+        let map = MAP.replace(
+            r#""render_hz":1000}}"#,
+            &format!(r#""render_hz":1000}},"estimator":{spec}}}"#),
+        );
+        let id = submit(&s, "bench", &map);
+        let v = wait_end(&s.base, &id, 120);
+        assert_eq!(v["state"], "succeeded", "{spec}: {v}");
+        let boundary = v["result"]["boundary"].as_array().unwrap();
+        assert_eq!(boundary.len(), 3, "{spec}: a boundary point per B: {v}");
+        assert!(
+            boundary
+                .iter()
+                .all(|p| p["k_max"].as_f64().is_some_and(|k| k > 0.0)),
+            "{spec}: {v}"
+        );
+        let trials = get(&format!("{}/v1/experiments/{id}/trials", s.base));
+        assert!(
+            trials.as_array().is_some_and(|t| t.len() >= 10),
+            "{spec}: {trials}"
+        );
+        // The last trial's positions and the velocities the C driver's
+        // estimator gave, against `zwidth estimate` on those positions.
+        let text = std::fs::read_to_string(&trace).unwrap();
+        let pairs: Vec<(f64, f64)> = text
+            .lines()
+            .map(|l| {
+                let (y, v) = l.split_once(' ').unwrap();
+                (y.parse().unwrap(), v.parse().unwrap())
+            })
+            .collect();
+        assert_eq!(pairs.len(), 12_000, "{spec}: 6 s at 2 kHz");
+        let positions: String = pairs.iter().map(|(y, _)| format!("{y:?}\n")).collect();
+        let mut child = Command::new(bin())
+            .args([
+                "estimate",
+                "--rate",
+                "2000",
+                "--quantization",
+                "1e-6",
+                "--estimator",
+                spec,
+            ])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        use std::io::Write;
+        child
+            .stdin
+            .take()
+            .unwrap()
+            .write_all(positions.as_bytes())
+            .unwrap();
+        let out = child.wait_with_output().unwrap();
+        assert!(out.status.success(), "{spec}");
+        let ours: Vec<f64> = String::from_utf8(out.stdout)
+            .unwrap()
+            .lines()
+            .map(|l| l.trim().parse().unwrap())
+            .collect();
+        assert_eq!(ours.len(), pairs.len(), "{spec}");
+        let moving = pairs.iter().filter(|(_, v)| *v != 0.0).count();
+        assert!(
+            moving > 100,
+            "{spec}: the trace moves ({moving} nonzero velocities)"
+        );
+        for (i, ((_, c), r)) in pairs.iter().zip(&ours).enumerate() {
+            assert_eq!(
+                c.to_bits(),
+                r.to_bits(),
+                "{spec}: sample {i}: C {c:e}, zwidth estimate {r:e}"
+            );
+        }
+        eprintln!(
+            "{spec}: {} trials, boundary {}, {} velocities equal to the bit",
+            trials.as_array().unwrap().len(),
+            v["result"]["boundary"],
+            pairs.len()
+        );
+    }
+}
+
 #[test]
 fn a_result_for_another_wall_fails_the_experiment_saying_so() {
     // A driver that prints K rounded (not the bits it was sent) must not

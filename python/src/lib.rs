@@ -107,9 +107,22 @@ impl Estimator {
     }
 }
 
+/// The estimator library's identity, `{"version": …, "fingerprints":
+/// {kind: 16 hex digits, …}}`: what a rig driver advertises under `"dsp"`
+/// in its capabilities, so the server can tell whether the rig runs its
+/// estimators to the bit (docs/rigs.md).
+#[pyfunction]
+fn dsp_identity(py: Python<'_>) -> PyResult<Py<PyAny>> {
+    let text = serde_json::to_string(&zwidth_core::estimators::identity::DspIdentity::ours())
+        .map_err(value_error)?;
+    let json = py.import("json")?;
+    Ok(json.call_method1("loads", (text,))?.unbind())
+}
+
 #[pymodule]
 fn _zwidth(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Estimator>()?;
+    m.add_function(wrap_pyfunction!(dsp_identity, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("dsp_version", zwidth_dsp::VERSION)?;
     Ok(())

@@ -9,6 +9,6 @@ Units are SI. A bad spec, rate or position raises ValueError naming the
 field, its value and what is allowed.
 """
 
-from ._zwidth import Estimator, __version__, dsp_version
+from ._zwidth import Estimator, __version__, dsp_identity, dsp_version
 
-__all__ = ["Estimator", "__version__", "dsp_version"]
+__all__ = ["Estimator", "__version__", "dsp_identity", "dsp_version"]

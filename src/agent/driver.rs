@@ -56,8 +56,13 @@ impl Recorder for Peaks {
 }
 
 impl Driver for SimDriver {
+    /// As configured, with this build's estimator library: the simulator
+    /// runs zwidth-dsp itself, whatever `--capabilities` said.
     fn capabilities(&self) -> Capabilities {
-        self.capabilities.clone()
+        Capabilities {
+            dsp: Some(crate::rig::protocol::DspIdentity::ours()),
+            ..self.capabilities.clone()
+        }
     }
 
     fn run(

@@ -12,7 +12,8 @@ use std::time::Duration;
 
 use super::lease::{Lease, Refusal, Timing};
 use super::protocol::{
-    parse_trial_id, trial_id, Capabilities, RigState, ServerMessage, TrialLimits, TrialResult,
+    parse_trial_id, trial_id, Capabilities, DspIdentity, EstimatorCheck, RigState, ServerMessage,
+    TrialLimits, TrialResult,
 };
 use super::{check_id, rig_pool, Rig, RigInfo};
 use crate::clock::now_ms;
@@ -84,6 +85,10 @@ pub struct AttachedView {
     pub state: Option<RigState>,
     /// What the agent advertised in its last `hello`.
     pub capabilities: Option<Capabilities>,
+    /// Whether the rig runs this build's estimators to the bit (from its
+    /// capabilities' `dsp`): a mismatch names each kind with both
+    /// fingerprints.
+    pub estimators: Option<EstimatorCheck>,
     /// Why the rig takes no trials until released (`DELETE
     /// /v1/rigs/{id}/quarantine`).
     pub quarantine: Option<String>,
@@ -362,6 +367,9 @@ impl AttachedRig {
             boot: g.agent.as_ref().map(|a| a.boot.clone()),
             state: s.map(|s| s.state.clone()),
             capabilities: g.agent.as_ref().map(|a| a.capabilities.clone()),
+            estimators: g.agent.as_ref().map(|a| {
+                DspIdentity::check(a.capabilities.dsp.as_ref(), &a.capabilities.estimators)
+            }),
             quarantine: g.lease.quarantine.clone(),
             trial_out: g
                 .lease

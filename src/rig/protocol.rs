@@ -6,6 +6,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::SpecError;
+pub use crate::estimators::identity::{DspIdentity, EstimatorCheck};
 use crate::zwidth::search::Point;
 use crate::zwidth::trial::TrialRequest;
 
@@ -89,6 +90,13 @@ pub struct Capabilities {
     /// An identified model of the device (a scene JSON), if it has one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model: Option<serde_json::Value>,
+    /// The estimator library the rig's controller runs: zwidth-dsp's
+    /// version and each kind's reference fingerprint (`zw_dsp_identity` in
+    /// C, `zwidth.dsp_identity()` in Python). The server compares them
+    /// with its own (`GET /v1/rigs`: `attached.estimators`); absent, the
+    /// rig runs estimators of its own and says so nowhere.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dsp: Option<DspIdentity>,
 }
 
 impl Capabilities {
@@ -117,6 +125,7 @@ impl Capabilities {
             .to_vec(),
             probes: vec!["wall_hit".into(), "multisine".into()],
             model: None,
+            dsp: Some(DspIdentity::ours()),
         }
     }
 
@@ -178,6 +187,9 @@ impl Capabilities {
                 format!("{:?}", self.estimators),
                 "list 1 to 32 estimator kinds",
             ));
+        }
+        if let Some(dsp) = &self.dsp {
+            dsp.validate()?;
         }
         Ok(())
     }

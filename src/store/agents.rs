@@ -45,18 +45,7 @@ pub const AUDIT_PAGE_MAX: i64 = 500;
 /// and `_`: `rig::check_id`).
 pub const UNKNOWN_RIG: &str = "?";
 
-/// `s` cut to at most `max` bytes at a character boundary; a cut text
-/// ends with `… (N bytes)` naming its whole length.
-pub fn clip(s: &str, max: usize) -> std::borrow::Cow<'_, str> {
-    if s.len() <= max {
-        return s.into();
-    }
-    let mut end = max.saturating_sub(24);
-    while !s.is_char_boundary(end) {
-        end -= 1;
-    }
-    format!("{}… ({} bytes)", &s[..end], s.len()).into()
-}
+pub use crate::error::clip;
 
 impl Store {
     /// The next epoch of `rig`'s sessions: larger than every one before,

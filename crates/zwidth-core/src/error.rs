@@ -69,6 +69,19 @@ impl fmt::Display for SpecError {
     }
 }
 
+/// `s` cut to at most `max` bytes at a character boundary; a cut text
+/// ends with `… (N bytes)` naming its whole length.
+pub fn clip(s: &str, max: usize) -> std::borrow::Cow<'_, str> {
+    if s.len() <= max {
+        return s.into();
+    }
+    let mut end = max.saturating_sub(24);
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    format!("{}… ({} bytes)", &s[..end], s.len()).into()
+}
+
 /// A number as a message shows it: never "NaN" or "inf" (an input from
 /// the command line, the C ABI or Python can be either).
 pub fn shown(value: f64) -> String {

@@ -42,6 +42,7 @@ pub mod estimator;
 pub mod fdm;
 pub mod fingerprint;
 pub mod foaw;
+pub mod identity;
 pub mod kalman;
 pub mod levant;
 pub mod math;

@@ -254,6 +254,20 @@ zw_status zw_reset(zw_estimator *e);
  */
 zw_status zw_fingerprint(const zw_estimator *e, uint64_t *out);
 
+/*
+ The library's identity as JSON, NUL-terminated:
+ `{"version":"…","fingerprints":{"fdm":"<16 hex digits>",…}}`, the
+ reference fingerprint of every kind. A rig's driver puts it under
+ `"dsp"` in its capabilities; the server compares it with its own
+ (docs/rigs.md, "bit-identical estimators"). `*needed` (when not null)
+ gets the bytes it takes with the NUL; a `len` below that writes nothing
+ and returns `ZW_CAPACITY`. 512 bytes always suffice.
+
+ # Safety
+ `buf` null or `len` writable bytes; `needed` null or a `size_t`.
+ */
+zw_status zw_dsp_identity(char *buf, size_t len, size_t *needed);
+
 #ifdef __cplusplus
 }  // extern "C"
 #endif  // __cplusplus

@@ -1,5 +1,5 @@
 //! The C ABI of zwidth's velocity estimators (`include/zwidth.h`, written
-//! by cbindgen 0.29.4; `tests/header.rs` fails when it drifts).
+//! by cbindgen 0.29.4; `tests/abi/header.rs` fails when it drifts).
 //!
 //! - **Caller-owned state.** A `zw_estimator` is a plain struct of
 //!   `ZW_ESTIMATOR_WORDS` 64-bit words: a lab puts it on the stack, in a
@@ -577,5 +577,42 @@ pub unsafe extern "C" fn zw_fingerprint(e: *const zw_estimator, out: *mut u64) -
             }
             Err(s) => s,
         }
+    })
+}
+
+/// The library's identity as JSON, NUL-terminated:
+/// `{"version":"…","fingerprints":{"fdm":"<16 hex digits>",…}}`, the
+/// reference fingerprint of every kind. A rig's driver puts it under
+/// `"dsp"` in its capabilities; the server compares it with its own
+/// (docs/rigs.md, "bit-identical estimators"). `*needed` (when not null)
+/// gets the bytes it takes with the NUL; a `len` below that writes nothing
+/// and returns `ZW_CAPACITY`. 512 bytes always suffice.
+///
+/// # Safety
+/// `buf` null or `len` writable bytes; `needed` null or a `size_t`.
+#[no_mangle]
+pub unsafe extern "C" fn zw_dsp_identity(
+    buf: *mut c_char,
+    len: usize,
+    needed: *mut usize,
+) -> zw_status {
+    guarded(|| {
+        let json = serde_json::to_string(&zwidth_core::estimators::identity::DspIdentity::ours())
+            .unwrap_or_default();
+        let size = json.len() + 1;
+        // SAFETY: `needed` null or a size_t, as the contract.
+        if let Some(n) = unsafe { needed.as_mut() } {
+            *n = size;
+        }
+        if buf.is_null() {
+            return zw_status::ZwNull;
+        }
+        if len < size {
+            return zw_status::ZwCapacity;
+        }
+        // SAFETY: `buf` holds `len` >= `size` writable bytes, as the contract.
+        let dst = unsafe { std::slice::from_raw_parts_mut(buf, size) };
+        copy_c(dst, &json);
+        zw_status::ZwOk
     })
 }

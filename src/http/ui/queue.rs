@@ -236,6 +236,7 @@ fn rig_row(r: &RigView, now: i64) -> Markup {
             td { (window) }
             td { (connected)
                 @if let Some(q) = r.attached.as_ref().and_then(|a| a.quarantine.as_deref()) { br; span class="bad" { "quarantined: " (q) } }
+                @if let Some(c) = r.attached.as_ref().and_then(|a| a.estimators.as_ref()).filter(|c| !c.identical) { br; span class="warn" { "estimators: " (c.summary) } }
             }
             td class="num" { (r.waiting) }
             td { @if let Some(run) = &r.running { (run_link(run)) } @else { "–" } }

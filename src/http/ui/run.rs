@@ -99,6 +99,10 @@ pub async fn page(
             h1 { (r.kind) " " span class="mono id" { (r.id) } }
             dl class="facts" {
                 dt { "rig" } dd { (r.rig) }
+                @if let Some(check) = estimator_check(&st, &r.rig) {
+                    dt { "estimators" }
+                    dd class=(if check.identical { "" } else { "warn" }) { (check.summary) }
+                }
                 dt { "priority" } dd { (r.priority) }
                 dt { "submitted" } dd class="volatile" { (utc(r.created_ms)) }
                 @if let Some(t) = r.not_before_ms { dt { "not before" } dd class="volatile" { (utc(t)) } }
@@ -111,6 +115,12 @@ pub async fn page(
             (live)
         },
     ))
+}
+
+/// Whether an attached rig's agent (as connected now) runs this build's
+/// estimators to the bit; None for the simulator or before any hello.
+fn estimator_check(st: &AppState, rig: &str) -> Option<crate::rig::protocol::EstimatorCheck> {
+    st.rig(rig)?.attached()?.view().estimators
 }
 
 /// `GET /ui/runs/{id}/live?since=…`: the live part, or 204 when unchanged.

@@ -7,6 +7,7 @@
 pub mod butterworth;
 pub mod fdm;
 pub mod foaw;
+pub mod identity;
 pub mod kalman;
 pub mod levant;
 pub mod median;

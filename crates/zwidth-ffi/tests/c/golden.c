@@ -199,6 +199,18 @@ static int refusals(void) {
     CHECK(zw_abi_version() == ZW_ABI_VERSION, "abi version");
     CHECK(zw_estimator_size() == sizeof(zw_estimator), "sizeof");
     CHECK(strlen(zw_version()) > 0, "version");
+    /* The identity a driver advertises: too small a buffer writes nothing
+     * and says what it needs; 512 bytes suffice (the header says so). */
+    char small[8] = "unset", identity[512];
+    size_t needed = 0;
+    REFUSE(zw_dsp_identity(small, sizeof small, &needed), ZW_CAPACITY);
+    CHECK(strcmp(small, "unset") == 0 && needed > sizeof small && needed <= sizeof identity,
+          "a short buffer untouched, %zu bytes needed", needed);
+    REFUSE(zw_dsp_identity(NULL, 0, NULL), ZW_NULL);
+    REFUSE(zw_dsp_identity(identity, sizeof identity, NULL), ZW_OK);
+    CHECK(strlen(identity) + 1 == needed, "identity of %zu bytes", strlen(identity));
+    CHECK(strncmp(identity, "{\"version\":\"", 12) == 0 && strstr(identity, "\"levant\":\"") != NULL,
+          "identity %s", identity);
     return checked;
 }
 

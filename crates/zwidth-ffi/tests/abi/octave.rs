@@ -5,25 +5,9 @@
 //! them it says so and passes, unless ZWIDTH_REQUIRE_TOOLS is set (CI sets
 //! it: there it fails, never skips).
 
+use super::support::{have, lib_dir};
 use std::path::PathBuf;
 use std::process::Command;
-
-/// Whether `tool` runs here. Without it the test says so and passes,
-/// unless `ZWIDTH_REQUIRE_TOOLS` is set (CI sets it: there it fails).
-fn have(tool: &str) -> bool {
-    let ok = Command::new(tool)
-        .arg("--version")
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var_os("ZWIDTH_REQUIRE_TOOLS").is_none(),
-            "{tool} is needed (ZWIDTH_REQUIRE_TOOLS is set)"
-        );
-        eprintln!("skipped: {tool} is not installed (CI installs it)");
-    }
-    ok
-}
 
 #[test]
 fn the_mex_gateway_in_octave_equals_the_golden_vectors() {
@@ -31,13 +15,7 @@ fn the_mex_gateway_in_octave_equals_the_golden_vectors() {
         return;
     }
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let lib = std::env::current_exe()
-        .unwrap()
-        .parent()
-        .unwrap()
-        .parent()
-        .unwrap()
-        .to_path_buf();
+    let lib = lib_dir();
     let tmp = std::env::temp_dir().join(format!("zwidth-mex-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).unwrap();
     let run = |cmd: &mut Command| {

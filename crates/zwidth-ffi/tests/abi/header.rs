@@ -21,6 +21,6 @@ fn the_committed_header_is_cbindgens() {
     let committed = std::fs::read_to_string(&path).unwrap_or_default();
     assert!(
         committed == fresh,
-        "{path} differs from what cbindgen writes: run `ZWIDTH_BLESS=1 cargo test -p zwidth-ffi --test header` and commit it"
+        "{path} differs from what cbindgen writes: run `ZWIDTH_BLESS=1 cargo test -p zwidth-ffi --test abi header` and commit it"
     );
 }
