@@ -324,6 +324,30 @@ pub fn fit_mode(trace: &Trace, mass: &Estimate, damping: &Estimate) -> Result<Mo
         ));
     }
     let data = Lines { w, f, x, scale };
+    fit_lines(
+        &data,
+        wr,
+        mass,
+        damping,
+        dt,
+        periods - 1,
+        trace.quantization(),
+    )
+}
+
+/// The fit on the averaged lines `data` (ω_r: the resonance's line, where
+/// the starts are placed), with the rigid fit's M and b and their errors;
+/// `periods` averaged, `q` the encoder step (for the misfit's message).
+fn fit_lines(
+    data: &Lines,
+    wr: f64,
+    mass: &Estimate,
+    damping: &Estimate,
+    dt: f64,
+    periods: usize,
+    q: f64,
+) -> Result<ModeFit, SpecError> {
+    let (m, b) = (mass.value, damping.value);
     // Start: k = r(1 − r)M·ω_r² for each split r on a grid and c from a
     // loss-factor grid; the best three starts are refined.
     let mut starts: Vec<(f64, Theta)> = Vec::new();
@@ -339,7 +363,7 @@ pub fn fit_mode(trace: &Trace, mass: &Estimate, damping: &Estimate) -> Result<Mo
     let theta = starts
         .iter()
         .take(3)
-        .map(|(_, t)| levenberg_marquardt(&data, *t, m, b, dt))
+        .map(|(_, t)| levenberg_marquardt(data, *t, m, b, dt))
         .min_by(|u, v| {
             cost(&data.residuals(u, m, b, dt)).total_cmp(&cost(&data.residuals(v, m, b, dt)))
         })
@@ -355,11 +379,11 @@ pub fn fit_mode(trace: &Trace, mass: &Estimate, damping: &Estimate) -> Result<Mo
             } else {
                 format!("misfit {:.0} %", 100.0 * misfit)
             },
-            format!("must fit a two-mass device with the encoder on the motor side to within {:.0} % of its response from {:.1} Hz up: with the encoder on the handle the mass split cannot be identified; friction on the motor side holds it in pre-sliding at the band's amplitude; a band response small against the encoder step ({q:e} m) leaves quantization in it (raise --band-force); check the trace is open loop", 100.0 * MAX_MISFIT, data.w[0] / (2.0 * std::f64::consts::PI), q = trace.quantization()),
+            format!("must fit a two-mass device with the encoder on the motor side to within {:.0} % of its response from {:.1} Hz up: with the encoder on the handle the mass split cannot be identified; friction on the motor side holds it in pre-sliding at the band's amplitude; a band response small against the encoder step ({q:e} m) leaves quantization in it (raise --band-force); check the trace is open loop", 100.0 * MAX_MISFIT, data.w[0] / (2.0 * std::f64::consts::PI)),
         ));
     }
     // Covariance: s²·(JᵀJ)⁻¹, s² = RSS/(2L − P).
-    let j = jacobian(&data, &theta, m, b, dt, &r0);
+    let j = jacobian(data, &theta, m, b, dt, &r0);
     let (a, _) = normal(&j, &r0);
     let s2 = rss / (r0.len() - P) as f64;
     let cov = solve_scaled(&a, &identity(P)).ok_or_else(|| {
@@ -403,7 +427,7 @@ pub fn fit_mode(trace: &Trace, mass: &Estimate, damping: &Estimate) -> Result<Mo
         antiresonance_hz: (k / mh).sqrt() / (2.0 * std::f64::consts::PI),
         band_hz: band,
         lines: data.w.len(),
-        periods: periods - 1,
+        periods,
         misfit,
     })
 }
@@ -429,6 +453,9 @@ fn estimate(value: f64, std_error: f64) -> Estimate {
         hi: value + 1.96 * std_error,
     }
 }
+
+#[cfg(test)]
+mod coverage_tests;
 
 #[cfg(test)]
 mod tests {

@@ -412,12 +412,6 @@ mod tests {
         );
     }
 
-    /// Standard normal from two uniforms (Box–Muller).
-    fn normal(r: &mut SplitMix64) -> f64 {
-        let (u, v) = (r.next_f64().max(1e-300), r.next_f64());
-        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-    }
-
     /// The sequential test run on synthetic realizations whose true Z is
     /// known: `re_z` on every one of 40 lines (2 per band), Im Z = −300,
     /// complex Gaussian scatter of relative size `noise` on G.
@@ -427,7 +421,7 @@ mod tests {
         let mut s = BlaStats::new(40, 1);
         loop {
             let g: Vec<C> = (0..40)
-                .map(|_| g0 + g0.norm() * noise * C::new(normal(&mut r), normal(&mut r)))
+                .map(|_| g0 + g0.norm() * noise * C::new(r.standard_normal(), r.standard_normal()))
                 .collect();
             s.push(&[g]);
             if s.count() >= MIN_REALIZATIONS {
@@ -463,7 +457,9 @@ mod tests {
             for _ in 0..3 {
                 let g: Vec<C> = g0
                     .iter()
-                    .map(|&g| g + g.norm() * 0.002 * C::new(normal(&mut r), normal(&mut r)))
+                    .map(|&g| {
+                        g + g.norm() * 0.002 * C::new(r.standard_normal(), r.standard_normal())
+                    })
                     .collect();
                 s.push(&[g]);
             }

@@ -142,6 +142,12 @@ impl SplitMix64 {
     pub fn next_f64(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
+
+    /// Standard normal from two uniforms (Box & Muller 1958: √(−2 ln u)·cos 2πv).
+    pub fn standard_normal(&mut self) -> f64 {
+        let (u, v) = (self.next_f64().max(1e-300), self.next_f64());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    }
 }
 
 #[cfg(test)]
