@@ -158,6 +158,21 @@ fn main() {
         .nth(1)
         .unwrap_or_else(|| "crates/zwidth-dsp/golden/vectors.txt".into());
     let mut out = String::new();
+    // Beside it, the built coefficients' fingerprints of every case and
+    // the identity's references (what a rig advertises at hello).
+    let mut prints = String::new();
+    writeln!(prints, "zwidth-dsp golden fingerprints 1").unwrap();
+    writeln!(
+        prints,
+        "# written with vectors.txt by the golden_vectors example"
+    )
+    .unwrap();
+    writeln!(
+        prints,
+        "# case SIGNAL ESTIMATOR FINGERPRINT | identity KIND FINGERPRINT"
+    )
+    .unwrap();
+    let mut out_prints = Vec::new();
     writeln!(out, "zwidth-dsp golden vectors 1").unwrap();
     writeln!(out, "# cargo run --release -p zwidth-core --example golden_vectors -- crates/zwidth-dsp/golden/vectors.txt").unwrap();
     writeln!(out, "# signal NAME RATE_HZ QUANTIZATION_M N / p BITS | r COUNT BITS (positions, f64 bits in hex)").unwrap();
@@ -184,6 +199,10 @@ fn main() {
                 .fold(Fingerprint::default(), |h, x| h.f64(*x))
                 .finish();
             writeln!(out, "estimator {name} {} {hash:016x} {json}", s.stride).unwrap();
+            let dsp = EstimatorSpec::from_json(json).unwrap().to_dsp().unwrap();
+            let print =
+                zwidth_dsp::estimator::fingerprint(&dsp, s.rate_hz, s.quantization).unwrap();
+            out_prints.push(format!("case {} {name} {print:016x}", s.name));
             for x in v.iter().step_by(s.stride) {
                 writeln!(out, "v {:016x}", x.to_bits()).unwrap();
             }
@@ -191,4 +210,14 @@ fn main() {
     }
     std::fs::write(&path, out).unwrap_or_else(|e| panic!("{path}: {e}"));
     eprintln!("wrote {path}");
+    for line in out_prints {
+        writeln!(prints, "{line}").unwrap();
+    }
+    for kind in zwidth_dsp::identity::KINDS {
+        let print = zwidth_dsp::identity::reference_fingerprint(kind).unwrap();
+        writeln!(prints, "identity {kind} {print:016x}").unwrap();
+    }
+    let prints_path = std::path::Path::new(&path).with_file_name("fingerprints.txt");
+    std::fs::write(&prints_path, prints).unwrap_or_else(|e| panic!("{prints_path:?}: {e}"));
+    eprintln!("wrote {}", prints_path.display());
 }

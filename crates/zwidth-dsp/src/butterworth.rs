@@ -285,3 +285,36 @@ impl Butterworth {
         &self.state[..self.sections]
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// scipy's `_cplxreal` order: one of each conjugate pair (imag > 0),
+    /// complex by real part, then the reals by value; an input that needs
+    /// each root moved more than one place.
+    #[test]
+    fn roots_are_paired_and_ordered_as_scipy_orders_them() {
+        let mut r = Roots::new();
+        for c in [
+            Cx::new(0.5, 0.0),
+            Cx::new(-0.2, 1e-18), // real within rounding
+            Cx::new(0.1, 0.2),
+            Cx::new(0.1, -0.2),
+            Cx::new(-0.3, 0.4),
+            Cx::new(-0.3, -0.4),
+        ] {
+            r.push(c);
+        }
+        let got = cplx_real(&r);
+        assert_eq!(
+            got.all(),
+            &[
+                Cx::new(-0.3, 0.4),
+                Cx::new(0.1, 0.2),
+                Cx::new(-0.2, 0.0),
+                Cx::new(0.5, 0.0)
+            ]
+        );
+    }
+}

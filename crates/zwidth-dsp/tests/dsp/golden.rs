@@ -5,7 +5,7 @@
 //! mutation of this crate is caught by its own tests, without building
 //! the service.
 
-#[path = "../golden/read.rs"]
+#[path = "../../golden/read.rs"]
 mod read;
 
 use read::{check, load};
@@ -76,6 +76,20 @@ fn every_estimator_equals_its_golden_vectors_through_this_crate() {
     assert_eq!(cases.len(), 90);
     for case in &cases {
         let s = signals.iter().find(|s| s.name == case.signal).unwrap();
+        // The hand-written spec is of the file's kind.
+        let kind = match spec(&case.estimator).kind {
+            KindSpec::Fdm => "fdm",
+            KindSpec::Butterworth { .. } => "butterworth",
+            KindSpec::Kalman { rho: None, .. } => "kalman",
+            KindSpec::Kalman { .. } => "adaptive_kalman",
+            KindSpec::Foaw { .. } => "foaw",
+            KindSpec::Levant { .. } => "levant",
+        };
+        assert!(
+            case.spec.starts_with(&format!(r#"{{"kind":"{kind}""#)),
+            "{}",
+            case.spec
+        );
         let mut rig = RigEstimator::new(&spec(&case.estimator), s.rate_hz, s.quantization)
             .unwrap_or_else(|e| panic!("{}: {e:?}", case.estimator));
         // One sample at a time, then the same through step_n after a reset.
@@ -86,4 +100,47 @@ fn every_estimator_equals_its_golden_vectors_through_this_crate() {
         rig.step_n(&s.positions, &mut w);
         check(case, &w, "RigEstimator::step_n after reset");
     }
+}
+
+/// The built coefficients' fingerprints of every case and the identity's
+/// references equal golden/fingerprints.txt (written with the vectors):
+/// built, computed without the state, and after a reset.
+#[test]
+fn every_fingerprint_equals_the_golden_file() {
+    let (signals, _) = load();
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/golden/fingerprints.txt"
+    ))
+    .unwrap();
+    let (mut cases, mut kinds) = (0, 0);
+    for line in text.lines().filter(|l| !l.starts_with('#')).skip(1) {
+        let w: Vec<&str> = line.split(' ').collect();
+        match w[0] {
+            "case" => {
+                let s = signals.iter().find(|s| s.name == w[1]).unwrap();
+                let want = read::hex(w[3]);
+                let spec = spec(w[2]);
+                let mut rig = RigEstimator::new(&spec, s.rate_hz, s.quantization).unwrap();
+                assert_eq!(rig.fingerprint(), want, "{line}: built");
+                rig.step(1e-3);
+                rig.reset();
+                assert_eq!(rig.fingerprint(), want, "{line}: after a reset");
+                let stateless =
+                    zwidth_dsp::estimator::fingerprint(&spec, s.rate_hz, s.quantization).unwrap();
+                assert_eq!(stateless, want, "{line}: without the state");
+                cases += 1;
+            }
+            "identity" => {
+                assert_eq!(
+                    zwidth_dsp::identity::reference_fingerprint(w[1]),
+                    Some(read::hex(w[2])),
+                    "{line}"
+                );
+                kinds += 1;
+            }
+            other => panic!("unknown line kind {other:?}"),
+        }
+    }
+    assert_eq!((cases, kinds), (90, zwidth_dsp::identity::KINDS.len()));
 }
