@@ -949,6 +949,90 @@ fn a_driver_in_c_maps_with_the_trials_own_estimator_bit_for_bit() {
     }
 }
 
+/// Close a raw session and wait until the server has ended it (one live
+/// session per rig: the next hello would be refused before).
+fn hang_up(s: &Server, mut ws: Ws) {
+    let _ = ws.close(None);
+    while ws.read().is_ok() {}
+    wait_for("the session to end", 10, || !connected(s));
+}
+
+#[test]
+fn a_rig_whose_estimators_differ_is_named_with_both_fingerprints() {
+    // Issue 32: the identity in the capabilities against the server's own.
+    let s = serve();
+    let token = agent_token(&s);
+    let ours = serde_json::to_value(zwidth::estimators::identity::DspIdentity::ours()).unwrap();
+    // The same library: identical.
+    let mut ws = dial(&s, &token).unwrap();
+    say(&mut ws, &hello(|_| {}));
+    let w = hear(&mut ws).unwrap();
+    assert_eq!(w["type"], "welcome", "{w}");
+    let check = rig(&s, "bench")["attached"]["estimators"].clone();
+    assert_eq!(check["identical"], true, "{check}");
+    assert_eq!(check["rig_version"], ours["version"], "{check}");
+    hang_up(&s, ws);
+    // FOAW built otherwise on the rig: the kind named, both values shown,
+    // on /v1/rigs and on the page of a run on that rig.
+    let mut ws = dial(&s, &token).unwrap();
+    say(
+        &mut ws,
+        &hello(|c| c["dsp"]["fingerprints"]["foaw"] = "00000000000000ff".into()),
+    );
+    let w = hear(&mut ws).unwrap();
+    assert_eq!(w["type"], "welcome", "{w}");
+    let check = rig(&s, "bench")["attached"]["estimators"].clone();
+    assert_eq!(check["identical"], false, "{check}");
+    let server = ours["fingerprints"]["foaw"].as_str().unwrap();
+    assert_eq!(
+        check["differing"],
+        serde_json::json!([{"kind":"foaw","server":server,"rig":"00000000000000ff"}])
+    );
+    let id = submit(&s, "bench", MAP);
+    let page = ureq::get(&format!("{}/runs/{id}", s.base))
+        .call()
+        .unwrap()
+        .into_string()
+        .unwrap();
+    let want = format!("foaw (rig 00000000000000ff, server {server})");
+    assert!(
+        page.contains("not bit-identical") && page.contains(&want),
+        "the run page lacks {want}"
+    );
+    hang_up(&s, ws);
+    // No identity at all (a driver of its own): said so.
+    let mut ws = dial(&s, &token).unwrap();
+    say(
+        &mut ws,
+        &hello(|c| {
+            c.as_object_mut().unwrap().remove("dsp");
+        }),
+    );
+    let w = hear(&mut ws).unwrap();
+    assert_eq!(w["type"], "welcome", "{w}");
+    let check = rig(&s, "bench")["attached"]["estimators"].clone();
+    assert_eq!(check["identical"], false, "{check}");
+    assert!(
+        check["summary"].as_str().unwrap().contains("does not say"),
+        "{check}"
+    );
+    // A malformed identity is refused at hello, naming the field.
+    let mut ws = dial(&s, &token).unwrap();
+    say(
+        &mut ws,
+        &hello(|c| c["dsp"]["fingerprints"]["fdm"] = "xyz".into()),
+    );
+    let e = hear(&mut ws).unwrap();
+    assert_eq!(e["type"], "error", "{e}");
+    assert!(
+        e["message"]
+            .as_str()
+            .unwrap()
+            .contains("capabilities.dsp.fingerprints.fdm"),
+        "{e}"
+    );
+}
+
 #[test]
 fn a_result_for_another_wall_fails_the_experiment_saying_so() {
     // A driver that prints K rounded (not the bits it was sent) must not
