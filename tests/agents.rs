@@ -778,44 +778,11 @@ fn a_driver_process_in_python_is_a_rig() {
     assert!((5e4..1e5).contains(&k0), "{k0}");
 }
 
-/// Whether `tool` runs here. Without it a test says so and passes, unless
-/// `ZWIDTH_REQUIRE_TOOLS` is set (CI sets it and installs the tools).
-fn have(tool: &str) -> bool {
-    let ok = Command::new(tool)
-        .arg("--version")
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var_os("ZWIDTH_REQUIRE_TOOLS").is_none(),
-            "{tool} is needed (ZWIDTH_REQUIRE_TOOLS is set)"
-        );
-        eprintln!("skipped: {tool} is not installed (CI installs it)");
-    }
-    ok
-}
-
 /// examples/rig_driver_c built as docs/rigs.md says, against this
 /// profile's static library (built here: `cargo test` builds the FFI crate
 /// only as an rlib).
 fn c_driver(dir: &std::path::Path) -> std::path::PathBuf {
-    let exe = std::env::current_exe().unwrap();
-    let profile = exe.parent().unwrap().parent().unwrap().to_path_buf();
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let mut build = Command::new(cargo);
-    build.args(["build", "-p", "zwidth-ffi", "--lib"]);
-    if profile.file_name().is_some_and(|n| n == "release") {
-        build.arg("--release");
-    }
-    let out = build
-        .env("CARGO_TARGET_DIR", profile.parent().unwrap())
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let profile = common::tools::ffi_lib_dir();
     let root = env!("CARGO_MANIFEST_DIR");
     let driver = dir.join("rig_driver_c");
     let out = Command::new("cc")
@@ -842,7 +809,7 @@ fn a_driver_in_c_maps_with_the_trials_own_estimator_bit_for_bit() {
     // through the real agent, and the velocities the driver's estimator
     // gave on its last trial's positions equal `zwidth estimate` (the
     // simulator's estimators, in Rust) on the same positions, bit for bit.
-    if !have("cc") {
+    if !common::tools::have("cc") {
         return;
     }
     let s = serve();

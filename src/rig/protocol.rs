@@ -113,16 +113,9 @@ impl Capabilities {
             speed_m_s: 1.0,
             encoder_m: 1e-6,
             sample_hz: vec![1000.0, 2000.0, 5000.0, 10000.0],
-            estimators: [
-                "fdm",
-                "butterworth",
-                "kalman",
-                "adaptive_kalman",
-                "foaw",
-                "levant",
-            ]
-            .map(String::from)
-            .to_vec(),
+            estimators: crate::estimators::identity::KINDS
+                .map(String::from)
+                .to_vec(),
             probes: vec!["wall_hit".into(), "multisine".into()],
             model: None,
             dsp: Some(DspIdentity::ours()),

@@ -170,6 +170,7 @@ pub fn wait_end(base: &str, id: &str, secs: u64) -> serde_json::Value {
     }
 }
 pub mod pg;
+pub mod tools;
 
 /// Use `token` for writes to the server at `base` (one given, not made).
 pub fn register_token(base: &str, token: &str) {

@@ -8,6 +8,8 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 use crate::error::SpecError;
+/// Every estimator kind, by the name the API and the capabilities use.
+pub use zwidth_dsp::identity::KINDS;
 
 /// An estimator library's identity: what `zw_dsp_identity` (C),
 /// `zwidth.dsp_identity()` (Python) and the Rust agent write.
