@@ -81,11 +81,14 @@ mod tests {
 
     /// The operations against their definitions (num-complex's order of
     /// evaluation, so the bits match it): (a + bi) − (c + di) = (a − c) +
-    /// (b − d)i; the product and quotient by hand.
+    /// (b − d)i, the sum and the negation likewise; the product and quotient
+    /// by hand.
     #[test]
     fn arithmetic_is_complex_arithmetic() {
         let (x, y) = (Cx::new(1.0, 2.0), Cx::new(0.5, 3.0));
         assert_eq!(x - y, Cx::new(0.5, -1.0));
+        assert_eq!(x + y, Cx::new(1.5, 5.0));
+        assert_eq!(-x, Cx::new(-1.0, -2.0));
         assert_eq!(x * y, Cx::new(1.0 * 0.5 - 2.0 * 3.0, 1.0 * 3.0 + 2.0 * 0.5));
         let q = x / y;
         let back = q * y;
