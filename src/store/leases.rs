@@ -519,3 +519,18 @@ impl Store {
             .map(|_| ()))
     }
 }
+
+#[cfg(test)]
+mod fraction_tests {
+    /// A fraction done is stored as given within [0, 1], clamped beyond,
+    /// 0 when not finite (a mutant returning 0 passed the store's tests).
+    #[test]
+    fn a_fraction_done_is_stored_within_0_and_1() {
+        use super::fraction_done;
+        assert_eq!(fraction_done(0.25), 0.25);
+        assert_eq!(fraction_done(1.5), 1.0);
+        assert_eq!(fraction_done(-0.5), 0.0);
+        assert_eq!(fraction_done(f64::NAN), 0.0);
+        assert_eq!(fraction_done(f64::INFINITY), 0.0);
+    }
+}
