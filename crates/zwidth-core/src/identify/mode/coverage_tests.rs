@@ -72,11 +72,11 @@ fn the_mode_intervals_cover_the_truth_95_percent_of_the_time() {
         ("amplifier_lag_s", t[4]),
     ];
     let pick = |fit: &ModeFit, name: &str| match name {
-        "handle_mass" => fit.handle_mass.clone(),
-        "stiffness" => fit.stiffness.clone(),
-        "cable_damping" => fit.cable_damping.clone(),
-        "motor_damping" => fit.motor_damping.clone(),
-        _ => fit.amplifier_lag_s.clone(),
+        "handle_mass" => fit.handle_mass,
+        "stiffness" => fit.stiffness,
+        "cable_damping" => fit.cable_damping,
+        "motor_damping" => fit.motor_damping,
+        _ => fit.amplifier_lag_s,
     };
     let n = 1000;
     let (mut covered, mut covered_90) = ([0usize; 5], [0usize; 5]);
