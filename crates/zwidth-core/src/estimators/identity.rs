@@ -83,11 +83,14 @@ impl DspIdentity {
     /// How the rig's estimators (`self`, for the kinds it advertises)
     /// compare with this build's.
     pub fn check(rig: Option<&Self>, kinds: &[String]) -> EstimatorCheck {
-        let ours = Self::ours();
+        // This build's identity never changes: computed once, not on every
+        // view of a rig (the check runs under the rig's lock).
+        static OURS: std::sync::OnceLock<DspIdentity> = std::sync::OnceLock::new();
+        let ours = OURS.get_or_init(Self::ours);
         let Some(rig) = rig else {
             return EstimatorCheck {
                 identical: false,
-                server_version: ours.version,
+                server_version: ours.version.clone(),
                 rig_version: None,
                 differing: Vec::new(),
                 summary: "the rig does not say which estimator library it runs: its velocities \
@@ -134,7 +137,7 @@ impl DspIdentity {
         };
         EstimatorCheck {
             identical: differing.is_empty(),
-            server_version: ours.version,
+            server_version: ours.version.clone(),
             rig_version: Some(rig.version.clone()),
             differing,
             summary,
