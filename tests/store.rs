@@ -1018,3 +1018,179 @@ async fn every_fenced_unit_write_of_a_stale_attempt_changes_nothing() {
         assert_eq!(snapshot(st).await, ended, "{}", st.backend());
     }
 }
+
+/// The workers' registry behind `/metrics` and the queue page: a worker is
+/// listed with what it said last (rigs, run, rate; a rate that is not a
+/// finite non-negative number is stored as 0), updated in place, and gone
+/// when it says goodbye or is not seen for longer than asked. (A mutant
+/// that made `worker_seen` write nothing passed the store's tests.)
+#[tokio::test]
+async fn the_workers_registry_keeps_what_each_worker_says() {
+    for (store, _dir) in stores("workers").await {
+        let st = &store;
+        let row = |id: &str| {
+            let id = id.to_string();
+            async move {
+                st.workers(60_000)
+                    .await
+                    .unwrap()
+                    .into_iter()
+                    .find(|w| w.id == id)
+                    .map(|w| (w.rigs, w.running, w.trials_per_s))
+            }
+        };
+        assert!(st.workers(60_000).await.unwrap().is_empty());
+        st.worker_seen("w1", "sim:2", Some("e1"), 12.5)
+            .await
+            .unwrap();
+        st.worker_seen("w2", "lab", None, f64::NAN).await.unwrap();
+        assert_eq!(
+            row("w1").await,
+            Some(("sim:2".into(), Some("e1".into()), 12.5))
+        );
+        assert_eq!(row("w2").await, Some(("lab".into(), None, 0.0)));
+        let started = st.workers(60_000).await.unwrap()[0].started_ms;
+        // Seen again: the run and the rate change, the start does not.
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+        st.worker_seen("w1", "sim:2", None, -3.0).await.unwrap();
+        let all = st.workers(60_000).await.unwrap();
+        assert_eq!(all.len(), 2, "{}", st.backend());
+        let w1 = all.iter().find(|w| w.id == "w1").unwrap();
+        assert_eq!((w1.running.as_deref(), w1.trials_per_s), (None, 0.0));
+        assert_eq!(w1.started_ms, started);
+        assert!(
+            w1.seen_ms > w1.started_ms,
+            "{} {}",
+            w1.seen_ms,
+            w1.started_ms
+        );
+        // Goodbye, and pruning those unseen for longer than 10 ms.
+        st.worker_gone("w2").await.unwrap();
+        assert_eq!(row("w2").await, None);
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        assert!(st.workers(10).await.unwrap().is_empty());
+        st.prune_workers(10).await.unwrap();
+        assert!(st.workers(60_000).await.unwrap().is_empty());
+    }
+}
+
+/// `zwidth bench` purges its own rig: every experiment of that rig and
+/// its trials go, nothing of another rig's. (A mutant that purged nothing
+/// passed the store's tests.)
+#[tokio::test]
+async fn purging_a_rig_removes_its_experiments_and_trials_only() {
+    for (store, _dir) in stores("purge").await {
+        let st = &store;
+        st.insert(NewExperiment {
+            id: "b1",
+            kind: "map",
+            spec: "{}",
+            priority: 0,
+            key: None,
+            not_before_ms: None,
+            rig: "bench-1",
+        })
+        .await
+        .unwrap();
+        let run = claim(st).await;
+        st.add_trials(&run, &[trial(0, 0, 0, 100.0, true)], &[], (1, 0.0))
+            .await
+            .unwrap();
+        let bench = st.claim("bench-1", "w1", 60_000).await.unwrap().unwrap();
+        st.add_trials(
+            &Lease::of(bench.id, bench.attempt),
+            &[trial(0, 0, 0, 5.0, false)],
+            &[],
+            (1, 0.0),
+        )
+        .await
+        .unwrap();
+        st.purge_rig("bench-1").await.unwrap();
+        assert!(st.get("b1").await.unwrap().is_none(), "{}", st.backend());
+        assert!(st.trials("b1").await.unwrap().is_empty());
+        assert!(st.get("e1").await.unwrap().is_some());
+        assert_eq!(
+            st.trials("e1").await.unwrap(),
+            [trial(0, 0, 0, 100.0, true)]
+        );
+    }
+}
+
+/// Planning units and ending one wake this process's waiters at once (and
+/// on PostgreSQL another process's, through NOTIFY): idle workers do not
+/// wait for their next poll. Bound: 5 s (a poll is 1 s+; the wake-up is
+/// milliseconds); the waiters are registered before the write.
+#[tokio::test]
+async fn planned_and_ended_units_wake_the_waiting_workers() {
+    use zwidth::zwidth::farm::Unit;
+    let bound = std::time::Duration::from_secs(5);
+    for (store, _dir) in stores("wake").await {
+        let st = &store;
+        let driver = claim(st).await;
+        let queued = st.wakeups().queued.notified();
+        tokio::pin!(queued);
+        queued.as_mut().enable();
+        let mut ended = st.wakeups().ended.subscribe();
+        st.plan_units(&driver, 0, "{}", &[Unit::Map]).await.unwrap();
+        tokio::time::timeout(bound, queued)
+            .await
+            .unwrap_or_else(|_| panic!("no wake-up for planned units ({})", st.backend()));
+        let u = st.claim_unit("sim", "w2", 60_000).await.unwrap().unwrap();
+        assert!(st
+            .finish(&u.lease(), "succeeded", 0, None, None)
+            .await
+            .unwrap());
+        let who = tokio::time::timeout(bound, ended.recv())
+            .await
+            .expect("no wake-up for an ended unit")
+            .unwrap();
+        assert_eq!(who, "e1");
+    }
+    // Across processes: another store on the same PostgreSQL database,
+    // listening, is woken by this one's writes.
+    let Some(url) = common::pg::fresh_database("wake_other").await else {
+        return;
+    };
+    let (a, b) = (
+        Store::connect(&Location::Postgres(url.clone()))
+            .await
+            .unwrap(),
+        Store::connect(&Location::Postgres(url)).await.unwrap(),
+    );
+    b.listen();
+    queue(&a, "e1").await;
+    let driver = claim(&a).await;
+    // The listener connects in the background: plan until it hears one.
+    let mut ended = b.wakeups().ended.subscribe();
+    let deadline = std::time::Instant::now() + bound;
+    let mut scope = 0;
+    loop {
+        let queued = b.wakeups().queued.notified();
+        tokio::pin!(queued);
+        queued.as_mut().enable();
+        a.plan_units(&driver, scope, "{}", &[Unit::Map])
+            .await
+            .unwrap();
+        if tokio::time::timeout(std::time::Duration::from_millis(200), queued)
+            .await
+            .is_ok()
+        {
+            break;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the other process never heard units planned"
+        );
+        scope += 1;
+    }
+    let u = a.claim_unit("sim", "w2", 60_000).await.unwrap().unwrap();
+    assert!(a
+        .finish(&u.lease(), "succeeded", 0, None, None)
+        .await
+        .unwrap());
+    let who = tokio::time::timeout(bound, ended.recv())
+        .await
+        .expect("the other process never heard a unit end")
+        .unwrap();
+    assert_eq!(who, "e1");
+}
