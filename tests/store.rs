@@ -318,7 +318,7 @@ async fn an_expired_lease_is_taken_over_and_the_old_holder_is_fenced() {
 async fn a_run_whose_lease_expires_max_lost_times_fails_with_the_reason() {
     for (store, _dir) in stores("lost").await {
         let st = &store;
-        for n in 1..zwidth::store::leases::MAX_LOST {
+        for n in 1..zwidth::store::MAX_LOST {
             let row = st
                 .claim("sim", &format!("w{n}"), 300)
                 .await
@@ -330,7 +330,7 @@ async fn a_run_whose_lease_expires_max_lost_times_fails_with_the_reason() {
         // Expired MAX_LOST - 1 times and claimed again each time; the last
         // claim (attempt MAX_LOST) expires too: failed, not claimed.
         let last = st.claim("sim", "w-last", 300).await.unwrap().unwrap();
-        assert_eq!(last.attempt, zwidth::store::leases::MAX_LOST);
+        assert_eq!(last.attempt, zwidth::store::MAX_LOST);
         tokio::time::sleep(std::time::Duration::from_millis(400)).await;
         assert!(st.claim("sim", "w-next", 300).await.unwrap().is_none());
         let row = st.get("e1").await.unwrap().unwrap();
@@ -723,7 +723,7 @@ async fn a_unit_whose_lease_expires_max_lost_times_fails_with_the_reason() {
         st.plan_units(&driver, 2, "{}", &[Unit::Column { column: 4, b: 40.0 }])
             .await
             .unwrap();
-        for n in 1..=zwidth::store::leases::MAX_LOST {
+        for n in 1..=zwidth::store::MAX_LOST {
             let u = st
                 .claim_unit("sim", &format!("w{n}"), 300)
                 .await

@@ -4,13 +4,13 @@
 //! itself stays light: it plans, polls and replays.
 
 use std::collections::BTreeSet;
-use std::sync::atomic::Ordering;
+
 use std::time::Duration;
 
-use super::{backoff, FIRST_RETRY};
+use super::retry::{backoff, FIRST_RETRY};
 use crate::store::{Fault, Lease, Store};
+use crate::zwidth::control::RunControl;
 use crate::zwidth::farm::{Farm, Unit};
-use crate::zwidth::search::Observer;
 use crate::zwidth::settings::MapSpec;
 
 /// How often a waiting run looks at its units when no unit's end wakes it
@@ -36,7 +36,7 @@ impl Farm for DbFarm {
         scope: u32,
         spec: &MapSpec,
         units: &[Unit],
-        observer: &Observer,
+        observer: &dyn RunControl,
         done: &(dyn Fn(usize) + Sync),
     ) -> Result<(), String> {
         let spec = serde_json::to_string(spec).map_err(|e| e.to_string())?;
@@ -51,7 +51,7 @@ impl DbFarm {
         scope: u32,
         spec: &str,
         units: &[Unit],
-        observer: &Observer,
+        observer: &dyn RunControl,
         done: &(dyn Fn(usize) + Sync),
     ) -> Result<(), String> {
         let mut pause = FIRST_RETRY;
@@ -65,7 +65,7 @@ impl DbFarm {
                 // Another worker runs the experiment now: stop; its runner
                 // learns it at the next heartbeat and writes nothing.
                 Err(e) if Fault::of(&e) == Fault::Lost => {
-                    observer.cancel.store(true, Ordering::Relaxed);
+                    observer.cancel();
                     return Ok(());
                 }
                 Err(e) if transient(&e) => {
@@ -146,7 +146,8 @@ impl DbFarm {
 mod tests {
     use super::*;
     use crate::store::NewExperiment;
-    use crate::zwidth::farm::run_unit;
+    use crate::zwidth::search::run_unit;
+    use crate::zwidth::search::Observer;
     use crate::zwidth::search::{map, map_observed};
     use std::sync::Arc;
 

@@ -9,14 +9,17 @@ use std::time::Duration;
 
 pub mod bench;
 pub mod farm;
+mod retry;
 pub mod worker;
 
 use crate::experiment::ExperimentSpec;
 use crate::rig::Rig;
 use crate::store::{Fault, Held, Lease, Store, UnitRow};
-use crate::zwidth::farm::{run_unit, Unit};
+use crate::zwidth::farm::Unit;
+use crate::zwidth::search::run_unit;
 use crate::zwidth::search::{Observer, StoredEvaluation, StoredTrial};
 use crate::zwidth::settings::MapSpec;
+use retry::{backoff, FIRST_RETRY};
 
 /// The observers of running experiments by id, so a cancel request reaches
 /// the simulation at once (not at the runner's next 100 ms look).
@@ -376,15 +379,6 @@ impl Unstored {
             }
         }
     }
-}
-
-/// The first wait before retrying a store write.
-const FIRST_RETRY: Duration = Duration::from_millis(100);
-
-/// The wait after `wait`: doubled, at most 5 s (a full disk is retried
-/// every 5 s all night, not in a storm and not once an hour).
-fn backoff(wait: Duration) -> Duration {
-    (wait * 2).min(Duration::from_secs(5))
 }
 
 /// Run a store operation, retrying while its fault is transient (another

@@ -10,16 +10,17 @@ use serde::Serialize;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::Duration;
 
+use super::base::{check_id, rig_pool, Rig, RigInfo};
 use super::lease::{Lease, Refusal, Timing};
 use super::protocol::{
     parse_trial_id, trial_id, Capabilities, DspIdentity, EstimatorCheck, RigState, ServerMessage,
     TrialLimits, TrialResult,
 };
-use super::{check_id, rig_pool, Rig, RigInfo};
 use crate::clock::now_ms;
 use crate::error::SpecError;
+use crate::zwidth::control::RunControl;
 use crate::zwidth::scene::SceneSpec;
-use crate::zwidth::search::{Observer, Point};
+use crate::zwidth::search::Point;
 use crate::zwidth::settings::Method;
 use crate::zwidth::trial::{TrialBackend, TrialRequest};
 
@@ -526,8 +527,8 @@ impl Rig for AttachedRig {
         }))
     }
 
-    fn attached(&self) -> Option<&AttachedRig> {
-        Some(self)
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
     }
 }
 
@@ -539,7 +540,7 @@ struct AttachedRun {
 }
 
 impl TrialBackend for AttachedRun {
-    fn trial(&self, request: &TrialRequest, observer: &Observer) -> Option<Point> {
+    fn trial(&self, request: &TrialRequest, observer: &dyn RunControl) -> Option<Point> {
         let id = trial_id(&self.experiment, request.scope, request.k, request.b);
         let mut g = self.shared.lock();
         g.pending = Some(Pending {

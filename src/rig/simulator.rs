@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use super::{check_id, rig_pool, Rig, RigInfo};
+use super::base::{check_id, rig_pool, Rig, RigInfo};
 use crate::error::SpecError;
 use crate::zwidth::trial::TrialBackend;
 
@@ -56,5 +56,9 @@ impl Rig for SimulatedRig {
     /// Trials run in this process.
     fn backend(&self, _experiment: &str) -> Option<Arc<dyn TrialBackend>> {
         None
+    }
+
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
     }
 }

@@ -297,7 +297,7 @@ impl Store {
             .bind(&r.worker)
             .execute(&mut *tx)
             .await?;
-            super::leases::insert_trials!(tx, &r.id, trials);
+            super::lease::insert_trials!(tx, &r.id, trials);
             for (seq, e) in evaluations.iter().enumerate() {
                 sqlx::query("INSERT INTO evaluations (experiment_id, key, seq, record) VALUES ($1, $2, $3, $4)")
                     .bind(&r.id)

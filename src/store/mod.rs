@@ -14,21 +14,27 @@
 //! everyone after). Hence `fetch_all`, never `fetch_one`, on writes.
 
 pub mod agents;
-pub mod fault;
-pub mod leases;
-pub use fault::{Fault, Health};
-pub use leases::{Held, Lease, WorkerRow};
 pub mod dashboard;
+mod db;
+pub mod fault;
+pub mod lease;
+pub mod leases;
 pub mod units;
-pub use units::{UnitPlace, UnitRow};
+pub mod wake;
+pub(crate) use db::on_pool;
+use db::{stored_trials, Db, TrialRow};
+pub use db::{ExperimentRow, Store, STATES};
+pub use fault::{Fault, Health};
+pub use lease::{Held, Lease, UnitPlace, MAX_LOST};
+pub use leases::WorkerRow;
+pub use units::UnitRow;
 
 pub mod location;
 pub use location::Location;
 
-use serde::Serialize;
 use sqlx::postgres::PgPoolOptions;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
-use sqlx::{FromRow, PgPool, SqlitePool};
+
 use std::path::Path;
 use std::time::Duration;
 
@@ -37,25 +43,6 @@ use crate::zwidth::search::{StoredEvaluation, StoredTrial};
 
 static SQLITE_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations/sqlite");
 static POSTGRES_MIGRATOR: sqlx::migrate::Migrator = sqlx::migrate!("./migrations/postgres");
-
-/// The database behind a store.
-#[derive(Debug, Clone)]
-enum Db {
-    Sqlite(SqlitePool),
-    Postgres(PgPool),
-}
-
-/// Run `$body` with `$p` bound to this store's pool, whichever database it
-/// is: the body is compiled once per backend (shared SQL, typed twice).
-macro_rules! on_pool {
-    ($store:expr, $p:ident => $body:expr) => {
-        match &$store.db {
-            Db::Sqlite($p) => $body,
-            Db::Postgres($p) => $body,
-        }
-    };
-}
-pub(crate) use on_pool;
 
 /// Why a store could not be opened: the location is wrong or unusable (a
 /// bad URL, an unreachable server, a refused password, a schema newer than
@@ -74,15 +61,6 @@ impl std::fmt::Display for OpenError {
     }
 }
 
-#[derive(Debug, Clone)]
-pub struct Store {
-    db: Db,
-    /// What the last integrity check found; a corrupt database refuses writes.
-    health: std::sync::Arc<std::sync::Mutex<Health>>,
-    /// Wake-ups when units are queued or end (`units.rs`).
-    wake: std::sync::Arc<units::Wakeups>,
-}
-
 /// How a submission went into the store.
 #[derive(Debug)]
 pub enum Inserted {
@@ -92,35 +70,6 @@ pub enum Inserted {
     Earlier(ExperimentRow),
     /// The idempotency key was used before with a different request.
     KeyReused(ExperimentRow),
-}
-
-/// One experiment row.
-#[derive(Debug, Clone, Serialize, FromRow)]
-pub struct ExperimentRow {
-    pub id: String,
-    pub kind: String,
-    pub spec: String,
-    pub state: String,
-    pub priority: i64,
-    pub created_ms: i64,
-    pub started_ms: Option<i64>,
-    pub finished_ms: Option<i64>,
-    pub trials_done: i64,
-    pub result: Option<String>,
-    pub error: Option<String>,
-    pub idempotency_key: Option<String>,
-    pub not_before_ms: Option<i64>,
-    pub rig: String,
-    /// Fraction of the work done, 0 to 1.
-    pub progress: f64,
-    /// A tune's best so far (JSON).
-    pub best: Option<String>,
-    /// Claims so far; the one holding the run now (see `leases`).
-    pub attempt: i64,
-    /// The worker holding the run, if running.
-    pub worker: Option<String>,
-    /// When its lease ends (database clock, unix ms).
-    pub lease_until_ms: Option<i64>,
 }
 
 /// What a submission stores.
@@ -138,34 +87,6 @@ pub struct NewExperiment<'a> {
 }
 
 pub use crate::clock::now_ms;
-
-/// Every state an experiment can be stored in.
-pub const STATES: [&str; 7] = [
-    "queued",
-    "scheduled",
-    "running",
-    "succeeded",
-    "failed",
-    "cancelled",
-    "interrupted",
-];
-
-/// A stored trial as read: scope, column, index, the point (JSON).
-type TrialRow = (i64, i64, i64, String);
-
-/// The trials of `rows` (a point that does not parse is left out).
-fn stored_trials(rows: Vec<TrialRow>) -> Vec<StoredTrial> {
-    rows.into_iter()
-        .filter_map(|(scope, column, index, p)| {
-            serde_json::from_str(&p).ok().map(|point| StoredTrial {
-                scope: scope as u32,
-                column: column as u32,
-                index: index as u32,
-                point,
-            })
-        })
-        .collect()
-}
 
 impl Store {
     /// Open (creating it if needed) and migrate the SQLite database at `path`.
@@ -396,7 +317,7 @@ impl Store {
         .map(|r| r.rows_affected()))?;
         if r == 1 {
             if state == "queued" {
-                self.notify_units(units::QUEUED, id).await;
+                self.notify_units(wake::QUEUED, id).await;
             }
             // Committed: the row is what was written (no read that could
             // fail after the commit and turn a stored submission into an error).
@@ -535,7 +456,7 @@ impl Store {
             .await
             .map(|_| ()))?;
         if !paused {
-            self.notify_units(units::QUEUED, "resumed").await;
+            self.notify_units(wake::QUEUED, "resumed").await;
         }
         Ok(())
     }

@@ -8,48 +8,12 @@
 //! experiments are claimed: a cancelled or failed experiment's units wait
 //! for nothing.
 
-use super::leases::{lost, Held, Lease, MAX_LOST};
-use super::{now_ms, on_pool, Db, Store};
+use super::db::{on_pool, stored_trials, Db, Store, TrialRow};
+use super::lease::{lost, Held, Lease, UnitPlace, MAX_LOST};
+use super::wake::{Wakeups, ENDED, QUEUED};
+use crate::clock::now_ms;
 use crate::zwidth::farm::{Unit, WHOLE_MAP};
 use crate::zwidth::search::StoredTrial;
-
-/// Wake-ups, so that a queued unit is claimed, and a finished one seen by
-/// its driver, without waiting out a poll: notified in this process by the
-/// writes themselves, and from other processes by PostgreSQL's
-/// `NOTIFY` (channels `zwidth_units` and `zwidth_unit_done`, sent at the
-/// commit), which [`Store::listen`] relays. Waiters poll as well (a
-/// notification may be missed while a listener reconnects).
-#[derive(Debug)]
-pub struct Wakeups {
-    /// Work was queued: units, or experiments (or the queue resumed).
-    pub queued: tokio::sync::Notify,
-    /// A unit of this experiment (its id) ended: each driver listens for
-    /// its own experiment only.
-    pub ended: tokio::sync::broadcast::Sender<String>,
-    listening: std::sync::atomic::AtomicBool,
-}
-
-impl Default for Wakeups {
-    fn default() -> Self {
-        Self {
-            queued: tokio::sync::Notify::new(),
-            ended: tokio::sync::broadcast::channel(1024).0,
-            listening: Default::default(),
-        }
-    }
-}
-
-/// The PostgreSQL channels of [`Wakeups`]: work was queued (units, or
-/// experiments), a unit ended.
-pub(super) const QUEUED: &str = "zwidth_units";
-const ENDED: &str = "zwidth_unit_done";
-
-/// Which unit of its experiment a lease holds.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct UnitPlace {
-    pub scope: i64,
-    pub col: i64,
-}
 
 /// A unit as stored.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, sqlx::FromRow, utoipa::ToSchema)]
@@ -341,7 +305,7 @@ impl Store {
                 .trials_page(&unit.experiment_id, Some(unit.scope as u32), 0, i64::MAX)
                 .await;
         }
-        let rows: Vec<super::TrialRow> = on_pool!(self, p => sqlx::query_as(
+        let rows: Vec<TrialRow> = on_pool!(self, p => sqlx::query_as(
             "SELECT scope, col, idx, point FROM trials WHERE experiment_id = $1 AND scope = $2 AND col = $3 ORDER BY idx",
         )
         .bind(&unit.experiment_id)
@@ -349,7 +313,7 @@ impl Store {
         .bind(unit.col)
         .fetch_all(p)
         .await)?;
-        Ok(super::stored_trials(rows))
+        Ok(stored_trials(rows))
     }
 
     /// Claim `rig`'s next unit for `worker`, holding it for `lease_ms`:
@@ -488,7 +452,7 @@ impl Store {
                 tx.rollback().await?;
                 return Err(lost(lease));
             }
-            super::leases::insert_trials!(tx, &lease.id, trials);
+            super::lease::insert_trials!(tx, &lease.id, trials);
             for &(scope, b) in dropped.iter().filter(|(s, _)| i64::from(*s) == at.scope) {
                 sqlx::query("DELETE FROM trials WHERE experiment_id = $1 AND scope = $2 AND b >= $3")
                     .bind(&lease.id)

@@ -10,7 +10,8 @@
 use crate::complex::Cx;
 use crate::fdm::Fdm;
 use crate::math;
-use crate::{flush, Error};
+use crate::math::flush;
+use crate::Error;
 
 /// Highest order accepted: beyond this the sections become so sharp that
 /// their rounding, not the design, dominates.

@@ -37,8 +37,9 @@
 
 use crate::error::positive;
 use crate::fdm::Fdm;
+use crate::math::flush;
 use crate::math::powi;
-use crate::{flush, Error};
+use crate::Error;
 
 /// ρ's default: 0.95.
 pub const DEFAULT_RHO: f64 = 0.95;

@@ -18,8 +18,9 @@
 //!
 //! Subnormals: the integrator state u1 is flushed below [`crate::FLUSH`].
 
+use crate::math::flush;
 use crate::math::{abs, sqrt};
-use crate::{flush, Error};
+use crate::Error;
 
 /// Range of α and λ accepted.
 pub const GAIN_MIN: f64 = 1e-12;

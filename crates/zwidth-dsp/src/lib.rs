@@ -55,21 +55,8 @@ pub use fdm::Fdm;
 pub use foaw::{Foaw, FoawFit};
 pub use kalman::{Kalman, QModel};
 pub use levant::{Discretization, ImplicitOutput, Levant};
+pub use math::{flush, FLUSH};
 pub use median::Median;
 
 /// The library's version (the agent advertises it at hello).
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
-
-/// States below this magnitude (in their SI unit) are set to 0 (see
-/// "Subnormals" above).
-pub const FLUSH: f64 = 1e-100;
-
-/// `x`, or 0 when `|x| < FLUSH` (NaN passes through).
-#[inline]
-pub fn flush(x: f64) -> f64 {
-    if math::abs(x) < FLUSH {
-        0.0
-    } else {
-        x
-    }
-}

@@ -1,5 +1,19 @@
 //! The one maths library of every build (src/lib.rs, "Rules").
 
+/// States below this magnitude (in their SI unit) are set to 0 (see
+/// "Subnormals" in lib.rs).
+pub const FLUSH: f64 = 1e-100;
+
+/// `x`, or 0 when `|x| < FLUSH` (NaN passes through).
+#[inline]
+pub fn flush(x: f64) -> f64 {
+    if abs(x) < FLUSH {
+        0.0
+    } else {
+        x
+    }
+}
+
 /// |x| by clearing the sign bit (IEEE-754 `abs`).
 #[inline]
 pub fn abs(x: f64) -> f64 {

@@ -7,7 +7,7 @@
 //! `zwidth_dsp::butterworth` (one implementation, here and on the rig); this
 //! module checks the spec with the service's messages.
 
-use super::{Sampling, VelocityEstimator};
+use super::streaming::{spec_error, Sampling, VelocityEstimator};
 use crate::error::SpecError;
 
 pub use zwidth_dsp::butterworth::{sos_step, Sos, MAX_ORDER};
@@ -36,7 +36,7 @@ fn check(order: u32, cutoff_hz: f64, fs: f64) -> Result<(), SpecError> {
 pub fn design_lowpass(order: u32, cutoff_hz: f64, fs: f64) -> Result<Vec<Sos>, SpecError> {
     check(order, cutoff_hz, fs)?;
     let (sos, n) =
-        zwidth_dsp::butterworth::design_lowpass(order, cutoff_hz, fs).map_err(super::spec_error)?;
+        zwidth_dsp::butterworth::design_lowpass(order, cutoff_hz, fs).map_err(spec_error)?;
     Ok(sos[..n].to_vec())
 }
 
@@ -49,7 +49,7 @@ impl Butterworth {
         check(order, cutoff_hz, s.rate_hz)?;
         zwidth_dsp::Butterworth::new(cutoff_hz, order, s.rate_hz)
             .map(Self)
-            .map_err(super::spec_error)
+            .map_err(spec_error)
     }
 
     pub fn sections(&self) -> &[Sos] {

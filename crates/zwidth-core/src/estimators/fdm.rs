@@ -3,7 +3,7 @@
 //! implementation is `zwidth_dsp::Fdm` (one implementation, here and on
 //! the rig).
 
-use super::VelocityEstimator;
+use super::streaming::VelocityEstimator;
 
 #[derive(Debug, Clone)]
 pub struct Fdm(zwidth_dsp::Fdm);

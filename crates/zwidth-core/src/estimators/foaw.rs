@@ -38,7 +38,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::VelocityEstimator;
+use super::streaming::{spec_error, VelocityEstimator};
 use crate::error::SpecError;
 use zwidth_dsp::estimator::RIG_FOAW_WINDOW;
 
@@ -117,7 +117,7 @@ impl Foaw {
         } else {
             zwidth_dsp::Foaw::new(fit, d, w, tol, t).map(|f| Foaw::Large(Box::new(f)))
         };
-        built.map_err(super::spec_error)
+        built.map_err(spec_error)
     }
 
     /// Window length n used for the last estimate (0 before the second sample).

@@ -37,7 +37,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Sampling, VelocityEstimator};
+use super::streaming::{spec_error, Sampling, VelocityEstimator};
 use crate::error::{require_positive, SpecError};
 
 pub use zwidth_dsp::kalman::DEFAULT_RHO;
@@ -89,7 +89,7 @@ impl Kalman {
                 zwidth_dsp::Error::Parameter {
                     name: "q", value, ..
                 } => SpecError::new("q", value, "q·T⁵ overflows; use a smaller q"),
-                e => super::spec_error(e),
+                e => spec_error(e),
             })
     }
 

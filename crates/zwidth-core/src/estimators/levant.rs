@@ -26,7 +26,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::VelocityEstimator;
+use super::streaming::VelocityEstimator;
 use crate::error::{require_positive, require_range, SpecError};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, utoipa::ToSchema)]

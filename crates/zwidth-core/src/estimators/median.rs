@@ -3,7 +3,7 @@
 //! rig's cap in the rig's state, longer ones (up to `MAX_MEDIAN_WINDOW`)
 //! in the simulator's; boxed, so an estimator stays small.
 
-use super::MAX_MEDIAN_WINDOW;
+use super::streaming::MAX_MEDIAN_WINDOW;
 use crate::error::SpecError;
 use zwidth_dsp::estimator::RIG_MEDIAN;
 

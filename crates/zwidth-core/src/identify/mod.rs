@@ -17,6 +17,7 @@
 //! and the blocks' spread gives a Student-t interval (batch means), honest
 //! about the windows' overlap that a residual-based covariance ignores.
 
+pub mod estimate;
 pub mod mode;
 pub mod record;
 pub mod trace;
@@ -25,6 +26,7 @@ use serde::Serialize;
 
 use crate::error::SpecError;
 use crate::zwidth::stats::student_t_quantile;
+pub use estimate::Estimate;
 pub use trace::Trace;
 
 /// The window φ(τ) = (τ(1 − τ))^N on τ ∈ [0, 1]. φ and its derivatives
@@ -70,16 +72,6 @@ pub enum Model {
     /// from the response around the mode; the encoder on the motor side
     /// ([`mode`]).
     TwoMass,
-}
-
-/// One identified parameter with its 95 % interval (SI units).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Estimate {
-    pub value: f64,
-    /// Standard error (from the blocks' spread).
-    pub std_error: f64,
-    pub lo: f64,
-    pub hi: f64,
 }
 
 /// What `identify` found.

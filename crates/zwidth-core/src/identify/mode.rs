@@ -28,7 +28,8 @@
 use num_complex::Complex64 as C;
 use serde::Serialize;
 
-use super::{Estimate, Trace};
+use super::estimate::Estimate;
+use super::trace::Trace;
 use crate::error::SpecError;
 use crate::linalg::{identity, solve_scaled, Mat};
 use crate::spectral::LineAnalyzer;

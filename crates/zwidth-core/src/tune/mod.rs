@@ -489,17 +489,6 @@ fn accuracy_name(a: &Accuracy) -> String {
 }
 
 impl TuneResult {
-    /// The objective against the parameter, every evaluation, the
-    /// finalists marked (`plots::landscape_svg`); with a Pareto objective,
-    /// the front over all search evaluations (`plots::pareto_svg`).
-    pub fn svg(&self) -> Result<String, String> {
-        if let Objective::Pareto(ms) = &self.objective {
-            return plots::pareto_svg(ms, &self.history).map(|(s, _)| s);
-        }
-        let params: Vec<String> = self.best.params.keys().cloned().collect();
-        plots::landscape_svg(&params, &self.objective, &self.history, ("search", "final"))
-    }
-
     /// Every evaluation as CSV: index, phase, each parameter, the four
     /// measures, score, feasible, cached, elapsed, replicate (final maps on
     /// a noisy scene: which probe seed), the K-width interval.

@@ -4,7 +4,7 @@
 //! search evaluations. Drawn from the evaluations so far, so a running
 //! tune's page and its finished SVG are the same picture.
 
-use super::{metric_name, Evaluation, Metric, Objective};
+use super::{metric_name, Evaluation, Metric, Objective, TuneResult};
 use crate::plot::{scatter_svg, Mark, Scatter};
 
 /// A metric on an axis, with its unit.
@@ -188,6 +188,19 @@ pub fn pareto_svg(metrics: &[Metric], history: &[Evaluation]) -> Result<(String,
         (900, 540),
     )?;
     Ok((svg, front.len()))
+}
+
+impl TuneResult {
+    /// The objective against the parameter, every evaluation, the
+    /// finalists marked (`landscape_svg`); with a Pareto objective,
+    /// the front over all search evaluations (`pareto_svg`).
+    pub fn svg(&self) -> Result<String, String> {
+        if let Objective::Pareto(ms) = &self.objective {
+            return pareto_svg(ms, &self.history).map(|(s, _)| s);
+        }
+        let params: Vec<String> = self.best.params.keys().cloned().collect();
+        landscape_svg(&params, &self.objective, &self.history, ("search", "final"))
+    }
 }
 
 #[cfg(test)]

@@ -1,7 +1,7 @@
 //! Bisection along K at one B (the searches' inner loop), pure: it sees
 //! only a verdict closure, so a scripted verdict can test it.
 
-use super::search::Point;
+use super::point::Point;
 
 /// Where a bisection along K starts, how far it may go and how fine it ends.
 #[derive(Debug, Clone, Copy)]

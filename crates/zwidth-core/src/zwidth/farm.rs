@@ -9,10 +9,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::observer::Observer;
-use super::search::{column_observed, map_observed};
+use super::control::RunControl;
 use super::settings::MapSpec;
-use crate::error::SpecError;
 
 /// One unit of map `scope` of an experiment.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -42,7 +40,7 @@ pub const WHOLE_MAP: i64 = -1;
 /// workers claim from).
 pub trait Farm: Send + Sync {
     /// Have `units` of map `scope` (whose spec is `spec`) computed, and
-    /// their trials added to `observer`'s replay ([`Observer::add_done`]);
+    /// their trials added to `observer`'s replay ([`RunControl::add_done`]);
     /// block until every one is, calling `done(n)` as the count of finished
     /// ones grows. Return early (Ok) once `observer` is cancelled. Err: why
     /// a unit cannot be computed (the map stops, failed with it).
@@ -51,7 +49,7 @@ pub trait Farm: Send + Sync {
         scope: u32,
         spec: &MapSpec,
         units: &[Unit],
-        observer: &Observer,
+        observer: &dyn RunControl,
         done: &(dyn Fn(usize) + Sync),
     ) -> Result<(), String>;
 
@@ -63,26 +61,12 @@ pub trait Farm: Send + Sync {
     }
 }
 
-/// Compute `unit` of map `scope` (the work of one claimed unit), its trials
-/// going to `observer` (which replays what an earlier attempt stored):
-/// the column's search, or the whole map.
-pub fn run_unit(
-    spec: &MapSpec,
-    scope: u32,
-    unit: Unit,
-    observer: std::sync::Arc<Observer>,
-) -> Result<(), SpecError> {
-    match unit {
-        Unit::Column { b, .. } => column_observed(spec, b, observer, scope),
-        Unit::Map => map_observed(spec, Some(observer), scope).map(|_| ()),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::zwidth::observer::StoredTrial;
-    use crate::zwidth::search::{map, map_observed, MapResult};
+    use crate::zwidth::observer::Observer;
+    use crate::zwidth::point::StoredTrial;
+    use crate::zwidth::search::{map, map_observed, run_unit, MapResult};
     use std::sync::{Arc, Mutex};
 
     /// A farm in this process: each unit computed by `run_unit` on an
@@ -100,7 +84,7 @@ mod tests {
             scope: u32,
             spec: &MapSpec,
             units: &[Unit],
-            observer: &Observer,
+            observer: &dyn RunControl,
             done: &(dyn Fn(usize) + Sync),
         ) -> Result<(), String> {
             self.calls.lock().unwrap().push((scope, units.to_vec()));
@@ -271,7 +255,7 @@ mod tests {
             scope: u32,
             spec: &MapSpec,
             units: &[Unit],
-            observer: &Observer,
+            observer: &dyn RunControl,
             done: &(dyn Fn(usize) + Sync),
         ) -> Result<(), String> {
             self.0.run(scope, spec, units, observer, done)

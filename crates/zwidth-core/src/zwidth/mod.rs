@@ -4,12 +4,16 @@
 pub mod analytic;
 mod bisect;
 pub mod bla;
+pub mod classify;
 pub mod compare;
+pub mod control;
 pub mod controller;
 pub mod cost;
+pub mod evaluator;
 pub mod farm;
 pub mod hit;
 pub mod observer;
+pub mod point;
 pub mod poly;
 pub mod probe;
 pub mod scene;

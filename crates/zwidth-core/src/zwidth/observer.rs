@@ -5,23 +5,8 @@
 
 use serde::Serialize;
 
-use super::search::Point;
-
-/// A finished trial of map `scope` within one experiment, with its place
-/// in the map: `column` is the position of its B in the map's B list (the
-/// automatic range counts from B = 0), `index` its order among that
-/// column's trials. Stored trials are listed by (scope, column, index):
-/// the order the map's own search visits them, whatever the thread count,
-/// the worker or the interruptions.
-#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize, utoipa::ToSchema)]
-pub struct StoredTrial {
-    pub scope: u32,
-    #[serde(default)]
-    pub column: u32,
-    #[serde(default)]
-    pub index: u32,
-    pub point: Point,
-}
+use super::control::RunControl;
+use super::point::StoredTrial;
 
 /// Shared with whoever runs a map: trials done so far, a cancel flag the
 /// searches honour between trials (a cancelled map ends within one trial),
@@ -331,9 +316,32 @@ impl Observer {
     }
 }
 
+impl RunControl for Observer {
+    fn cancelled(&self) -> bool {
+        Observer::cancelled(self)
+    }
+    fn cancel(&self) {
+        self.cancel
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+    fn fail(&self, why: String) {
+        Observer::fail(self, why)
+    }
+    fn set_elsewhere(&self, scope: u32, n: usize) {
+        Observer::set_elsewhere(self, scope, n)
+    }
+    fn set_waiting(&self, why: Option<String>) {
+        Observer::set_waiting(self, why)
+    }
+    fn add_done(&self, trials: Vec<StoredTrial>) {
+        Observer::add_done(self, trials)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::zwidth::point::Point;
 
     #[test]
     fn a_run_is_stopped_only_past_its_trial_limit() {

@@ -15,97 +15,15 @@ use rayon::prelude::*;
 use serde::Serialize;
 use std::time::Instant;
 
-use super::analytic::{ImpedanceCurve, LinearModel};
-use super::bisect::{bisect_k, Bracket};
+use super::classify::{whole_map_unit, Classifier};
 use super::cost::Cost;
-use super::hit::{replicated_hits, wall_hit, NoTrace};
-pub use super::observer::{Observer, StoredEvaluation, StoredTrial};
-use super::probe::{probe_with, ProbeSetup};
-use super::scene::{validate_wall, ProbeMethod, Scene, SceneSpec};
+pub use super::evaluator::{noisy_verdicts, Evaluator};
+use super::farm::Unit;
+pub use super::observer::{Observer, StoredEvaluation};
+pub use super::point::{BoundaryPoint, Point, StoredTrial};
+use super::scene::validate_wall;
 use super::settings::{Criterion, MapSpec, Method, Resolved, SearchKind};
 use crate::error::SpecError;
-
-/// One evaluated (K, B).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, serde::Deserialize, utoipa::ToSchema)]
-pub struct Point {
-    pub k: f64,
-    pub b: f64,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub stable: Option<bool>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub passive: Option<bool>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub fidelity: Option<f64>,
-    /// Noisy scenes: whether the verdict was decided at the scene's
-    /// confidence (false: undecided, `passive` is the sign of `margin`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub decided: Option<bool>,
-    /// Noisy scenes: min over the lines of Re Z of the best linear
-    /// approximation (N·s/m) and its standard error.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub margin: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub margin_se: Option<f64>,
-    /// Noisy scenes: random-phase realizations the verdict took (the
-    /// frequency engine's BLA), or hits (the time engine's
-    /// `hit.replicates`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub realizations: Option<u32>,
-    /// Simulations: true when the device's force limit clipped the wall
-    /// force during the trial (the verdict then reflects the actuator too).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub saturated: Option<bool>,
-}
-
-impl Point {
-    /// Decided passive (or stable): certain at the stated confidence.
-    pub fn surely_ok(&self) -> bool {
-        self.ok() && self.decided != Some(false)
-    }
-
-    /// Decided not passive (or unstable).
-    pub fn surely_not_ok(&self) -> bool {
-        !self.ok() && self.decided != Some(false)
-    }
-
-    pub fn ok(&self) -> bool {
-        self.stable.or(self.passive).unwrap_or(false)
-    }
-}
-
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
-pub struct BoundaryPoint {
-    /// Wall damping B (N·s/m).
-    pub b: f64,
-    /// Largest stiffness that renders at this B (N/m).
-    pub k_max: f64,
-    /// Noisy scenes: the confidence interval of `k_max` (N/m), from the
-    /// largest K decided passive to the smallest decided not passive
-    /// (`bisect::interval`); `k_hi` is absent when nothing up to `k_max`
-    /// of the map was decided not passive.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub k_lo: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub k_hi: Option<f64>,
-}
-
-impl BoundaryPoint {
-    pub fn new(b: f64, k_max: f64) -> Self {
-        Self {
-            b,
-            k_max,
-            ..Self::default()
-        }
-    }
-
-    /// Nothing renders at this B, surely: no K rendered and, on a noisy
-    /// scene, the smallest K searched (`k_floor`) was decided not passive.
-    /// An empty column whose upper bound lies above `k_floor` may still
-    /// render (its verdicts there were undecided).
-    pub fn surely_empty(&self, k_floor: f64) -> bool {
-        self.k_max == 0.0 && self.k_hi.is_none_or(|h| h <= k_floor)
-    }
-}
 
 #[derive(Debug, Clone, Serialize)]
 pub struct MapResult {
@@ -143,392 +61,6 @@ pub struct MapResult {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub saturation: Option<String>,
     pub elapsed_s: f64,
-}
-
-/// Whether engine `method` gives verdicts with a confidence on `scene`:
-/// the BLA probe of a scene with friction or quantization (a nonlinear
-/// frequency-domain probe), or replicated wall hits.
-pub fn noisy_verdicts(scene: &SceneSpec, method: Method) -> bool {
-    let d = &scene.device;
-    let nonlinear_probe = method == Method::Frequency && (d.coulomb > 0.0 || d.quantization > 0.0);
-    (nonlinear_probe && scene.probe.method == ProbeMethod::Bla)
-        || (method == Method::Time && scene.hit.replicates > 1)
-}
-
-/// The chosen engine for one scene and criterion.
-pub struct Evaluator {
-    pub scene: Scene,
-    pub method: Method,
-    pub criterion: Criterion,
-    pub res: Resolved,
-    model: Option<LinearModel>,
-    probe_setup: Option<ProbeSetup>,
-    observer: Option<std::sync::Arc<Observer>>,
-    scope: u32,
-    /// The map's B list, by the bits of each B: a trial's column (B values
-    /// not in it, and evaluators outside a map, count as column 0).
-    columns: std::collections::HashMap<u64, u32>,
-    /// The accuracy as specified (a remote trial resolves it again, on the
-    /// same scene, to the same `res`); set by the map.
-    accuracy: Option<super::settings::Accuracy>,
-}
-
-impl Evaluator {
-    /// Resolve `auto`, and check the engine can answer the criterion.
-    pub fn new(
-        scene: Scene,
-        method: Method,
-        criterion: Criterion,
-        res: Resolved,
-    ) -> Result<Self, SpecError> {
-        let method = match method {
-            Method::Auto if scene.is_linear() => Method::Analytic,
-            Method::Auto => match criterion {
-                Criterion::Stability => Method::Time,
-                Criterion::Impedance => Method::Frequency,
-                Criterion::StrictPassivity => {
-                    return Err(SpecError::new(
-                        "criterion",
-                        "strict_passivity",
-                        format!(
-                            "needs the analytic engine, and this scene is not linear ({})",
-                            scene.linear_reason().unwrap_or_default()
-                        ),
-                    ))
-                }
-            },
-            m => m,
-        };
-        let d = &scene.spec.device;
-        if criterion == Criterion::StrictPassivity
-            && (d.amplifier_hz.is_some() || d.transmission.is_some())
-        {
-            return Err(SpecError::new(
-                "criterion",
-                "strict_passivity",
-                "Colgate & Schenkel's condition is for a rigid device driven without lag; with device.amplifier_hz or device.transmission use impedance or stability",
-            ));
-        }
-        let bad = |allowed: &str| {
-            Err(SpecError::new(
-                "criterion",
-                format!("{criterion:?}").to_lowercase(),
-                format!(
-                    "method {} answers {allowed} only",
-                    format!("{method:?}").to_lowercase()
-                ),
-            ))
-        };
-        match (method, criterion) {
-            (Method::Time, Criterion::Stability)
-            | (Method::Frequency, Criterion::Impedance)
-            | (Method::Analytic, _) => {}
-            (Method::Time, _) => return bad("stability"),
-            (Method::Frequency, _) => return bad("impedance"),
-            (Method::Auto, _) => unreachable!("resolved above"),
-        }
-        let model = if method == Method::Analytic {
-            Some(LinearModel::new(&scene)?)
-        } else {
-            None
-        };
-        let probe_setup = (method == Method::Frequency).then(|| ProbeSetup::new(&scene));
-        Ok(Self {
-            scene,
-            method,
-            criterion,
-            res,
-            model,
-            probe_setup,
-            observer: None,
-            scope: 0,
-            columns: std::collections::HashMap::new(),
-            accuracy: None,
-        })
-    }
-
-    pub fn model_description(&self) -> String {
-        let s = &self.scene.spec;
-        let est = s.estimator.label();
-        match self.method {
-            Method::Analytic => format!(
-                "analytic: linear single-rate loop at {} Hz, ZOH plant m = {} kg, b = {} N·s/m{}, estimator {est} (exact V(z)), delay {} samples",
-                s.control.sample_hz,
-                s.device.mass,
-                s.device.damping,
-                drive_description(&s.device),
-                s.control.delay_samples
-            ),
-            Method::Time | Method::Frequency => {
-                let mut parts = vec![format!("exact ZOH plant m = {} kg, b = {} N·s/m", s.device.mass, s.device.damping)];
-                match (&s.device.friction, s.device.coulomb > 0.0) {
-                    (Some(f), _) => parts.push(format!(
-                        "LuGre friction on the {} F_c = {} N, F_s = {} N, v_s = {} m/s, σ0 = {} N/m, σ1 = {} N·s/m",
-                        if f.on == super::scene::FrictionSide::Motor { "motor side" } else { "handle" },
-                        s.device.coulomb,
-                        s.device.static_friction(),
-                        f.stribeck_velocity,
-                        f.bristle_stiffness,
-                        f.bristle_damping
-                    )),
-                    (None, true) => {
-                        parts.push(format!("Coulomb stick-slip f_c = {} N", s.device.coulomb))
-                    }
-                    (None, false) => {}
-                }
-                if s.device.quantization > 0.0 {
-                    parts.push(format!("quantization {} m", s.device.quantization));
-                }
-                if let Some(f) = s.device.force_limit {
-                    parts.push(format!("saturation ±{f} N"));
-                }
-                if let Some(r) = s.device.force_resolution {
-                    parts.push(format!("force command in steps of {r} N"));
-                }
-                let drive = drive_description(&s.device);
-                if !drive.is_empty() {
-                    parts.push(drive.trim_start_matches(", ").to_string());
-                }
-                parts.push(format!("encoder {} Hz, render {} Hz, delay {}", s.control.sample_hz, s.control.render_hz, s.control.delay_samples));
-                parts.push(format!("estimator {est}"));
-                let noisy = self.noisy();
-                let kind = if self.method == Method::Time && noisy {
-                    format!(
-                        "time-domain wall-hit simulation ({} replicate hits per verdict, each started a further 1/{} encoder step from the wall; the majority decides, decided only when all agree)",
-                        s.hit.replicates, s.hit.replicates
-                    )
-                } else if self.method == Method::Time {
-                    "time-domain wall-hit simulation".to_string()
-                } else if noisy {
-                    format!(
-                        "frequency-domain multisine simulation (bilateral wall; best linear approximation from random-phase realizations, seed {} shared by every map with this seed, verdicts at {} % confidence)",
-                        s.probe.seed,
-                        100.0 * s.probe.confidence
-                    )
-                } else if self.method == Method::Frequency
-                    && (s.device.coulomb > 0.0 || s.device.quantization > 0.0)
-                {
-                    format!(
-                        "frequency-domain multisine simulation (bilateral wall; the 2018 paper's tfestimate verdict: one Schroeder multisine, {} periods Welch-averaged, taken as certain: no confidence, no intervals)",
-                        super::probe::tfestimate_periods(self.res.probe.periods)
-                    )
-                } else {
-                    "frequency-domain multisine simulation (bilateral wall)".to_string()
-                };
-                format!("{kind}: {}", parts.join(", "))
-            }
-            Method::Auto => unreachable!(),
-        }
-    }
-
-    fn probe(&self, k: f64, b: f64) -> super::probe::ProbeOutcome {
-        let setup = self
-            .probe_setup
-            .as_ref()
-            .expect("frequency method has a probe setup");
-        probe_with(setup, &self.scene, k, b, self.res.probe)
-    }
-
-    /// The impedance curve at (K, B) from whichever engine can give one.
-    pub fn impedance(&self, k: f64, b: f64) -> Option<ImpedanceCurve> {
-        match (&self.model, self.method) {
-            (Some(m), _) => Some(m.impedance(k, b)),
-            (None, Method::Frequency) => Some(self.probe(k, b).impedance),
-            _ => None,
-        }
-    }
-
-    pub fn classify(&self, k: f64, b: f64) -> Point {
-        let mut p = Point {
-            k,
-            b,
-            ..Point::default()
-        };
-        if let Some(o) = &self.observer {
-            if o.cancelled() {
-                // Every search ends quickly once nothing renders.
-                p.passive = Some(false);
-                return p;
-            }
-            o.wait_while_held();
-            o.count_trial();
-            let column = self.columns.get(&b.to_bits()).copied().unwrap_or(0);
-            let index = o.next_index(self.scope, column);
-            let trial = |point: Point| StoredTrial {
-                scope: self.scope,
-                column,
-                index,
-                point,
-            };
-            if let Some(done) = o.replay(self.scope, k, b) {
-                // Stored without its place (by an older version, or by an
-                // attached rig's result before the search took it): store
-                // the place again.
-                if (done.column, done.index) != (column, index) {
-                    o.record(trial(done.point.clone()));
-                }
-                return done.point;
-            }
-            let p = match (o.backend(), &self.accuracy) {
-                (Some(backend), Some(accuracy)) => {
-                    let request = super::trial::TrialRequest {
-                        scope: self.scope,
-                        k,
-                        b,
-                        scene: self.scene.spec.clone(),
-                        method: self.method,
-                        criterion: self.criterion,
-                        accuracy: accuracy.clone(),
-                    };
-                    match backend.trial(&request, o) {
-                        Some(p) => p,
-                        // Cancelled while the trial was out: end as a cancel does.
-                        None => {
-                            p.passive = Some(false);
-                            return p;
-                        }
-                    }
-                }
-                _ => self.evaluate(p),
-            };
-            o.record(trial(p.clone()));
-            return p;
-        }
-        self.evaluate(p)
-    }
-
-    /// The verdict at (K, B) from this process's engines (what a remote
-    /// trial computes too: `trial::run`).
-    pub(super) fn evaluate_point(&self, k: f64, b: f64) -> Point {
-        self.evaluate(Point {
-            k,
-            b,
-            ..Point::default()
-        })
-    }
-
-    fn evaluate(&self, mut p: Point) -> Point {
-        let (k, b) = (p.k, p.b);
-        match (self.criterion, &self.model) {
-            (Criterion::Stability, Some(m)) => p.stable = Some(m.spectral_radius(k, b) < 1.0),
-            (Criterion::Stability, None) if self.scene.spec.hit.replicates > 1 => {
-                let r = replicated_hits(&self.scene, k, b, self.res.hit);
-                p.stable = Some(r.stable());
-                p.decided = Some(r.decided());
-                p.realizations = Some(r.hits);
-                p.saturated = r.saturated.then_some(true);
-            }
-            (Criterion::Stability, None) => {
-                let o = wall_hit(&self.scene, k, b, self.res.hit, &mut NoTrace);
-                p.stable = Some(o.stable);
-                p.saturated = (o.saturated_renders > 0).then_some(true);
-            }
-            (Criterion::Impedance, Some(m)) => {
-                let c = m.impedance(k, b);
-                p.passive = Some(c.passive);
-                p.fidelity = Some(c.fidelity);
-            }
-            (Criterion::Impedance, None) => {
-                let o = self.probe(k, b);
-                p.passive = Some(o.passive);
-                p.fidelity = Some(o.impedance.fidelity);
-                p.saturated = (o.saturated_renders > 0).then_some(true);
-                if let Some(c) = o.confidence {
-                    p.decided = Some(c.decided);
-                    p.margin = Some(c.margin);
-                    p.margin_se = Some(c.margin_se);
-                    p.realizations = Some(c.realizations);
-                }
-            }
-            (Criterion::StrictPassivity, Some(m)) => {
-                p.passive = Some(
-                    m.strict_passivity_range(b)
-                        .is_some_and(|(lo, hi)| k >= lo && k <= hi),
-                );
-                p.fidelity = Some(m.impedance(k, b).fidelity);
-            }
-            (Criterion::StrictPassivity, None) => unreachable!("checked in new()"),
-        }
-        p
-    }
-
-    /// Whether verdicts carry uncertainty: a simulation with friction or
-    /// quantization, judged by the BLA verdict (`bla.rs`). The
-    /// `tfestimate` baseline takes its verdicts as certain.
-    /// Verdicts with a confidence, so boundaries with intervals: the BLA
-    /// probe of a nonlinear scene, or replicated wall hits.
-    pub fn noisy(&self) -> bool {
-        noisy_verdicts(&self.scene.spec, self.method)
-    }
-
-    /// The farm this map's units go to, if any.
-    fn farm(&self) -> Option<&std::sync::Arc<dyn super::farm::Farm>> {
-        self.observer.as_ref().and_then(|o| o.farm())
-    }
-
-    /// With a farm: have `units` of this map computed elsewhere, their
-    /// trials then replayed here. A unit that cannot be computed stops the
-    /// map, failed with the reason. Without a farm: nothing (the map
-    /// computes them itself).
-    fn farm_units(
-        &self,
-        spec: &MapSpec,
-        units: &[super::farm::Unit],
-        done: &(dyn Fn(usize) + Sync),
-    ) {
-        let (Some(o), Some(farm)) = (&self.observer, self.farm()) else {
-            return;
-        };
-        // A whole-map unit's columns came with it.
-        let columns = units
-            .iter()
-            .any(|u| matches!(u, super::farm::Unit::Column { .. }));
-        if o.cancelled() || (columns && whole_map_unit(spec, self)) {
-            return;
-        }
-        if let Err(why) = farm.run(self.scope, spec, units, o, done) {
-            o.fail(why);
-        }
-    }
-
-    /// Tell the observer (if any) this map is `fraction` done.
-    fn report(&self, fraction: f64) {
-        if let Some(o) = &self.observer {
-            o.report(self.scope, fraction);
-        }
-    }
-
-    /// Largest K that renders at B: bracket from `k0`, then bisect. With
-    /// `robust`, K values below the result are checked as well (see
-    /// `SearchKind::RobustBisect`).
-    fn bisect_k(
-        &self,
-        b: f64,
-        k0: f64,
-        k_cap: f64,
-        robust: bool,
-        points: &mut Vec<Point>,
-    ) -> Option<f64> {
-        let bounds = Bracket {
-            k0,
-            k_cap,
-            rel_tol: self.res.k_rel_tol,
-        };
-        bisect_k(|k| self.classify(k, b), bounds, robust, points)
-    }
-
-    /// The confidence interval of a boundary point found by `bisect_k`.
-    fn interval(&self, bp: &mut BoundaryPoint, k0: f64, k_cap: f64, points: &mut Vec<Point>) {
-        let bounds = Bracket {
-            k0,
-            k_cap,
-            rel_tol: self.res.k_rel_tol,
-        };
-        let (lo, hi) =
-            super::bisect::interval(|k| self.classify(k, bp.b), bp.k_max, bounds, points);
-        bp.k_lo = Some(lo.min(bp.k_max));
-        bp.k_hi = Some(hi.unwrap_or(k_cap).max(bp.k_max));
-    }
 }
 
 /// Run a map.
@@ -634,25 +166,6 @@ fn saturation_note(points: &[Point], boundary: &[BoundaryPoint], limit: f64) -> 
     ))
 }
 
-/// The amplifier lag and transmission a device names, as ", …" (or "").
-fn drive_description(d: &super::scene::DeviceSpec) -> String {
-    let mut s = String::new();
-    if let Some(t) = &d.transmission {
-        s.push_str(&format!(
-            ", two-mass transmission (motor side {} kg, {} N·s/m; cable {} N/m, {} N·s/m; encoder on the {})",
-            t.motor_mass,
-            t.motor_damping,
-            t.stiffness,
-            t.damping,
-            if t.encoder == super::scene::EncoderSide::Motor { "motor" } else { "handle" }
-        ));
-    }
-    if let Some(fa) = d.amplifier_hz {
-        s.push_str(&format!(", amplifier lag {fa} Hz"));
-    }
-    s
-}
-
 /// Run a map, reporting trials to and honouring cancellation from
 /// `observer`; `scope` names this map within its experiment.
 pub fn map_observed(
@@ -667,7 +180,7 @@ pub fn map_observed(
     // forms) are one unit of work each: with a farm, the whole map is
     // computed elsewhere and replayed here.
     if whole_map_unit(spec, &ev) {
-        ev.farm_units(spec, &[super::farm::Unit::Map], &|_| {});
+        ev.farm_units(spec, &[Unit::Map], &|_| {});
     }
     let (boundary, points) = match (spec.search, ev.criterion, &ev.model) {
         (_, Criterion::StrictPassivity, Some(m)) => {
@@ -753,8 +266,9 @@ fn map_evaluator(
     spec: &MapSpec,
     observer: Option<std::sync::Arc<Observer>>,
     scope: u32,
-) -> Result<(Evaluator, Vec<f64>), SpecError> {
-    let (mut ev, _) = prepare(spec)?;
+) -> Result<(Classifier, Vec<f64>), SpecError> {
+    let (ev, _) = prepare(spec)?;
+    let mut ev = Classifier::new(ev);
     ev.accuracy = Some(spec.accuracy.clone());
     ev.observer = observer;
     ev.scope = scope;
@@ -772,12 +286,6 @@ fn map_evaluator(
         ev.columns.entry(b.to_bits()).or_insert(i as u32);
     }
     Ok((ev, b_auto))
-}
-
-/// Whether a map is one unit of work (a trace, the analytic engine), not
-/// one per column.
-fn whole_map_unit(spec: &MapSpec, ev: &Evaluator) -> bool {
-    spec.search == SearchKind::Trace || ev.model.is_some()
 }
 
 /// Compute one column of map `scope` (a farmed unit, see `farm.rs`): the
@@ -811,6 +319,21 @@ pub fn column_observed(
     }
     ev.report(1.0);
     Ok(())
+}
+
+/// Compute `unit` of map `scope` (the work of one claimed unit), its trials
+/// going to `observer` (which replays what an earlier attempt stored):
+/// the column's search, or the whole map.
+pub fn run_unit(
+    spec: &MapSpec,
+    scope: u32,
+    unit: Unit,
+    observer: std::sync::Arc<Observer>,
+) -> Result<(), SpecError> {
+    match unit {
+        Unit::Column { b, .. } => column_observed(spec, b, observer, scope),
+        Unit::Map => map_observed(spec, Some(observer), scope).map(|_| ()),
+    }
 }
 
 /// The K-width and B-width intervals from the boundary's: K-width lies
@@ -878,7 +401,7 @@ fn planned_b(boundary: &[BoundaryPoint], n_auto: usize, b_step: f64) -> usize {
 
 /// One column of a bisection map: the largest K that renders at `b`, with
 /// its interval on a noisy scene, and the trials that found it.
-fn bisect_column(ev: &Evaluator, spec: &MapSpec, b: f64) -> (BoundaryPoint, Vec<Point>) {
+fn bisect_column(ev: &Classifier, spec: &MapSpec, b: f64) -> (BoundaryPoint, Vec<Point>) {
     let mut pts = Vec::new();
     let robust = spec.search == SearchKind::RobustBisect;
     let k = ev.bisect_k(b, ev.res.k_step, spec.k_max, robust, &mut pts);
@@ -890,16 +413,16 @@ fn bisect_column(ev: &Evaluator, spec: &MapSpec, b: f64) -> (BoundaryPoint, Vec<
 }
 
 /// The units of the columns at `bs` (each B's place in the map's list).
-fn column_units(ev: &Evaluator, bs: &[f64]) -> Vec<super::farm::Unit> {
+fn column_units(ev: &Classifier, bs: &[f64]) -> Vec<Unit> {
     bs.iter()
-        .map(|&b| super::farm::Unit::Column {
+        .map(|&b| Unit::Column {
             column: ev.columns.get(&b.to_bits()).copied().unwrap_or(0),
             b,
         })
         .collect()
 }
 
-fn bisect_all(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
+fn bisect_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
     let one = |b: f64| bisect_column(ev, spec, b);
     if let Some(bs) = &spec.b {
         // With a farm, every column is computed elsewhere first (in
@@ -991,7 +514,7 @@ fn end_of_auto_range(
         .map(|i| i + 1)
 }
 
-fn trace(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
+fn trace(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
     let step = ev.res.k_step;
     let (mut boundary, mut points) = (Vec::new(), Vec::new());
     let mut eval = |k: f64, b: f64| {
@@ -1035,13 +558,13 @@ fn trace(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>,
 }
 
 /// The K values of a grid map's columns: up to 60 steps of `k_step`.
-fn grid_ks(ev: &Evaluator, spec: &MapSpec) -> Vec<f64> {
+fn grid_ks(ev: &Classifier, spec: &MapSpec) -> Vec<f64> {
     let step = ev.res.k_step;
     let nk = ((spec.k_max / step).floor() as usize).clamp(1, 60);
     (1..=nk).map(|i| i as f64 * step).collect()
 }
 
-fn grid(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
+fn grid(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
     let ks = grid_ks(ev, spec);
     let bs = spec
         .b
@@ -1081,6 +604,7 @@ fn grid(ev: &Evaluator, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::zwidth::hit::NoTrace;
     use crate::zwidth::scene::SceneSpec;
 
     fn bp(b: f64, k_max: f64) -> BoundaryPoint {
@@ -1636,8 +1160,8 @@ mod tests {
             res,
         )
         .unwrap();
-        assert_eq!(ev.classify(30_000.0, 0.0).passive, Some(false));
-        assert_eq!(ev.classify(20_000.0, 0.0).passive, Some(true));
+        assert_eq!(ev.evaluate_point(30_000.0, 0.0).passive, Some(false));
+        assert_eq!(ev.evaluate_point(20_000.0, 0.0).passive, Some(true));
         // A linear scene on `auto` is answered by the analytic engine.
         let ev = Evaluator::new(sc.clone(), Method::Auto, Criterion::Stability, res).unwrap();
         assert_eq!(ev.method, Method::Analytic);

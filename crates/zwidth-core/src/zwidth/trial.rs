@@ -8,9 +8,10 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::observer::Observer;
+use super::control::RunControl;
+use super::evaluator::{noisy_verdicts, Evaluator};
+use super::point::Point;
 use super::scene::SceneSpec;
-use super::search::{Evaluator, Point};
 use super::settings::{Accuracy, Criterion, Method};
 use crate::error::SpecError;
 
@@ -33,7 +34,7 @@ pub struct TrialRequest {
 /// when the run was cancelled meanwhile (see `observer.cancelled()`): the
 /// search then ends as it does on a cancel.
 pub trait TrialBackend: Send + Sync {
-    fn trial(&self, request: &TrialRequest, observer: &Observer) -> Option<Point>;
+    fn trial(&self, request: &TrialRequest, observer: &dyn RunControl) -> Option<Point>;
 }
 
 /// Run a trial in this process, as the map's own search would.
@@ -69,7 +70,7 @@ impl TrialRequest {
         }
         let scene = self.scene.validate().map_err(|e| e.within("scene"))?;
         let res = self.accuracy.resolve(&scene)?;
-        let noisy = super::search::noisy_verdicts(&scene.spec, self.method);
+        let noisy = noisy_verdicts(&scene.spec, self.method);
         let max_realizations = match self.criterion {
             Criterion::Stability => scene.spec.hit.replicates,
             _ => res.probe.realizations,
@@ -427,6 +428,7 @@ mod verdict_tests {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::zwidth::observer::Observer;
     use crate::zwidth::search::{map, map_observed};
     use crate::zwidth::settings::MapSpec;
     use std::sync::atomic::{AtomicUsize, Ordering};
@@ -437,7 +439,7 @@ mod tests {
     #[derive(Default)]
     struct OverTheWire(AtomicUsize);
     impl TrialBackend for OverTheWire {
-        fn trial(&self, request: &TrialRequest, _: &Observer) -> Option<Point> {
+        fn trial(&self, request: &TrialRequest, _: &dyn RunControl) -> Option<Point> {
             self.0.fetch_add(1, Ordering::Relaxed);
             let wire = serde_json::to_string(request).unwrap();
             let back: TrialRequest = serde_json::from_str(&wire).unwrap();
@@ -480,8 +482,8 @@ mod tests {
     fn a_cancelled_remote_trial_ends_the_map_as_a_cancel_does() {
         struct Gone;
         impl TrialBackend for Gone {
-            fn trial(&self, _: &TrialRequest, o: &Observer) -> Option<Point> {
-                o.cancel.store(true, Ordering::Relaxed);
+            fn trial(&self, _: &TrialRequest, o: &dyn RunControl) -> Option<Point> {
+                o.cancel();
                 None
             }
         }

@@ -1,0 +1,298 @@
+//! `zwidth serve`: open the store, requeue interrupted work, bind, start
+//! one runner per rig, serve until a signal, and stop cleanly; the secrets
+//! beside the database and the lock that keeps a second server off it.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use super::guard::token_accepted;
+use super::routes::router;
+use super::state::{random_secret, refresh_served, AppState};
+use super::{accept, agent};
+use crate::rig::Rig;
+use crate::store::Store;
+
+/// How `serve` runs.
+pub struct ServeConfig {
+    pub db: crate::store::Location,
+    pub bind: String,
+    pub tokens: Vec<String>,
+    /// Agent tokens; empty: the one in `<db>.agent-token` (made on first
+    /// start; with PostgreSQL, none: agents need `--agent-token-file`).
+    pub agent_tokens: Vec<String>,
+    pub allow_origins: Vec<String>,
+    pub rigs: Vec<Arc<dyn Rig>>,
+    /// Heartbeat, TTL and grace of attached rigs' sessions.
+    pub lease: crate::rig::lease::Timing,
+    /// Longest a request may take before a 503 (s).
+    pub request_timeout_s: f64,
+    /// Most connections one client address may hold at once.
+    pub max_connections_per_client: usize,
+    /// Run only attached rigs here (workers run the simulated ones).
+    pub api_only: bool,
+    /// This process as a worker (its id on the leases it holds).
+    pub worker: crate::jobs::Worker,
+}
+
+/// Open the store, requeue interrupted work, bind, start one runner per
+/// rig, and serve until Ctrl-C or SIGTERM. On shutdown the server stops
+/// accepting, a running experiment stops within one trial with its trials
+/// stored (state `interrupted`, resumed at the next start), then it returns.
+/// Prints the bound address on stdout first.
+pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
+    let ServeConfig {
+        db,
+        bind,
+        tokens,
+        agent_tokens,
+        allow_origins,
+        rigs,
+        lease,
+        request_timeout_s,
+        max_connections_per_client,
+        api_only,
+        worker,
+    } = cfg;
+    let me = Arc::new(worker);
+    if rigs.is_empty() {
+        return Err("refusing to serve without a rig".into());
+    }
+    if !(request_timeout_s.is_finite() && (0.1..=3600.0).contains(&request_timeout_s)) {
+        return Err(format!(
+            "refusing: --request-timeout-s = {request_timeout_s} must be 0.1 to 3600 s"
+        ));
+    }
+    // With PostgreSQL, several API processes serve one database: they and
+    // the clients share the user token, so it is given, never made here.
+    if db.sqlite_path().is_none() && tokens.is_empty() {
+        return Err("refusing: with a PostgreSQL database give the user token (--token-file, ZWIDTH_TOKENS or --token): the API processes and their clients must share it".into());
+    }
+    // Every check that can refuse comes before any side effect (no
+    // socket, no database file).
+    let addrs: Vec<std::net::SocketAddr> = tokio::net::lookup_host(&bind)
+        .await
+        .map_err(|e| format!("cannot resolve --bind {bind}: {e}"))?
+        .collect();
+    if addrs.is_empty() {
+        return Err(format!("--bind {bind} names no address"));
+    }
+    // Then the socket (a second server on the same port stops here, before
+    // touching the database), then the database, which one server at a time
+    // may serve (an exclusive lock on `<db>.lock`).
+    let listener = tokio::net::TcpListener::bind(addrs.as_slice())
+        .await
+        .map_err(|e| format!("cannot bind {bind}: {e}"))?;
+    let addr = listener.local_addr().map_err(|e| e.to_string())?;
+    // One server per SQLite file; PostgreSQL takes many.
+    let _serving = db.sqlite_path().map(lock_database).transpose()?;
+    let store = Store::connect(&db).await.map_err(|e| match e {
+        crate::store::OpenError::Refused(m) => format!("refusing: {m}"),
+        crate::store::OpenError::Failed(m) => m,
+    })?;
+    // A corrupt database is served read-only: /healthz says so, writes are
+    // refused with the reason, nothing is requeued or run.
+    if let Some(why) = store.health().corrupt {
+        tracing::error!(%why, "the database failed its integrity check: serving it read-only; restore a backup");
+    } else if db.sqlite_path().is_some() {
+        // The only server on this file: whatever it ran before is its own.
+        let requeued = store
+            .requeue_interrupted()
+            .await
+            .map_err(|e| e.to_string())?;
+        if requeued > 0 {
+            tracing::info!(
+                requeued,
+                "requeued experiments interrupted by the last shutdown"
+            );
+        }
+    }
+    let agent_tokens = match (agent_tokens.is_empty(), db.sqlite_path()) {
+        (false, _) => agent_tokens,
+        (true, Some(path)) => vec![secret_file(path, "agent-token")?],
+        (true, None) => {
+            tracing::warn!("no --agent-token-file: attached rigs' agents cannot connect");
+            vec![random_secret()]
+        }
+    };
+    // Attached rigs registered through the API (`POST /v1/rigs`) are data:
+    // they come back with the database.
+    let mut rigs = rigs;
+    for row in store.attached_rigs().await.map_err(|e| e.to_string())? {
+        if !rigs.iter().any(|r| r.info().id == row.id) {
+            let rig = crate::rig::AttachedRig::new(&row.id, &row.description)
+                .map_err(|e| format!("stored rig {}: {e}", row.id))?;
+            rigs.push(Arc::new(rig));
+        }
+    }
+    for r in agent::attached_rigs(&rigs) {
+        r.set_timing(lease);
+        // Reconcile: the epochs handed out and the trial that was out.
+        let epoch = store.epoch(r.id()).await.map_err(|e| e.to_string())?;
+        let out = store.trial_out(r.id()).await.map_err(|e| e.to_string())?;
+        if let Some((trial, e)) = &out {
+            tracing::info!(rig = %r.id(), %trial, epoch = e, "a trial was out at the last stop: its result is awaited from the agent");
+        }
+        r.restore(epoch, out);
+        if let Ok(rows) = store.attached_rigs().await {
+            if let Some(q) = rows
+                .iter()
+                .find(|a| a.id == r.id())
+                .and_then(|a| a.quarantine.clone())
+            {
+                tracing::warn!(rig = %r.id(), reason = %q, "rig quarantined (DELETE /v1/rigs/{{id}}/quarantine releases it)");
+                r.set_quarantine(Some(q));
+            }
+        }
+    }
+    // No write is ever unauthenticated (the service can move hardware):
+    // without a configured token the server makes one, owner-only, next to
+    // the database, where the client commands find it (`<db>.token`).
+    let tokens = match db.sqlite_path() {
+        Some(path) if tokens.is_empty() => vec![secret_file(path, "token")?],
+        _ => tokens,
+    };
+    if agent_tokens.iter().any(|a| token_accepted(&tokens, a)) {
+        return Err("refusing: an agent token is also a user token; they must differ".into());
+    }
+    println!("zwidth serving on http://{addr}");
+    use std::io::Write;
+    let _ = std::io::stdout().flush();
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let running = crate::jobs::Running::default();
+    let runners = Arc::new(std::sync::Mutex::new(Vec::new()));
+    let start_runner: Arc<dyn Fn(Arc<dyn Rig>) + Send + Sync> = {
+        let (store, running, stop_rx, runners) = (
+            store.clone(),
+            running.clone(),
+            stop_rx.clone(),
+            runners.clone(),
+        );
+        let me = me.clone();
+        Arc::new(move |r: Arc<dyn Rig>| {
+            if api_only && r.attached().is_none() {
+                tracing::info!(rig = %r.info().id, "rig accepted; its experiments run on workers (--api-only)");
+                return;
+            }
+            tracing::info!(rig = %r.info().id, parallelism = r.info().parallelism, "rig ready");
+            let tasks = crate::jobs::spawn_rig(&store, r, &running, &stop_rx, &me);
+            runners
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .extend(tasks);
+        })
+    };
+    for r in &rigs {
+        start_runner(r.clone());
+    }
+    // This process in the `workers` table, with the rigs it runs.
+    let ran: Vec<Arc<dyn Rig>> = rigs
+        .iter()
+        .filter(|r| !api_only || r.attached().is_some())
+        .cloned()
+        .collect();
+    let announce = tokio::spawn(crate::jobs::worker::announce(
+        store.clone(),
+        me.clone(),
+        crate::jobs::worker::rig_names(&ran),
+        running.clone(),
+        stop_rx.clone(),
+    ));
+    let state = AppState {
+        store: store.clone(),
+        tokens: Arc::new(tokens),
+        agent_tokens: Arc::new(agent_tokens),
+        allow_origins: Arc::new(allow_origins),
+        rigs: Arc::new(std::sync::RwLock::new(rigs)),
+        start_runner,
+        lease,
+        running,
+        api_only,
+        served: Default::default(),
+    };
+    let served = tokio::spawn(refresh_served(state.clone(), stop_rx.clone()));
+    // On the signal the runners stop at once (the running experiment is
+    // interrupted within a trial) while open requests drain.
+    let stop_tx = Arc::new(stop_tx);
+    let stop = stop_tx.clone();
+    accept::serve(
+        listener,
+        router(state, Duration::from_secs_f64(request_timeout_s)),
+        max_connections_per_client,
+        async move {
+            crate::jobs::worker::shutdown_signal().await;
+            tracing::info!("shutting down: stopping the runners, draining requests");
+            let _ = stop.send(true);
+        },
+    )
+    .await;
+    let _ = stop_tx.send(true);
+    let tasks = std::mem::take(&mut *runners.lock().unwrap_or_else(|e| e.into_inner()));
+    for r in tasks {
+        let _ = r.await;
+    }
+    let _ = announce.await;
+    let _ = served.await;
+    let _ = store.worker_gone(&me.id).await;
+    // Everything in the WAL goes into the database file: the `.db` alone
+    // is then a complete copy.
+    match store.close().await {
+        Ok(()) => tracing::info!("database checkpointed and closed"),
+        Err(e) => tracing::error!(error = %e, "checkpoint at shutdown failed"),
+    }
+    Ok(())
+}
+
+/// The secret in `<db>.<name>`, made (random, owner-only) if missing.
+/// Its path is logged, never its content.
+pub fn secret_file(db: &std::path::Path, name: &str) -> Result<String, String> {
+    let mut p = db.as_os_str().to_owned();
+    p.push(format!(".{name}"));
+    let path = std::path::PathBuf::from(p);
+    if let Ok(text) = std::fs::read_to_string(&path) {
+        let t = text.trim().to_string();
+        if !t.is_empty() {
+            tracing::info!(path = %path.display(), "{name} read");
+            return Ok(t);
+        }
+    }
+    let token = random_secret();
+    let mut opts = std::fs::OpenOptions::new();
+    opts.write(true).create(true).truncate(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        opts.mode(0o600);
+    }
+    use std::io::Write;
+    opts.open(&path)
+        .and_then(|mut f| {
+            f.write_all(format!("{token}\n").as_bytes())
+                .and_then(|_| f.sync_all())
+        })
+        .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+    tracing::info!(path = %path.display(), "{name} made (owner-only): pass it to the clients that need it");
+    Ok(token)
+}
+
+/// Hold an exclusive lock on `<db>.lock` while serving: a second server
+/// on the same database is refused (two would run the same experiments).
+fn lock_database(db: &std::path::Path) -> Result<std::fs::File, String> {
+    let mut name = db.as_os_str().to_owned();
+    name.push(".lock");
+    let path = std::path::PathBuf::from(name);
+    let f = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .map_err(|e| format!("cannot open {}: {e}", path.display()))?;
+    match f.try_lock() {
+        Ok(()) => Ok(f),
+        Err(std::fs::TryLockError::WouldBlock) => Err(format!(
+            "refusing: another zwidth serve is using {} (lock {})",
+            db.display(),
+            path.display()
+        )),
+        Err(std::fs::TryLockError::Error(e)) => Err(format!("cannot lock {}: {e}", path.display())),
+    }
+}
