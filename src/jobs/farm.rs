@@ -4,7 +4,6 @@
 //! itself stays light: it plans, polls and replays.
 
 use std::collections::BTreeSet;
-
 use std::time::Duration;
 
 use super::retry::{backoff, FIRST_RETRY};

@@ -45,8 +45,8 @@ pub trait Rig: Send + Sync {
     /// Where experiment `experiment`'s trials run; None: in this process.
     fn backend(&self, experiment: &str) -> Option<Arc<dyn TrialBackend>>;
 
-    /// This rig as `Any`, for [`Rig::attached`](super::Rig): the attached
-    /// rig behind it, if it is one.
+    /// This rig as `Any`, for `attached()` on `dyn Rig` (`rig/mod.rs`):
+    /// the attached rig behind it, if it is one.
     fn as_any(&self) -> &dyn std::any::Any;
 }
 

@@ -33,7 +33,7 @@ pub struct Store {
     pub(super) db: Db,
     /// What the last integrity check found; a corrupt database refuses writes.
     pub(super) health: std::sync::Arc<std::sync::Mutex<Health>>,
-    /// Wake-ups when units are queued or end (`units.rs`).
+    /// Wake-ups when units are queued or end (`wake.rs`).
     pub(super) wake: std::sync::Arc<Wakeups>,
 }
 
@@ -58,7 +58,7 @@ pub struct ExperimentRow {
     pub progress: f64,
     /// A tune's best so far (JSON).
     pub best: Option<String>,
-    /// Claims so far; the one holding the run now (see `leases`).
+    /// Claims so far; the one holding the run now (see `lease.rs`).
     pub attempt: i64,
     /// The worker holding the run, if running.
     pub worker: Option<String>,
