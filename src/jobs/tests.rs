@@ -92,7 +92,7 @@ fn store_retries_back_off_from_a_tenth_of_a_second_to_five() {
     assert_eq!(seen, [100, 200, 400, 800, 1600, 3200, 5000, 5000, 5000]);
 }
 
-/// The quick spec of tests/reliability.rs: one exact strict-passivity
+/// The quick spec of tests/it/reliability.rs: one exact strict-passivity
 /// point (microseconds of work).
 const SMALL: &str = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"criterion":"strict_passivity","b":[0]}"#;
 

@@ -546,7 +546,7 @@ mod tests {
 
     #[test]
     fn refusals_say_which_epoch_and_why() {
-        // The texts the audit and tests/agents.rs look for.
+        // The texts the audit and tests/it/agents.rs look for.
         assert_eq!(
             Refusal::NotSent.describe(3),
             "a result for a trial that is not out"

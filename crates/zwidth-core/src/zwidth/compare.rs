@@ -387,7 +387,7 @@ mod tests {
     fn c_comes_from_the_wall_contact() {
         // docs/zwidth.md records C = 1.098 m/s² for the 2018 device at
         // 1 kHz, from the FDM + Butterworth hit at K = 7 441.2 N/m,
-        // B = 29.76 N·s/m (also pinned through the CLI in tests/cli.rs).
+        // B = 29.76 N·s/m (also pinned through the CLI in tests/it/cli.rs).
         // The window starts at first contact: the free flight before it
         // accelerates at only push/m = 0.3572/0.52 = 0.69 m/s².
         let c = estimate_c(&seed_2018_scene()).unwrap();

@@ -1,10 +1,10 @@
 //! What the tests that compile C share: the tools and the built libraries
-//! (the workspace's tests/common/tools.rs, built once per run here).
+//! (the workspace's tests/it/common/tools.rs, built once per run here).
 
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
-#[path = "../../../../tests/common/tools.rs"]
+#[path = "../../../../tests/it/common/tools.rs"]
 mod tools;
 
 pub use tools::have;

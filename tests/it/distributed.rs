@@ -1,14 +1,13 @@
 //! Beyond one machine (issue 14): API processes and `zwidth worker`
 //! processes on one PostgreSQL database, started as a user starts them,
 //! against the single-process SQLite service. Needs `ZWIDTH_TEST_PG` (see
-//! tests/common/pg.rs); without it these tests are skipped, unless
+//! tests/it/common/pg.rs); without it these tests are skipped, unless
 //! `ZWIDTH_REQUIRE_PG=1` (CI), where they fail.
 
 use std::process::Child;
 use std::time::{Duration, Instant};
 
-mod common;
-use common::*;
+use crate::common::*;
 
 const TOKEN: &str = "distributed-test-token";
 

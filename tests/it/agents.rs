@@ -3,9 +3,7 @@
 //! a fraction of a second). Every fault ends with each trial stored once
 //! and the map equal, to the bit, to the in-process simulator's.
 
-mod common;
-
-use common::*;
+use crate::common::*;
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
@@ -154,7 +152,7 @@ fn a_map_through_the_agent_equals_the_in_process_map_to_the_bit() {
     let id = submit(&s, "bench", MAP);
     let there = outcome(&s, &id);
     // The round trip's cost per trial against the in-process simulator
-    // (printed for docs/rigs.md: `cargo test --release --test agents
+    // (printed for docs/rigs.md: `cargo test --release --test it
     // equals -- --nocapture`).
     let wall = |id: &str| {
         let v = get(&format!("{}/v1/experiments/{id}", s.base));
@@ -782,7 +780,7 @@ fn a_driver_process_in_python_is_a_rig() {
 /// profile's static library (built here: `cargo test` builds the FFI crate
 /// only as an rlib).
 fn c_driver(dir: &std::path::Path) -> std::path::PathBuf {
-    let profile = common::tools::ffi_lib_dir();
+    let profile = crate::common::tools::ffi_lib_dir();
     let root = env!("CARGO_MANIFEST_DIR");
     let driver = dir.join("rig_driver_c");
     let out = Command::new("cc")
@@ -809,7 +807,7 @@ fn a_driver_in_c_maps_with_the_trials_own_estimator_bit_for_bit() {
     // through the real agent, and the velocities the driver's estimator
     // gave on its last trial's positions equal `zwidth estimate` (the
     // simulator's estimators, in Rust) on the same positions, bit for bit.
-    if !common::tools::have("cc") {
+    if !crate::common::tools::have("cc") {
         return;
     }
     let s = serve();

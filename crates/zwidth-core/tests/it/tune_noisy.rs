@@ -11,7 +11,7 @@ use zwidth_core::zwidth::search::map;
 use zwidth_core::zwidth::settings::{Accuracy, Criterion, MapSpec, Method, Preset, SearchKind};
 use zwidth_core::zwidth::sweep::Scale;
 
-const SEED_2018: &str = include_str!("../../../examples/seed_2018.json");
+const SEED_2018: &str = include_str!("../../../../examples/seed_2018.json");
 
 fn seed_scene(cutoff: f64) -> SceneSpec {
     let mut s = SceneSpec::from_json(SEED_2018).unwrap();

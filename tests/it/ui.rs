@@ -2,7 +2,7 @@
 //! router in this process: HTML with the expected content, SVG marks that
 //! count the stored trials, hostile strings escaped, the polling contract
 //! (204 while nothing changed), bad queries as problems naming the field.
-//! SQLite always; PostgreSQL too when configured (`common::pg`).
+//! SQLite always; PostgreSQL too when configured (`crate::common::pg`).
 
 use axum::body::Body;
 use axum::http::{Request, StatusCode};
@@ -10,8 +10,6 @@ use tower::ServiceExt;
 use zwidth::http::ui::bench::{seed, Seeded};
 use zwidth::http::{router, AppState};
 use zwidth::store::{Location, Store};
-
-mod common;
 
 struct Dir(std::path::PathBuf);
 impl Drop for Dir {
@@ -35,7 +33,7 @@ async fn seeded(name: &str) -> Vec<(axum::Router, Store, Seeded, Option<Dir>)> {
             .unwrap(),
         Some(Dir(d)),
     )];
-    if let Some(url) = common::pg::fresh_database(name).await {
+    if let Some(url) = crate::common::pg::fresh_database(name).await {
         stores.push((
             Store::connect(&Location::Postgres(url)).await.unwrap(),
             None,

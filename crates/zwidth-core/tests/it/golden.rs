@@ -8,7 +8,7 @@
 use zwidth_core::estimators::{EstimatorSpec, Sampling, VelocityEstimator};
 use zwidth_dsp::RigEstimator;
 
-#[path = "../../zwidth-dsp/golden/read.rs"]
+#[path = "../../../zwidth-dsp/golden/read.rs"]
 mod read;
 use read::{check, load};
 

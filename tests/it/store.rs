@@ -3,10 +3,8 @@
 use zwidth::store::{Held, Lease, Location, NewExperiment, Store};
 use zwidth::zwidth::search::{Point, StoredTrial};
 
-mod common;
-
 /// The stores every test body runs on: a fresh SQLite file, and a fresh
-/// PostgreSQL database when one is configured (`common::pg`).
+/// PostgreSQL database when one is configured (`crate::common::pg`).
 async fn stores(name: &str) -> Vec<(Store, Option<tempdir::Dir>)> {
     let dir = tempdir::Dir::new(name);
     let mut v = vec![(
@@ -15,7 +13,7 @@ async fn stores(name: &str) -> Vec<(Store, Option<tempdir::Dir>)> {
             .unwrap(),
         Some(dir),
     )];
-    if let Some(url) = common::pg::fresh_database(name).await {
+    if let Some(url) = crate::common::pg::fresh_database(name).await {
         v.push((
             Store::connect(&Location::Postgres(url)).await.unwrap(),
             None,
@@ -798,7 +796,7 @@ async fn concurrent_submissions_with_one_key_store_one_experiment() {
     use zwidth::store::Inserted;
     let dir = tempdir::Dir::new("idem");
     let mut places = vec![Location::Sqlite(dir.0.join("z.db"))];
-    if let Some(url) = common::pg::fresh_database("idem").await {
+    if let Some(url) = crate::common::pg::fresh_database("idem").await {
         places.push(Location::Postgres(url));
     }
     for at in places {
@@ -1148,7 +1146,7 @@ async fn planned_and_ended_units_wake_the_waiting_workers() {
     }
     // Across processes: another store on the same PostgreSQL database,
     // listening, is woken by this one's writes.
-    let Some(url) = common::pg::fresh_database("wake_other").await else {
+    let Some(url) = crate::common::pg::fresh_database("wake_other").await else {
         return;
     };
     let (a, b) = (

@@ -1,8 +1,7 @@
 //! Reliability under attack and faults (issue 9): each test names the
 //! defect it guards against, and fails on the code that had it.
 
-mod common;
-use common::*;
+use crate::common::*;
 
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -36,7 +35,7 @@ fn assert_problem(code: u16, ct: &str, v: &serde_json::Value, want: u16, field: 
     }
 }
 
-const LINEAR: &str = include_str!("../examples/linear_1khz.json");
+const LINEAR: &str = include_str!("../../examples/linear_1khz.json");
 
 /// The cheapest experiment: one exact strict-passivity column of the 2018
 /// device without friction and quantization, single rate (milliseconds).
