@@ -530,3 +530,48 @@ impl Store {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(col: i64, b: Option<f64>) -> UnitRow {
+        UnitRow {
+            experiment_id: "e1".into(),
+            scope: 2,
+            col,
+            b,
+            spec: "{}".into(),
+            rig: "sim".into(),
+            priority: 0,
+            created_ms: 0,
+            state: "queued".into(),
+            attempt: 0,
+            worker: None,
+            lease_until_ms: None,
+            lost: 0,
+            trials: 0,
+            error: None,
+        }
+    }
+
+    /// The stored column key decides what a unit is: a column at its
+    /// place with its B, and the whole map at `WHOLE_MAP` whatever B a
+    /// row carries (`plan_units` writes none there; a mutant that let any
+    /// row with a B be a column passed the store's tests).
+    #[test]
+    fn the_column_key_decides_a_unit_s_kind() {
+        assert_eq!(
+            row(3, Some(40.0)).unit(),
+            Unit::Column { column: 3, b: 40.0 }
+        );
+        assert_eq!(row(WHOLE_MAP, None).unit(), Unit::Map);
+        assert_eq!(row(WHOLE_MAP, Some(40.0)).unit(), Unit::Map);
+        assert_eq!(row(3, None).unit(), Unit::Map);
+        assert_eq!(
+            row(3, Some(40.0)).describe(),
+            "map 2, column 3 (B = 40 N·s/m)"
+        );
+        assert_eq!(row(WHOLE_MAP, None).describe(), "map 2");
+    }
+}
