@@ -17,7 +17,7 @@ use crate::error::SpecError;
 use crate::experiment::ExperimentSpec;
 use crate::report::{self, MapSummary};
 use crate::store::UnitRow;
-use crate::store::{now_ms, ExperimentRow, Inserted, NewExperiment};
+use crate::store::{now_ms, ExperimentRow, ExperimentState, Inserted, NewExperiment};
 use crate::zwidth::cost::Cost;
 use crate::zwidth::search::{StoredEvaluation, StoredTrial};
 
@@ -68,7 +68,7 @@ fn progress(r: &ExperimentRow) -> Value {
     {
         p["best"] = best;
     }
-    if r.state == "running" {
+    if r.state == ExperimentState::Running {
         if let Some(t0) = r.started_ms {
             let elapsed = ((now_ms() - t0) as f64 / 1000.0).max(0.0);
             p["elapsed_s"] = json!(elapsed);
@@ -97,7 +97,7 @@ impl From<ExperimentRow> for ExperimentView {
                 .and_then(|s| serde_json::from_str(s).ok()),
             id: r.id,
             kind: r.kind,
-            state: r.state,
+            state: r.state.to_string(),
             priority: r.priority,
             created_ms: r.created_ms,
             started_ms: r.started_ms,
@@ -123,7 +123,7 @@ impl AppState {
             v.progress["held"] = json!(why);
         }
         let waiting = waiting.or_else(|| {
-            (v.state == "queued")
+            (v.state == ExperimentState::Queued.as_str())
                 .then(|| self.unserved(&v.rig))
                 .flatten()
         });
@@ -486,7 +486,7 @@ pub async fn finished_maps(
         .await
         .map_err(|e| st.fail(e))?
         .ok_or_else(|| Problem::not_found("experiment", id))?;
-    let (Some(result), "succeeded") = (row.result.as_deref(), row.state.as_str()) else {
+    let (Some(result), ExperimentState::Succeeded) = (row.result.as_deref(), row.state) else {
         return Err(Problem::new(
             StatusCode::CONFLICT,
             "No result yet",

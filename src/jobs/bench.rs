@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 use super::{spawn_rig, Running, Worker};
-use crate::store::{Lease, Location, NewExperiment, Store};
+use crate::store::{ExperimentState, Lease, Location, NewExperiment, Store};
 
 /// The 2011 boundary trace of the seed device (time domain, 537 trials):
 /// one map of real work, a few tenths of a second in a release build.
@@ -115,8 +115,8 @@ async fn campaign(store: &Store, workers: usize, maps: usize, spec: &str) -> Res
     let mut next = 0;
     while let Some(id) = ids.get(next) {
         match store.get(id).await.map_err(|e| e.to_string())? {
-            Some(r) if r.state == "succeeded" => next += 1,
-            Some(r) if r.state == "failed" => {
+            Some(r) if r.state == ExperimentState::Succeeded => next += 1,
+            Some(r) if r.state == ExperimentState::Failed => {
                 return Err(format!("a bench run failed: {:?}", r.error))
             }
             _ => tokio::time::sleep(Duration::from_millis(20)).await,
@@ -163,7 +163,7 @@ async fn claim_rate(
                 let Some(r) = row else { break };
                 let lease = Lease::of(r.id, r.attempt);
                 store
-                    .finish(&lease, "succeeded", 0, None, None)
+                    .finish(&lease, ExperimentState::Succeeded, 0, None, None)
                     .await
                     .map_err(|e| e.to_string())?;
             }

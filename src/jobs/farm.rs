@@ -144,7 +144,7 @@ impl DbFarm {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store::NewExperiment;
+    use crate::store::{ExperimentState, NewExperiment};
     use crate::zwidth::search::run_unit;
     use crate::zwidth::search::Observer;
     use crate::zwidth::search::{map, map_observed};
@@ -203,7 +203,7 @@ mod tests {
             let lease = u.lease();
             if let Some(why) = fail {
                 assert!(store
-                    .finish(&lease, "failed", 0, None, Some(why))
+                    .finish(&lease, ExperimentState::Failed, 0, None, Some(why))
                     .await
                     .unwrap());
             } else {
@@ -221,7 +221,7 @@ mod tests {
                     .await
                     .unwrap();
                 assert!(store
-                    .finish(&lease, "succeeded", n, None, None)
+                    .finish(&lease, ExperimentState::Succeeded, n, None, None)
                     .await
                     .unwrap());
             }

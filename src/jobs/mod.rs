@@ -14,7 +14,9 @@ pub mod worker;
 
 use crate::experiment::ExperimentSpec;
 use crate::rig::Rig;
+use crate::store::ExperimentState::{Cancelled, Failed, Succeeded};
 use crate::store::{Fault, Held, Lease, Store, UnitRow};
+use crate::zwidth::cost::Cost;
 use crate::zwidth::farm::Unit;
 use crate::zwidth::search::run_unit;
 use crate::zwidth::search::{Observer, StoredEvaluation, StoredTrial};
@@ -182,18 +184,14 @@ pub async fn runner(
         queued.as_mut().enable();
         match store.claim(&id, &me.id, me.lease_ms).await {
             Ok(Some(row)) => {
-                let lease = Lease::of(row.id, row.attempt);
-                run_one(
-                    &store,
-                    rig.clone(),
-                    &running,
-                    lease,
-                    Work::Experiment(row.spec),
-                    shutdown.clone(),
-                    &me,
-                    driver.clone(),
-                )
-                .await
+                let run = Run {
+                    store: &store,
+                    lease: Lease::of(row.id, row.attempt),
+                    shutdown: shutdown.clone(),
+                    me: &me,
+                };
+                let work = Work::Experiment(row.spec);
+                run_one(run, rig.clone(), &running, work, driver.clone()).await
             }
             Ok(None) => {
                 tokio::select! {
@@ -255,18 +253,13 @@ pub async fn unit_runner(
         queued.as_mut().enable();
         match store.claim_unit(&id, &me.id, me.lease_ms).await {
             Ok(Some(row)) => {
-                let lease = row.lease();
-                run_one(
-                    &store,
-                    rig.clone(),
-                    &running,
-                    lease,
-                    Work::Unit(Box::new(row)),
-                    shutdown.clone(),
-                    &me,
-                    None,
-                )
-                .await
+                let run = Run {
+                    store: &store,
+                    lease: row.lease(),
+                    shutdown: shutdown.clone(),
+                    me: &me,
+                };
+                run_one(run, rig.clone(), &running, Work::Unit(Box::new(row)), None).await
             }
             Ok(None) => {
                 tokio::select! {
@@ -448,237 +441,304 @@ impl Job {
     }
 }
 
+/// One claimed run, as its steps see it: the store it is written to, the
+/// lease every write is fenced by, shutdown, and the worker's lease timing.
+struct Run<'a> {
+    store: &'a Store,
+    lease: Lease,
+    shutdown: tokio::sync::watch::Receiver<bool>,
+    me: &'a Worker,
+}
+
+/// How a run's computation ended, as [`Run::supervise`] saw it.
+struct Supervised {
+    /// What the computation returned (Err: it panicked).
+    outcome: Result<Result<serde_json::Value, crate::error::SpecError>, tokio::task::JoinError>,
+    /// Stopped by shutdown: it resumes at the next start.
+    interrupted: bool,
+    /// What is not stored yet, and whether the lease was lost.
+    unstored: Unstored,
+}
+
 /// Run an experiment (with `driver`, its units go to the workers and it
 /// waits on the driver's threads) or a unit, under `lease`: store its
 /// trials as they finish, renew the lease, honour cancel and shutdown, and
-/// record its end.
-#[allow(clippy::too_many_arguments)]
-#[tracing::instrument(skip(store, rig, running, work, shutdown, me, driver), fields(rig = %rig.info().id, id = %lease.id, unit = ?lease.unit, attempt = lease.attempt))]
+/// record its end. Four steps: [`Run::prepare`] (the stored spec checked
+/// again), [`Run::resume`] (the stored work read back), [`Run::supervise`]
+/// (the computation watched), [`Run::finish`] (its end recorded).
+#[tracing::instrument(skip_all, fields(rig = %rig.info().id, id = %run.lease.id, unit = ?run.lease.unit, attempt = run.lease.attempt))]
 async fn run_one(
-    store: &Store,
+    run: Run<'_>,
     rig: Arc<dyn Rig>,
     running: &Running,
-    lease: Lease,
     work: Work,
-    shutdown: tokio::sync::watch::Receiver<bool>,
-    me: &Worker,
     driver: Option<Arc<rayon::ThreadPool>>,
 ) {
-    let id = lease.id.clone();
-    let key = match lease.unit {
-        None => id.clone(),
-        Some(u) => format!("{id}/{}/{}", u.scope, u.col),
+    let Some((job, cost, unit)) = run.prepare(work).await else {
+        return;
     };
-    // A stored spec is checked again: one stored by an older version may
-    // not pass today's limits, and must fail here, not take the server down.
-    let (checked, unit) = match work {
-        Work::Experiment(spec) => (
-            serde_json::from_str::<ExperimentSpec>(&spec)
-                .map_err(|e| format!("stored spec unreadable: {e}"))
-                .and_then(|s| match s.validate() {
-                    Ok(cost) => Ok((Job::Experiment(s), cost)),
-                    Err(e) => Err(e.to_string()),
-                }),
-            None,
-        ),
-        Work::Unit(row) => (
-            serde_json::from_str::<MapSpec>(&row.spec)
-                .map_err(|e| format!("stored unit spec unreadable: {e}"))
-                .and_then(|m| match crate::zwidth::search::validate(&m) {
-                    Ok(cost) => Ok((Job::Unit(m, row.scope as u32, row.unit()), cost)),
-                    Err(e) => Err(e.to_string()),
-                }),
-            Some(row),
-        ),
+    let Some((done, evals)) = run.resume(unit.as_deref()).await else {
+        return;
     };
-    let (parsed, cost) = match checked {
-        Ok(x) => x,
-        Err(e) => {
-            let _ = retrying("recording a failed spec", &shutdown, store, None, || {
-                store.finish(&lease, "failed", 0, None, Some(&e))
-            })
-            .await;
-            return;
-        }
-    };
-    // Resume: trials stored by an interrupted run are replayed, not redone.
-    // They are read (retrying while the database is busy) before anything
-    // runs; an experiment whose stored work cannot be read fails saying so.
-    let stored = async {
-        let t = retrying("reading stored trials", &shutdown, store, None, || async {
-            match &unit {
-                Some(row) => store.unit_trials(row).await,
-                None => store.trials(&id).await,
-            }
-        })
-        .await?;
-        let e = match unit {
-            Some(_) => Vec::new(),
-            None => {
-                retrying("reading stored evaluations", &shutdown, store, None, || {
-                    store.evaluations(&id)
-                })
-                .await?
-            }
-        };
-        Ok::<_, sqlx::Error>((t, e))
-    };
-    let (done, evals) = match stored.await {
-        Ok(x) => x,
-        Err(e) => {
-            if !*shutdown.borrow() {
-                let why = format!("its stored trials could not be read: {e}");
-                let _ = store.finish(&lease, "failed", 0, None, Some(&why)).await;
-            }
-            return;
-        }
-    };
-    tracing::info!(
-        stored_trials = done.len(),
-        stored_evaluations = evals.len(),
-        "starting (stored work is replayed, not redone)"
-    );
     let mut observer = Observer::resuming(done).with_evaluations(evals);
-    if let Some(backend) = rig.backend(&id) {
+    if let Some(backend) = rig.backend(&run.lease.id) {
         observer = observer.with_backend(backend);
     }
     if driver.is_some() {
         observer = observer.with_farm(Arc::new(farm::DbFarm {
-            store: store.clone(),
-            lease: lease.clone(),
+            store: run.store.clone(),
+            lease: run.lease.clone(),
             handle: tokio::runtime::Handle::current(),
         }));
     }
     let observer = Arc::new(observer);
     observer.limit_trials(usize::try_from(cost.trial_limit()).unwrap_or(usize::MAX));
+    let key = match run.lease.unit {
+        None => run.lease.id.clone(),
+        Some(u) => format!("{}/{}/{}", run.lease.id, u.scope, u.col),
+    };
     running
         .lock()
         .unwrap_or_else(|e| e.into_inner())
         .insert(key.clone(), observer.clone());
     let obs = observer.clone();
-    let rig_id = rig.info().id;
     let on_rig = rig.clone();
-    let mut task = tokio::task::spawn_blocking(move || match driver {
-        Some(pool) => pool.install(|| parsed.run(obs)),
-        None => on_rig.pool().install(|| parsed.run(obs)),
+    let task = tokio::task::spawn_blocking(move || match driver {
+        Some(pool) => pool.install(|| job.run(obs)),
+        None => on_rig.pool().install(|| job.run(obs)),
     });
-    // Every 100 ms: store the trials finished since (one transaction) and
-    // look for shutdown; every heartbeat: renew the lease, write progress,
-    // and look for a cancel request (made by any API process).
-    let mut interrupted = false;
-    let mut unstored = Unstored::default();
-    let mut beat = std::time::Instant::now();
-    let mut held_at = std::time::Instant::now();
-    let outcome = loop {
-        tokio::select! {
-            r = &mut task => break r,
-            _ = tokio::time::sleep(Duration::from_millis(100)) => {
-                let _ = unstored.flush(store, &lease, &observer).await;
-                let trials = observer.trials_done() as i64;
-                if beat.elapsed() >= me.heartbeat() && !unstored.lost {
-                    beat = std::time::Instant::now();
-                    match store.heartbeat(&lease, trials, observer.fraction(), me.lease_ms).await {
-                        Ok(Held::Held) => held_at = std::time::Instant::now(),
-                        Ok(Held::Cancelled) => {
-                            held_at = std::time::Instant::now();
-                            observer.cancel.store(true, Ordering::Relaxed);
+    let ran = run.supervise(task, &observer, rig.as_ref()).await;
+    run.finish(ran, &observer).await;
+    running
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .remove(&key);
+}
+
+impl Run<'_> {
+    /// The claimed work as a job and its cost. A stored spec is checked
+    /// again: one stored by an older version may not pass today's limits,
+    /// and must fail here (recorded so), not take the server down.
+    #[tracing::instrument(skip_all)]
+    async fn prepare(&self, work: Work) -> Option<(Job, Cost, Option<Box<UnitRow>>)> {
+        let (checked, unit) = match work {
+            Work::Experiment(spec) => (
+                serde_json::from_str::<ExperimentSpec>(&spec)
+                    .map_err(|e| format!("stored spec unreadable: {e}"))
+                    .and_then(|s| match s.validate() {
+                        Ok(cost) => Ok((Job::Experiment(s), cost)),
+                        Err(e) => Err(e.to_string()),
+                    }),
+                None,
+            ),
+            Work::Unit(row) => (
+                serde_json::from_str::<MapSpec>(&row.spec)
+                    .map_err(|e| format!("stored unit spec unreadable: {e}"))
+                    .and_then(|m| match crate::zwidth::search::validate(&m) {
+                        Ok(cost) => Ok((Job::Unit(m, row.scope as u32, row.unit()), cost)),
+                        Err(e) => Err(e.to_string()),
+                    }),
+                Some(row),
+            ),
+        };
+        match checked {
+            Ok((job, cost)) => Some((job, cost, unit)),
+            Err(e) => {
+                let _ = retrying(
+                    "recording a failed spec",
+                    &self.shutdown,
+                    self.store,
+                    None,
+                    || self.store.finish(&self.lease, Failed, 0, None, Some(&e)),
+                )
+                .await;
+                None
+            }
+        }
+    }
+
+    /// The trials (and a tune's evaluations) an interrupted run stored, to
+    /// be replayed, not redone. They are read (retrying while the database
+    /// is busy) before anything runs; a run whose stored work cannot be
+    /// read fails saying so.
+    #[tracing::instrument(skip_all)]
+    async fn resume(
+        &self,
+        unit: Option<&UnitRow>,
+    ) -> Option<(Vec<StoredTrial>, Vec<StoredEvaluation>)> {
+        let (store, id, shutdown) = (self.store, &self.lease.id, &self.shutdown);
+        let stored = async {
+            let t = retrying("reading stored trials", shutdown, store, None, || async {
+                match unit {
+                    Some(row) => store.unit_trials(row).await,
+                    None => store.trials(id).await,
+                }
+            })
+            .await?;
+            let e = match unit {
+                Some(_) => Vec::new(),
+                None => {
+                    retrying("reading stored evaluations", shutdown, store, None, || {
+                        store.evaluations(id)
+                    })
+                    .await?
+                }
+            };
+            Ok::<_, sqlx::Error>((t, e))
+        };
+        match stored.await {
+            Ok((done, evals)) => {
+                tracing::info!(
+                    stored_trials = done.len(),
+                    stored_evaluations = evals.len(),
+                    "starting (stored work is replayed, not redone)"
+                );
+                Some((done, evals))
+            }
+            Err(e) => {
+                if !*shutdown.borrow() {
+                    let why = format!("its stored trials could not be read: {e}");
+                    let _ = store.finish(&self.lease, Failed, 0, None, Some(&why)).await;
+                }
+                None
+            }
+        }
+    }
+
+    /// Watch the computation until it ends. Every 100 ms: store the trials
+    /// finished since (one transaction) and look for shutdown; every
+    /// heartbeat: renew the lease, write progress, and look for a cancel
+    /// request (made by any API process).
+    #[tracing::instrument(skip_all)]
+    async fn supervise(
+        &self,
+        mut task: tokio::task::JoinHandle<Result<serde_json::Value, crate::error::SpecError>>,
+        observer: &Observer,
+        rig: &dyn Rig,
+    ) -> Supervised {
+        let (store, lease, me) = (self.store, &self.lease, self.me);
+        let rig_id = rig.info().id;
+        let mut interrupted = false;
+        let mut unstored = Unstored::default();
+        let mut beat = std::time::Instant::now();
+        let mut held_at = std::time::Instant::now();
+        let outcome = loop {
+            tokio::select! {
+                r = &mut task => break r,
+                _ = tokio::time::sleep(Duration::from_millis(100)) => {
+                    let _ = unstored.flush(store, lease, observer).await;
+                    let trials = observer.trials_done() as i64;
+                    if beat.elapsed() >= me.heartbeat() && !unstored.lost {
+                        beat = std::time::Instant::now();
+                        match store.heartbeat(lease, trials, observer.fraction(), me.lease_ms).await {
+                            Ok(Held::Held) => held_at = std::time::Instant::now(),
+                            Ok(Held::Cancelled) => {
+                                held_at = std::time::Instant::now();
+                                observer.cancel.store(true, Ordering::Relaxed);
+                            }
+                            Ok(Held::Lost) => {
+                                tracing::warn!("the run's lease was taken over: abandoning it (or, for a unit, its experiment ended)");
+                                unstored.lost = true;
+                                observer.cancel.store(true, Ordering::Relaxed);
+                            }
+                            Err(e) => tracing::warn!(error = %e, "heartbeat failed"),
                         }
-                        Ok(Held::Lost) => {
-                            tracing::warn!("the run's lease was taken over: abandoning it (or, for a unit, its experiment ended)");
+                        // Unheard for a whole lease, the run may be another
+                        // worker's by now: stop computing (and moving a rig).
+                        // (SQLite has one process: nobody else can take it.)
+                        if !unstored.lost
+                            && store.shared()
+                            && held_at.elapsed().as_millis() as i64 > me.lease_ms
+                        {
+                            tracing::warn!(lease_ms = me.lease_ms, "no heartbeat went through for a whole lease: abandoning the run");
                             unstored.lost = true;
                             observer.cancel.store(true, Ordering::Relaxed);
                         }
-                        Err(e) => tracing::warn!(error = %e, "heartbeat failed"),
                     }
-                    // Unheard for a whole lease, the run may be another
-                    // worker's by now: stop computing (and moving a rig).
-                    // (SQLite has one process: nobody else can take it.)
-                    if !unstored.lost
-                        && store.shared()
-                        && held_at.elapsed().as_millis() as i64 > me.lease_ms
-                    {
-                        tracing::warn!(lease_ms = me.lease_ms, "no heartbeat went through for a whole lease: abandoning the run");
-                        unstored.lost = true;
+                    // Hardware moves only inside its window: an attached rig
+                    // takes no new trial once it closes (the experiment waits).
+                    if let Some(a) = rig.attached() {
+                        if let Ok(w) = store.rig_window(&rig_id).await {
+                            a.set_window_closed(window_closed(w.as_ref(), jiff::Timestamp::now()));
+                        }
+                    }
+                    if *self.shutdown.borrow() && !interrupted {
+                        tracing::info!("shutting down: stopping the running experiment");
+                        interrupted = true;
                         observer.cancel.store(true, Ordering::Relaxed);
                     }
                 }
-                // Hardware moves only inside its window: an attached rig
-                // takes no new trial once it closes (the experiment waits).
-                if let Some(a) = rig.attached() {
-                    if let Ok(w) = store.rig_window(&rig_id).await {
-                        a.set_window_closed(window_closed(w.as_ref(), jiff::Timestamp::now()));
-                    }
-                }
-                if *shutdown.borrow() && !interrupted {
-                    tracing::info!("shutting down: stopping the running experiment");
-                    interrupted = true;
-                    observer.cancel.store(true, Ordering::Relaxed);
-                }
             }
+        };
+        Supervised {
+            outcome,
+            interrupted,
+            unstored,
         }
-    };
-    // Every finished trial is stored before the end is recorded (the
-    // experiment stays in `running` meanwhile, so its `held` reason shows).
-    let mut wait = FIRST_RETRY;
-    let stored_all = loop {
-        match unstored.flush(store, &lease, &observer).await {
-            Ok(()) => break true,
-            Err(Fault::Busy | Fault::Full) if !*shutdown.borrow() => {
-                tokio::time::sleep(wait).await;
-                wait = backoff(wait);
+    }
+
+    /// Record the end: every finished trial is stored first (the experiment
+    /// stays `running` meanwhile, so its `held` reason shows); then its end
+    /// state, or, shut down or unable to store, `interrupted` to resume
+    /// from what is stored (never ended with trials lost). A lost lease
+    /// writes nothing: another worker holds the run.
+    #[tracing::instrument(skip_all)]
+    async fn finish(&self, ran: Supervised, observer: &Observer) {
+        let (store, lease, shutdown) = (self.store, &self.lease, &self.shutdown);
+        let Supervised {
+            outcome,
+            interrupted,
+            mut unstored,
+        } = ran;
+        let mut wait = FIRST_RETRY;
+        let stored_all = loop {
+            match unstored.flush(store, lease, observer).await {
+                Ok(()) => break true,
+                Err(Fault::Busy | Fault::Full) if !*shutdown.borrow() => {
+                    tokio::time::sleep(wait).await;
+                    wait = backoff(wait);
+                }
+                Err(_) => break false,
             }
-            Err(_) => break false,
+        };
+        let trials = observer.trials.load(Ordering::Relaxed) as i64;
+        if unstored.lost {
+            return;
         }
-    };
-    let trials = observer.trials.load(Ordering::Relaxed) as i64;
-    let forget = || {
-        running
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .remove(&key)
-    };
-    if unstored.lost {
-        // Another worker holds the run now: nothing of ours is written.
-        forget();
-        return;
-    }
-    if interrupted || !stored_all {
-        // Shut down, or its trials cannot be stored: leave it to resume at
-        // the next start from what is stored (never end it with trials lost).
-        let _ = retrying(
-            "recording an interrupted run",
-            &shutdown,
-            store,
-            None,
-            // Its trials could not be stored: another try in a minute, not
-            // at once in a loop.
-            || store.interrupt(&lease, trials, if interrupted { 0 } else { 60_000 }),
-        )
-        .await;
-        forget();
-        return;
-    }
-    let (state, result, error) = match (observer.runaway(), observer.cancelled(), outcome) {
-        (Some(why), _, _) => ("failed", None, Some(why)),
-        (None, true, _) => ("cancelled", None, None),
-        (None, false, Ok(Ok(v))) => ("succeeded", Some(v.to_string()), None),
-        (None, false, Ok(Err(e))) => ("failed", None, Some(e.to_string())),
-        (None, false, Err(e)) => ("failed", None, Some(format!("the run panicked: {e}"))),
-    };
-    let what = "recording the end of a run";
-    let r = retrying(what, &shutdown, store, Some(&observer), || {
-        store.finish(&lease, state, trials, result.as_deref(), error.as_deref())
-    })
-    .await;
-    if let (Err(e), "succeeded") = (&r, state) {
-        // A result the database refuses (e.g. too big): say so.
-        let why = format!("the result could not be stored: {e}");
-        let _ = retrying(what, &shutdown, store, Some(&observer), || {
-            store.finish(&lease, "failed", trials, None, Some(&why))
+        if interrupted || !stored_all {
+            let _ = retrying(
+                "recording an interrupted run",
+                shutdown,
+                store,
+                None,
+                // Its trials could not be stored: another try in a minute,
+                // not at once in a loop.
+                || store.interrupt(lease, trials, if interrupted { 0 } else { 60_000 }),
+            )
+            .await;
+            return;
+        }
+        let (state, result, error) = match (observer.runaway(), observer.cancelled(), outcome) {
+            (Some(why), _, _) => (Failed, None, Some(why)),
+            (None, true, _) => (Cancelled, None, None),
+            (None, false, Ok(Ok(v))) => (Succeeded, Some(v.to_string()), None),
+            (None, false, Ok(Err(e))) => (Failed, None, Some(e.to_string())),
+            (None, false, Err(e)) => (Failed, None, Some(format!("the run panicked: {e}"))),
+        };
+        let what = "recording the end of a run";
+        let r = retrying(what, shutdown, store, Some(observer), || {
+            store.finish(lease, state, trials, result.as_deref(), error.as_deref())
         })
         .await;
+        if let (Err(e), Succeeded) = (&r, state) {
+            // A result the database refuses (e.g. too big): say so.
+            let why = format!("the result could not be stored: {e}");
+            let _ = retrying(what, shutdown, store, Some(observer), || {
+                store.finish(lease, Failed, trials, None, Some(&why))
+            })
+            .await;
+        }
     }
-    forget();
 }
 
 #[cfg(test)]

@@ -1,5 +1,6 @@
 //! The runner's own tests: cancels, store retries, ends behind a lock.
 use super::*;
+use crate::store::ExperimentState;
 use std::sync::atomic::AtomicUsize;
 
 #[test]
@@ -141,20 +142,18 @@ async fn a_final_store_blocked_by_another_writer_is_retried_until_it_works() {
     });
     let rig = Arc::new(crate::rig::SimulatedRig::new("sim", 1).unwrap());
     let (_tx, shutdown) = tokio::sync::watch::channel(false);
-    run_one(
-        &store,
-        rig,
-        &Running::default(),
+    let me = Worker::new(LEASE_MS);
+    let run = Run {
+        store: &store,
         lease,
-        Work::Experiment(SMALL.into()),
         shutdown,
-        &Worker::new(LEASE_MS),
-        None,
-    )
-    .await;
+        me: &me,
+    };
+    let work = Work::Experiment(SMALL.into());
+    run_one(run, rig, &Running::default(), work, None).await;
     release.await.unwrap();
     let row = store.get("e1").await.unwrap().unwrap();
-    assert_eq!(row.state, "succeeded", "{:?}", row.error);
+    assert_eq!(row.state, ExperimentState::Succeeded, "{:?}", row.error);
     assert_eq!(store.trials("e1").await.unwrap().len(), 1);
 }
 
@@ -167,21 +166,23 @@ async fn at_shutdown_a_final_store_blocked_by_another_writer_is_left_to_resume()
     let (store, _guard, mut lock, lease) = claimed_behind_a_lock("busy-shutdown", "e2").await;
     let rig = Arc::new(crate::rig::SimulatedRig::new("sim", 1).unwrap());
     let (_tx, shutdown) = tokio::sync::watch::channel(true);
+    let me = Worker::new(LEASE_MS);
+    let run = Run {
+        store: &store,
+        lease,
+        shutdown,
+        me: &me,
+    };
+    let work = Work::Experiment(SMALL.into());
     let ended = tokio::time::timeout(
         Duration::from_secs(40),
-        run_one(
-            &store,
-            rig,
-            &Running::default(),
-            lease,
-            Work::Experiment(SMALL.into()),
-            shutdown,
-            &Worker::new(LEASE_MS),
-            None,
-        ),
+        run_one(run, rig, &Running::default(), work, None),
     )
     .await;
     sqlx::query("ROLLBACK").execute(&mut lock).await.unwrap();
     assert!(ended.is_ok(), "the runner waited for the lock at shutdown");
-    assert_ne!(store.get("e2").await.unwrap().unwrap().state, "succeeded");
+    assert_ne!(
+        store.get("e2").await.unwrap().unwrap().state,
+        ExperimentState::Succeeded
+    );
 }

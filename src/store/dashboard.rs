@@ -281,7 +281,7 @@ impl Store {
             .bind(&r.id)
             .bind(&r.kind)
             .bind(&r.spec)
-            .bind(&r.state)
+            .bind(r.state.as_str())
             .bind(r.priority)
             .bind(r.created_ms)
             .bind(r.started_ms)

@@ -1,11 +1,12 @@
 //! The store itself: its pool on either database ([`Db`], and
-//! [`on_pool!`] to run one body on whichever it is), the rows every part
-//! of the store reads, and the states an experiment is stored in.
+//! [`on_pool!`] to run one body on whichever it is), and the rows every part
+//! of the store reads.
 
 use serde::Serialize;
 use sqlx::{FromRow, PgPool, SqlitePool};
 
 use super::fault::Health;
+use super::state::ExperimentState;
 use super::wake::Wakeups;
 use crate::zwidth::search::StoredTrial;
 
@@ -43,7 +44,8 @@ pub struct ExperimentRow {
     pub id: String,
     pub kind: String,
     pub spec: String,
-    pub state: String,
+    #[sqlx(try_from = "String")]
+    pub state: ExperimentState,
     pub priority: i64,
     pub created_ms: i64,
     pub started_ms: Option<i64>,
@@ -65,17 +67,6 @@ pub struct ExperimentRow {
     /// When its lease ends (database clock, unix ms).
     pub lease_until_ms: Option<i64>,
 }
-
-/// Every state an experiment can be stored in.
-pub const STATES: [&str; 7] = [
-    "queued",
-    "scheduled",
-    "running",
-    "succeeded",
-    "failed",
-    "cancelled",
-    "interrupted",
-];
 
 /// A stored trial as read: scope, column, index, the point (JSON).
 pub(super) type TrialRow = (i64, i64, i64, String);

@@ -10,6 +10,7 @@
 
 use super::db::{on_pool, Db, ExperimentRow, Store};
 use super::lease::{fraction_done, lost, Held, Lease, MAX_LOST};
+use super::state::ExperimentState;
 use crate::clock::now_ms;
 use crate::zwidth::search::{StoredEvaluation, StoredTrial};
 
@@ -134,7 +135,7 @@ impl Store {
                 .pop(),
             };
             match row {
-                Some(r) if r.state == "failed" => {
+                Some(r) if r.state == ExperimentState::Failed => {
                     self.end_units(&r.id).await?;
                     continue;
                 }
@@ -173,8 +174,8 @@ impl Store {
         .bind(lease.attempt)
         .fetch_all(p)
         .await)?;
-        Ok(match state.first().map(String::as_str) {
-            Some("running") => Held::Held,
+        Ok(match state.first().map(|w| w.parse::<ExperimentState>()) {
+            Some(Ok(ExperimentState::Running)) => Held::Held,
             Some(_) => Held::Cancelled,
             None => Held::Lost,
         })
@@ -284,7 +285,7 @@ impl Store {
     pub async fn finish(
         &self,
         lease: &Lease,
-        state: &str,
+        state: ExperimentState,
         trials: i64,
         result: Option<&str>,
         error: Option<&str>,
@@ -298,7 +299,7 @@ impl Store {
                      progress = CASE WHEN $1 = 'succeeded' THEN 1 ELSE progress END,
                      lease_until_ms = NULL
                      WHERE id = $6 AND attempt = $7 AND (state = 'running' OR (state = 'cancelled' AND $1 = 'cancelled'))")
-            .bind(state)
+            .bind(state.as_str())
             .bind(trials)
             .bind(result)
             .bind(error)
@@ -308,7 +309,7 @@ impl Store {
             .execute(p)
             .await
             .map(|r| r.rows_affected()))?;
-        if r == 1 && state != "succeeded" {
+        if r == 1 && state != ExperimentState::Succeeded {
             // The experiment ended early: units it did not wait for are not
             // claimed again. (One that succeeded waited for all of its own.)
             self.end_units(&lease.id).await?;

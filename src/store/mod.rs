@@ -19,14 +19,16 @@ mod db;
 pub mod fault;
 pub mod lease;
 pub mod leases;
+mod state;
 pub mod units;
 pub mod wake;
 pub(crate) use db::on_pool;
 use db::{stored_trials, Db, TrialRow};
-pub use db::{ExperimentRow, Store, STATES};
+pub use db::{ExperimentRow, Store};
 pub use fault::{Fault, Health};
 pub use lease::{Held, Lease, UnitPlace, MAX_LOST};
 pub use leases::WorkerRow;
+pub use state::{ExperimentState, STATES};
 pub use units::UnitRow;
 
 pub mod location;
@@ -294,9 +296,9 @@ impl Store {
             rig,
         } = e;
         let state = if not_before_ms.is_some_and(|t| t > now_ms()) {
-            "scheduled"
+            ExperimentState::Scheduled
         } else {
-            "queued"
+            ExperimentState::Queued
         };
         let created_ms = now_ms();
         let r = on_pool!(self, p => sqlx::query(
@@ -306,7 +308,7 @@ impl Store {
         .bind(id)
         .bind(kind)
         .bind(spec)
-        .bind(state)
+        .bind(state.as_str())
         .bind(priority)
         .bind(created_ms)
         .bind(key)
@@ -316,7 +318,7 @@ impl Store {
         .await
         .map(|r| r.rows_affected()))?;
         if r == 1 {
-            if state == "queued" {
+            if state == ExperimentState::Queued {
                 self.notify_units(wake::QUEUED, id).await;
             }
             // Committed: the row is what was written (no read that could
@@ -325,7 +327,7 @@ impl Store {
                 id: id.into(),
                 kind: kind.into(),
                 spec: spec.into(),
-                state: state.into(),
+                state,
                 priority,
                 created_ms,
                 started_ms: None,
@@ -510,11 +512,13 @@ impl Store {
         .map(|r| r.rows_affected()))
     }
 
-    pub async fn state(&self, id: &str) -> Result<Option<String>, sqlx::Error> {
-        on_pool!(self, p => sqlx::query_scalar::<_, String>("SELECT state FROM experiments WHERE id = $1")
+    pub async fn state(&self, id: &str) -> Result<Option<ExperimentState>, sqlx::Error> {
+        let word = on_pool!(self, p => sqlx::query_scalar::<_, String>("SELECT state FROM experiments WHERE id = $1")
             .bind(id)
             .fetch_optional(p)
-            .await)
+            .await)?;
+        word.map(|w| w.parse().map_err(|e: String| sqlx::Error::Decode(e.into())))
+            .transpose()
     }
 
     /// Store a trial whose place in its map is not known here (an attached

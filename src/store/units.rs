@@ -10,6 +10,7 @@
 
 use super::db::{on_pool, stored_trials, Db, Store, TrialRow};
 use super::lease::{lost, Held, Lease, UnitPlace, MAX_LOST};
+use super::state::ExperimentState;
 use super::wake::{Wakeups, ENDED, QUEUED};
 use crate::clock::now_ms;
 use crate::zwidth::farm::{Unit, WHOLE_MAP};
@@ -112,10 +113,10 @@ macro_rules! claim_unit_set {
 }
 
 /// A unit's state as its heartbeat and writes name it.
-fn unit_state(state: &str) -> &'static str {
+fn unit_state(state: ExperimentState) -> &'static str {
     match state {
-        "succeeded" => "done",
-        "cancelled" => "cancelled",
+        ExperimentState::Succeeded => "done",
+        ExperimentState::Cancelled => "cancelled",
         _ => "failed",
     }
 }
@@ -399,18 +400,12 @@ impl Store {
         if held.is_empty() {
             return Ok(Held::Lost);
         }
-        let state: Option<String> = on_pool!(self, p => sqlx::query_scalar(
-            "SELECT state FROM experiments WHERE id = $1",
-        )
-        .bind(&lease.id)
-        .fetch_optional(p)
-        .await)?;
         // Its experiment ended: stop. Running, or waiting for a driver (a
         // driver shut down leaves it interrupted): the unit goes on, its
         // result is what the next driver replays.
-        Ok(match state.as_deref() {
-            Some("succeeded" | "failed" | "cancelled") | None => Held::Cancelled,
-            Some(_) => Held::Held,
+        Ok(match self.state(&lease.id).await? {
+            Some(s) if !s.ended() => Held::Held,
+            _ => Held::Cancelled,
         })
     }
 
@@ -470,7 +465,7 @@ impl Store {
         &self,
         lease: &Lease,
         at: UnitPlace,
-        state: &str,
+        state: ExperimentState,
         trials: i64,
         error: Option<&str>,
     ) -> Result<bool, sqlx::Error> {

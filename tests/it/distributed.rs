@@ -472,8 +472,10 @@ fn killing_the_api_leaves_the_workers_going() {
         ))
         .unwrap();
     wait_for("every run finished without an API process", 120, || {
-        ids.iter()
-            .all(|id| rt.block_on(store.get(id)).unwrap().unwrap().state == "succeeded")
+        ids.iter().all(|id| {
+            rt.block_on(store.get(id)).unwrap().unwrap().state
+                == zwidth::store::ExperimentState::Succeeded
+        })
     });
     assert!(killed.elapsed() < Duration::from_secs(120));
     let base2 = api(&mut p, &url, true, "api2.err");

@@ -658,7 +658,7 @@ fn sigterm_interrupts_the_running_experiment_and_restart_resumes_it() {
         let row = st.get(&id).await.unwrap().unwrap();
         (row, st.trial_count(&id).await.unwrap())
     });
-    assert_eq!(row.0.state, "interrupted");
+    assert_eq!(row.0.state, zwidth::store::ExperimentState::Interrupted);
     assert!(row.1 >= 40, "{} trials stored", row.1);
     // Restarted, it resumes and succeeds with the uninterrupted result.
     let s2 = start_in(dir);

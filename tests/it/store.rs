@@ -1,6 +1,6 @@
 //! The store's own rules, checked through its public methods.
 
-use zwidth::store::{Held, Lease, Location, NewExperiment, Store};
+use zwidth::store::{ExperimentState, Held, Lease, Location, NewExperiment, Store};
 use zwidth::zwidth::search::{Point, StoredTrial};
 
 /// The stores every test body runs on: a fresh SQLite file, and a fresh
@@ -235,19 +235,22 @@ async fn a_cancelled_experiment_never_ends_succeeded() {
         assert!(st.cancel("e1").await.unwrap());
         // The run ends a moment later with a result: it must not overwrite.
         let changed = st
-            .finish(&run, "succeeded", 10, Some("{}"), None)
+            .finish(&run, ExperimentState::Succeeded, 10, Some("{}"), None)
             .await
             .unwrap();
         assert!(!changed, "{}", st.backend());
         let row = st.get("e1").await.unwrap().unwrap();
-        assert_eq!(row.state, "cancelled");
+        assert_eq!(row.state, ExperimentState::Cancelled);
         assert!(row.result.is_none());
         // Its heartbeat says so; its own cancelled record still lands.
         assert_eq!(
             st.heartbeat(&run, 7, 0.5, 60_000).await.unwrap(),
             Held::Cancelled
         );
-        assert!(st.finish(&run, "cancelled", 7, None, None).await.unwrap());
+        assert!(st
+            .finish(&run, ExperimentState::Cancelled, 7, None, None)
+            .await
+            .unwrap());
         assert_eq!(st.get("e1").await.unwrap().unwrap().trials_done, 7);
     }
 }
@@ -286,7 +289,7 @@ async fn an_expired_lease_is_taken_over_and_the_old_holder_is_fenced() {
             "{e}"
         );
         assert!(!st
-            .finish(&old, "succeeded", 99, Some("{}"), None)
+            .finish(&old, ExperimentState::Succeeded, 99, Some("{}"), None)
             .await
             .unwrap());
         st.interrupt(&old, 99, 0).await.unwrap();
@@ -303,10 +306,13 @@ async fn an_expired_lease_is_taken_over_and_the_old_holder_is_fenced() {
             Held::Held
         );
         assert!(st
-            .finish(&new, "succeeded", 1, Some("{}"), None)
+            .finish(&new, ExperimentState::Succeeded, 1, Some("{}"), None)
             .await
             .unwrap());
-        assert_eq!(st.get("e1").await.unwrap().unwrap().state, "succeeded");
+        assert_eq!(
+            st.get("e1").await.unwrap().unwrap().state,
+            ExperimentState::Succeeded
+        );
     }
 }
 
@@ -332,7 +338,7 @@ async fn a_run_whose_lease_expires_max_lost_times_fails_with_the_reason() {
         tokio::time::sleep(std::time::Duration::from_millis(400)).await;
         assert!(st.claim("sim", "w-next", 300).await.unwrap().is_none());
         let row = st.get("e1").await.unwrap().unwrap();
-        assert_eq!(row.state, "failed", "{}", st.backend());
+        assert_eq!(row.state, ExperimentState::Failed, "{}", st.backend());
         let why = row.error.unwrap();
         assert!(
             why.contains("stopped answering 3 times") && why.contains("w-last"),
@@ -424,7 +430,7 @@ fn no_experiment_is_done_twice_or_lost_whatever_the_interleaving() {
                         let t = trial(0, 0, 0, 1.0, true);
                         let stored = st.add_trials(&l, &[t], &[], (1, 1.0)).await;
                         let ended = st
-                            .finish(&l, "succeeded", 1, Some("{}"), None)
+                            .finish(&l, ExperimentState::Succeeded, 1, Some("{}"), None)
                             .await
                             .unwrap();
                         // A write is refused exactly when the end is.
@@ -592,7 +598,10 @@ async fn work_units_are_planned_once_claimed_in_order_and_fenced() {
             .await
             .unwrap_err();
         assert_eq!(Fault::of(&e), Fault::Lost, "{e}");
-        assert!(!st.finish(&old, "succeeded", 2, None, None).await.unwrap());
+        assert!(!st
+            .finish(&old, ExperimentState::Succeeded, 2, None, None)
+            .await
+            .unwrap());
         // The new holder resumes from the stored trial of its column only.
         st.add_trials(&b.lease(), &[trial(0, 1, 0, 300.0, true)], &[], (1, 0.0))
             .await
@@ -602,7 +611,13 @@ async fn work_units_are_planned_once_claimed_in_order_and_fenced() {
         assert_eq!(st.unit_trials(&m).await.unwrap(), []);
         // Ends: done (as `succeeded` says it), and interrupted: queued again.
         assert!(st
-            .finish(&a2.lease(), "succeeded", 1, Some("null"), None)
+            .finish(
+                &a2.lease(),
+                ExperimentState::Succeeded,
+                1,
+                Some("null"),
+                None
+            )
             .await
             .unwrap());
         st.interrupt(&b.lease(), 1, 0).await.unwrap();
@@ -633,7 +648,7 @@ async fn work_units_are_planned_once_claimed_in_order_and_fenced() {
             Held::Lost
         );
         assert!(!st
-            .finish(&b2.lease(), "cancelled", 1, None, None)
+            .finish(&b2.lease(), ExperimentState::Cancelled, 1, None, None)
             .await
             .unwrap());
         assert!(st.claim_unit("sim", "w6", 300).await.unwrap().is_none());
@@ -677,7 +692,7 @@ async fn units_of_an_ended_experiment_are_cancelled_and_replanning_revives_cance
         let u0 = st.claim_unit("sim", "w2", 60_000).await.unwrap().unwrap();
         assert_eq!((u0.col, u0.attempt), (0, 2));
         assert!(st
-            .finish(&u0.lease(), "cancelled", 0, None, None)
+            .finish(&u0.lease(), ExperimentState::Cancelled, 0, None, None)
             .await
             .unwrap());
         st.plan_units(&driver, 0, "{}", &[col(0)]).await.unwrap();
@@ -696,7 +711,13 @@ async fn units_of_an_ended_experiment_are_cancelled_and_replanning_revives_cance
         );
         // The experiment ends (failed by its driver): both cancelled.
         assert!(st
-            .finish(&driver, "failed", 0, None, Some("map 0, column 1 failed"))
+            .finish(
+                &driver,
+                ExperimentState::Failed,
+                0,
+                None,
+                Some("map 0, column 1 failed")
+            )
             .await
             .unwrap());
         let states: Vec<String> = st
@@ -915,7 +936,11 @@ async fn every_fenced_experiment_write_of_a_stale_attempt_changes_nothing() {
                 .await
                 .unwrap_err(),
         );
-        for end in ["succeeded", "failed", "cancelled"] {
+        for end in [
+            ExperimentState::Succeeded,
+            ExperimentState::Failed,
+            ExperimentState::Cancelled,
+        ] {
             assert!(
                 !st.finish(&old, end, 9, Some("{}"), Some("stale"))
                     .await
@@ -928,11 +953,15 @@ async fn every_fenced_experiment_write_of_a_stale_attempt_changes_nothing() {
         assert_eq!(snapshot(st).await, before, "{}", st.backend());
         // The holder's end is taken; the stale one's after it changes nothing.
         assert!(st
-            .finish(&new, "succeeded", 1, Some("{}"), None)
+            .finish(&new, ExperimentState::Succeeded, 1, Some("{}"), None)
             .await
             .unwrap());
         let ended = snapshot(st).await;
-        for end in ["succeeded", "failed", "cancelled"] {
+        for end in [
+            ExperimentState::Succeeded,
+            ExperimentState::Failed,
+            ExperimentState::Cancelled,
+        ] {
             assert!(!st.finish(&old, end, 9, None, Some("stale")).await.unwrap());
         }
         st.interrupt(&old, 9, 0).await.unwrap();
@@ -987,7 +1016,11 @@ async fn every_fenced_unit_write_of_a_stale_attempt_changes_nothing() {
             .await
             .unwrap_err();
         assert_eq!(Fault::of(&e), Fault::Lost, "{e}");
-        for end in ["succeeded", "failed", "cancelled"] {
+        for end in [
+            ExperimentState::Succeeded,
+            ExperimentState::Failed,
+            ExperimentState::Cancelled,
+        ] {
             assert!(
                 !st.finish(&old, end, 9, Some("null"), Some("stale"))
                     .await
@@ -1000,7 +1033,7 @@ async fn every_fenced_unit_write_of_a_stale_attempt_changes_nothing() {
         assert_eq!(snapshot(st).await, before, "{}", st.backend());
         // The holder ends it; the stale writes after that change nothing.
         assert!(st
-            .finish(&new, "succeeded", 1, Some("null"), None)
+            .finish(&new, ExperimentState::Succeeded, 1, Some("null"), None)
             .await
             .unwrap());
         let ended = snapshot(st).await;
@@ -1009,7 +1042,7 @@ async fn every_fenced_unit_write_of_a_stale_attempt_changes_nothing() {
             Held::Lost
         );
         assert!(!st
-            .finish(&old, "failed", 9, None, Some("stale"))
+            .finish(&old, ExperimentState::Failed, 9, None, Some("stale"))
             .await
             .unwrap());
         st.interrupt(&old, 9, 0).await.unwrap();
@@ -1135,7 +1168,7 @@ async fn planned_and_ended_units_wake_the_waiting_workers() {
             .unwrap_or_else(|_| panic!("no wake-up for planned units ({})", st.backend()));
         let u = st.claim_unit("sim", "w2", 60_000).await.unwrap().unwrap();
         assert!(st
-            .finish(&u.lease(), "succeeded", 0, None, None)
+            .finish(&u.lease(), ExperimentState::Succeeded, 0, None, None)
             .await
             .unwrap());
         let who = tokio::time::timeout(bound, ended.recv())
@@ -1183,7 +1216,7 @@ async fn planned_and_ended_units_wake_the_waiting_workers() {
     }
     let u = a.claim_unit("sim", "w2", 60_000).await.unwrap().unwrap();
     assert!(a
-        .finish(&u.lease(), "succeeded", 0, None, None)
+        .finish(&u.lease(), ExperimentState::Succeeded, 0, None, None)
         .await
         .unwrap());
     let who = tokio::time::timeout(bound, ended.recv())

@@ -281,7 +281,7 @@ async fn the_live_part_answers_204_while_nothing_changed() {
         // the same token now answers the part, showing it.
         let mut row = store.get(&s.typical).await.unwrap().unwrap();
         row.id = "joined-the-queue".into();
-        row.state = "queued".into();
+        row.state = zwidth::store::ExperimentState::Queued;
         (row.started_ms, row.finished_ms, row.result) = (None, None, None);
         store.import_run(&row, &[], &[]).await.unwrap();
         let (code, _, body) = get(&app, &format!("/ui/queue/live?{enc}")).await;
@@ -339,7 +339,7 @@ async fn hostile_strings_come_out_escaped() {
         assert_eq!(v["field"], "description", "{v}");
         let mut row = store.get(&s.typical).await.unwrap().unwrap();
         row.id = "hostile-run".into();
-        row.state = "failed".into();
+        row.state = zwidth::store::ExperimentState::Failed;
         row.finished_ms = Some(zwidth::clock::now_ms());
         row.error = Some("<b onmouseover=alert(3)>boom</b>".into());
         store.import_run(&row, &[], &[]).await.unwrap();

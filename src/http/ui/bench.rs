@@ -12,6 +12,7 @@ use axum::http::Request;
 use serde::Serialize;
 use tower::ServiceExt;
 
+use crate::store::ExperimentState::{Failed, Queued, Running, Succeeded};
 use crate::store::{ExperimentRow, Store};
 use crate::zwidth::search::{map, Point, StoredEvaluation, StoredTrial};
 use crate::zwidth::settings::MapSpec;
@@ -116,18 +117,15 @@ pub async fn seed(
     // Every 50th waiting, every 200th running, every 97th failed; the
     // first the biggest, the third the tune.
     let state_of = |i: usize| match i {
-        1 => "succeeded",
-        _ if i % 200 == 7 => "running",
-        _ if i % 50 == 3 => "queued",
-        _ if i % 97 == 5 => "failed",
-        _ => "succeeded",
+        1 => Succeeded,
+        _ if i % 200 == 7 => Running,
+        _ if i % 50 == 3 => Queued,
+        _ if i % 97 == 5 => Failed,
+        _ => Succeeded,
     };
     // The other trials over the runs that hold trials (not the biggest,
     // the tune or the waiting), so the database holds `trials` in all.
-    let holders = (3..experiments)
-        .filter(|&i| state_of(i) != "queued")
-        .count()
-        + 1;
+    let holders = (3..experiments).filter(|&i| state_of(i) != Queued).count() + 1;
     let per = trials.saturating_sub(big).div_ceil(holders.max(1));
     let mut left = trials.saturating_sub(big);
     let mut out = Seeded {
@@ -142,7 +140,7 @@ pub async fn seed(
         let id = uuid::Uuid::now_v7().to_string();
         let n = if i == 0 {
             big
-        } else if i == 2 || state_of(i) == "queued" {
+        } else if i == 2 || state_of(i) == Queued {
             0
         } else {
             let n = per.min(left);
@@ -161,30 +159,29 @@ pub async fn seed(
             } else {
                 spec_json.clone()
             },
-            state: if is_tune { "succeeded" } else { state }.into(),
+            state: if is_tune { Succeeded } else { state },
             priority: (i % 3) as i64,
             created_ms: t0,
-            started_ms: (state != "queued").then_some(t0 + 1000),
-            finished_ms: (state == "succeeded" || state == "failed" || is_tune)
-                .then_some(t0 + 30_000),
+            started_ms: (state != Queued).then_some(t0 + 1000),
+            finished_ms: (state == Succeeded || state == Failed || is_tune).then_some(t0 + 30_000),
             trials_done: if is_tune { 0 } else { n as i64 },
             result: if is_tune {
                 Some(serde_json::to_string(&tuned).map_err(|e| e.to_string())?)
             } else {
-                (state == "succeeded").then(|| result_json.clone())
+                (state == Succeeded).then(|| result_json.clone())
             },
-            error: (state == "failed")
+            error: (state == Failed)
                 .then(|| format!("seeded failure {i}: the rig stopped answering")),
             idempotency_key: None,
             not_before_ms: None,
             rig: "sim".into(),
-            progress: if state == "succeeded" { 1.0 } else { 0.4 },
+            progress: if state == Succeeded { 1.0 } else { 0.4 },
             best: None,
-            attempt: (state != "queued") as i64,
-            worker: (state == "running").then(|| "bench:1:ui".to_string()),
+            attempt: (state != Queued) as i64,
+            worker: (state == Running).then(|| "bench:1:ui".to_string()),
             lease_until_ms: None,
         };
-        let ts = if is_tune || state == "queued" {
+        let ts = if is_tune || state == Queued {
             Vec::new()
         } else {
             synthetic_trials(n, &like)
@@ -202,7 +199,7 @@ pub async fn seed(
                 out.typical = id;
             }
             2 => out.tune = id,
-            _ if state == "succeeded" && out.pair[1].is_empty() => out.pair[1] = id,
+            _ if state == Succeeded && out.pair[1].is_empty() => out.pair[1] = id,
             _ => {}
         }
     }

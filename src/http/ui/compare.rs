@@ -246,7 +246,7 @@ async fn picker(st: &AppState) -> Result<Response, Problem> {
                                 td { input type="checkbox" name="run" value=(r.id) aria-label={"compare " (r.id)}; }
                                 td { (run_link(&r.id)) }
                                 td { (r.kind) }
-                                td { (state_badge(&r.state)) }
+                                td { (state_badge(r.state)) }
                                 td { (r.rig) }
                                 td class="num" { (r.trials_done) }
                             }

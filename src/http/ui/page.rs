@@ -143,7 +143,7 @@ pub fn utc(ms: i64) -> String {
 }
 
 /// A state as a badge (colour and text: never colour alone).
-pub fn state_badge(state: &str) -> Markup {
+pub fn state_badge(state: crate::store::ExperimentState) -> Markup {
     html! { span class={"badge " (state)} { (state) } }
 }
 

@@ -166,7 +166,7 @@ async fn render(st: &AppState, token: &str) -> Result<Markup, Problem> {
                             td { (run_link(&r.id)) }
                             td { (r.kind) }
                             td class="num" { (r.priority) }
-                            td { (state_badge(&r.state)) }
+                            td { (state_badge(r.state)) }
                             td class="volatile" { (ago(r.created_ms, now)) }
                             td class="volatile" { (ready.map_or("now".into(), |t| format!("in {}", duration((t - now) as f64 / 1000.0)))) }
                             td { (action("POST", &format!("/v1/experiments/{}/cancel", r.id), "Cancel", &r.id)) }
@@ -273,7 +273,7 @@ pub fn per_rig_order(rows: &[crate::store::ExperimentRow]) -> Vec<usize> {
 /// When a waiting run becomes claimable, if later than `now`: its
 /// `not_before`, or an interrupted run's last lease end.
 pub fn ready_at(r: &crate::store::ExperimentRow, now: i64) -> Option<i64> {
-    let lease = (r.state == "interrupted")
+    let lease = (r.state == crate::store::ExperimentState::Interrupted)
         .then_some(r.lease_until_ms)
         .flatten();
     [r.not_before_ms, lease]
@@ -293,7 +293,7 @@ mod tests {
             id: "x".into(),
             kind: "map".into(),
             spec: String::new(),
-            state: state.into(),
+            state: state.parse().unwrap(),
             priority: 0,
             created_ms: 0,
             started_ms: None,

@@ -16,7 +16,7 @@ use crate::http::problem::QueryArgs;
 use crate::http::{AppState, Problem};
 use crate::plot::{map_extent, zwidth_map_svg_styled, FidelityScale, MapPlotPoint, MapStyle};
 use crate::report::{self, MapSummary};
-use crate::store::ExperimentRow;
+use crate::store::{ExperimentRow, ExperimentState};
 use crate::zwidth::search::BoundaryPoint;
 
 /// Points drawn one by one with a tooltip, over all maps of a page; past
@@ -29,8 +29,6 @@ pub const PAGE_MAPS: usize = 12;
 /// are thinned alike (1 in n drawn, said under the maps; the boundaries
 /// and the figures stay whole).
 pub const PAGE_POINTS: usize = 8_000;
-
-const ENDED: [&str; 3] = ["succeeded", "failed", "cancelled"];
 
 async fn row(st: &AppState, id: &str) -> Result<ExperimentRow, Problem> {
     st.store
@@ -55,7 +53,7 @@ pub(super) fn token(r: &ExperimentRow, stored: i64, st: &AppState) -> String {
     {
         (o.held(), o.waiting()).hash(&mut h);
     }
-    if r.state == "queued" {
+    if r.state == ExperimentState::Queued {
         st.unserved(&r.rig).hash(&mut h);
     }
     format!(
@@ -144,10 +142,10 @@ async fn live_markup(st: &AppState, r: &ExperimentRow, page: usize) -> Result<Ma
         .as_deref()
         .and_then(|s| serde_json::from_str(s).ok());
     let v = st.view(r.clone());
-    let ended = ENDED.contains(&r.state.as_str());
+    let ended = r.state.ended();
     let status = html! {
         div class="status" {
-            (state_badge(&r.state))
+            (state_badge(r.state))
             @if !ended {
                 " " progress class="volatile" value=(format!("{:.3}", r.progress)) max="1" aria-label="progress" {}
                 " " span class="num volatile" { (format!("{:.0} %", 100.0 * r.progress)) }
@@ -172,7 +170,7 @@ async fn live_markup(st: &AppState, r: &ExperimentRow, page: usize) -> Result<Ma
         None => html! { p class="error" { "The stored spec cannot be read by this version." } },
     };
     let downloads = html! {
-        @if r.state == "succeeded" {
+        @if r.state == ExperimentState::Succeeded {
             p class="downloads" { "Download: "
                 a href={"/v1/experiments/" (r.id) "/points.csv"} download { "CSV" } " · "
                 a href={"/v1/experiments/" (r.id) "/plot.svg"} download { "SVG" } " · "
@@ -260,8 +258,8 @@ async fn maps_markup(
         .into_iter()
         .map(|(scope, points)| (scope, points.iter().map(MapPlotPoint::of).collect()))
         .collect();
-    let finished: Vec<MapSummary> = match (result, r.state.as_str()) {
-        (Some(res), "succeeded") => report::maps(&r.id, spec, res),
+    let finished: Vec<MapSummary> = match (result, r.state) {
+        (Some(res), ExperimentState::Succeeded) => report::maps(&r.id, spec, res),
         _ => Vec::new(),
     };
     let n = scopes

@@ -15,7 +15,7 @@ use crate::store::dashboard::ListFilter;
 /// Runs per page.
 pub const PER_PAGE: i64 = 50;
 const KINDS: [&str; 4] = ["map", "compare", "sweep", "tune"];
-use crate::store::STATES;
+use crate::store::{ExperimentState, STATES};
 
 /// The filter from the query, each value checked.
 pub fn filter(q: &QueryArgs) -> Result<ListFilter, Problem> {
@@ -131,12 +131,12 @@ pub async fn page(
                     tbody {
                         @for r in &rows {
                             tr {
-                                td { @if r.state == "succeeded" && r.kind != "tune" {
+                                td { @if r.state == ExperimentState::Succeeded && r.kind != "tune" {
                                     input type="checkbox" name="run" value=(r.id) aria-label={"compare " (r.id)};
                                 } }
                                 td { (run_link(&r.id)) }
                                 td { (r.kind) }
-                                td { (state_badge(&r.state)) }
+                                td { (state_badge(r.state)) }
                                 td { (r.rig) }
                                 td class="num volatile" { (format!("{:.0} %", 100.0 * r.progress)) }
                                 td class="num volatile" { (r.trials_done) }
