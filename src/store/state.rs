@@ -131,6 +131,8 @@ mod tests {
         for (s, w) in ALL.iter().zip(&words) {
             assert_eq!(w.parse::<ExperimentState>(), Ok(*s));
             assert_eq!(serde_json::to_string(s).unwrap(), format!("\"{w}\""));
+            // Display: how messages and the API's view name it.
+            assert_eq!(s.to_string(), *w);
         }
         let e = "Queued".parse::<ExperimentState>().unwrap_err();
         assert!(
