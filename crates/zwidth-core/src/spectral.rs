@@ -8,7 +8,42 @@
 
 use num_complex::Complex64 as C;
 use realfft::{RealFftPlanner, RealToComplex};
-use std::sync::Arc;
+use std::collections::HashSet;
+use std::sync::{Arc, Mutex, MutexGuard, OnceLock, PoisonError};
+
+/// The process's FFT plans, kept by length. Planning a 4 000-point FFT
+/// computes its twiddles (one `sincos` each): done afresh for every
+/// realization it cost 15 % of a noisy map's time (perf, issue 34).
+/// Planning is deterministic, so a kept plan is the plan a new planner would
+/// make: results are the same bit for bit.
+struct Plans {
+    planner: RealFftPlanner<f64>,
+    lengths: HashSet<usize>,
+}
+
+/// Distinct lengths kept before the cache starts afresh: a long-running
+/// service sees a few per scene, and a stream of odd scenes must not grow
+/// it without end.
+const MAX_PLANNED_LENGTHS: usize = 64;
+
+fn plans(n: usize) -> MutexGuard<'static, Plans> {
+    static PLANS: OnceLock<Mutex<Plans>> = OnceLock::new();
+    let mut p = PLANS
+        .get_or_init(|| {
+            Mutex::new(Plans {
+                planner: RealFftPlanner::new(),
+                lengths: HashSet::new(),
+            })
+        })
+        .lock()
+        // A panic while planning leaves the cache as it was: still usable.
+        .unwrap_or_else(PoisonError::into_inner);
+    if p.lengths.insert(n) && p.lengths.len() > MAX_PLANNED_LENGTHS {
+        p.planner = RealFftPlanner::new();
+        p.lengths = HashSet::from([n]);
+    }
+    p
+}
 
 #[derive(Debug, Clone)]
 pub struct Multisine {
@@ -71,8 +106,7 @@ impl Multisine {
     /// One period sampled at `n` evenly spaced instants (n > 2·L), by one
     /// inverse real FFT: x[i] = Σ Re(A_k e^{j2πki/n}).
     pub fn period(&self, n: usize) -> Vec<f64> {
-        let mut planner = RealFftPlanner::<f64>::new();
-        let ifft = planner.plan_fft_inverse(n);
+        let ifft = plans(n).planner.plan_fft_inverse(n);
         let mut spectrum = ifft.make_input_vec();
         for (&k, a) in self.lines.iter().zip(&self.amplitudes) {
             if k < spectrum.len() && 2 * k != n {
@@ -105,7 +139,7 @@ pub struct LineAnalyzer {
 impl LineAnalyzer {
     /// `n`: samples per period.
     pub fn new(n: usize) -> Self {
-        let fft = RealFftPlanner::<f64>::new().plan_fft_forward(n);
+        let fft = plans(n).planner.plan_fft_forward(n);
         let input = fft.make_input_vec();
         let spectrum = fft.make_output_vec();
         let scratch = fft.make_scratch_vec();

@@ -2,6 +2,7 @@
 //! per test build instead of one per file. Each module is the file of one
 //! surface; `common` holds what they share.
 
+mod bit_identical;
 mod engines;
 mod extremes;
 mod golden;
