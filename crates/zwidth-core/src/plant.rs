@@ -82,6 +82,40 @@ impl ZohStep {
         }
         next
     }
+
+    /// The parts of [`ZohStep::step`] that do not depend on the last input:
+    /// per row, `Φ z` and the sum over the other inputs `u_head`, each
+    /// summed as `step` sums it, so that [`ZohStep::row`] and
+    /// [`ZohStep::finish`] complete it to the same bits. LuGre's predictor
+    /// and corrector differ only in the friction force (the last input):
+    /// they share these, and the predictor needs one row (issue 34).
+    #[inline]
+    fn partial(&self, z: &[f64; 5], u_head: &[f64]) -> ([f64; 5], [f64; 5]) {
+        let (mut a, mut p) = ([0.0; 5], [0.0; 5]);
+        let head = self.m.saturating_sub(1);
+        for i in 0..self.n {
+            a[i] = dot(&self.phi[i][..self.n], z);
+            p[i] = dot(&self.gamma[i][..head], u_head);
+        }
+        (a, p)
+    }
+
+    /// Row `i` of the step from its [`ZohStep::partial`] parts and the last
+    /// input.
+    #[inline]
+    fn row(&self, i: usize, a: &[f64; 5], p: &[f64; 5], last: f64) -> f64 {
+        a[i] + (p[i] + self.gamma[i][self.m - 1] * last)
+    }
+
+    /// The whole step from its [`ZohStep::partial`] parts and the last input.
+    #[inline]
+    fn finish(&self, a: &[f64; 5], p: &[f64; 5], last: f64) -> [f64; 5] {
+        let mut next = [0.0; 5];
+        for (i, zi) in next.iter_mut().enumerate().take(self.n) {
+            *zi = self.row(i, a, p, last);
+        }
+        next
+    }
 }
 
 /// φ(a) = (1 − e^{−a})/a.
@@ -411,17 +445,21 @@ impl Plant {
     fn step_lugre(&self, l: &LuGreStep, s: &mut PlantState, motor: f64, ext: f64) {
         let mut z = self.pack(s);
         let (k0, k1) = (l.model.stiffness, l.model.damping);
-        let advance = |z: &[f64; 5], friction: f64| l.zoh.step(z, &[motor, ext, friction]);
+        let u = [motor, ext];
         for _ in 0..l.n {
             // Predict with the velocity at the start, then correct with the
             // bristle stepped at the mean velocity and its spring force's
-            // mean over h (trapezoid): second order in h (Heun).
+            // mean over h (trapezoid): second order in h (Heun). Both steps
+            // start from z and differ in the friction force only.
+            let (a, p) = l.zoh.partial(&z, &u);
             let v0 = z[l.body];
             let b = l.model.bristle(s.z, v0, l.h);
-            let predicted = advance(&z, k0 * b + k1 * (b - s.z) / l.h);
-            let vm = 0.5 * (v0 + predicted[l.body]);
+            let predicted = l.zoh.row(l.body, &a, &p, k0 * b + k1 * (b - s.z) / l.h);
+            let vm = 0.5 * (v0 + predicted);
             let b = l.model.bristle(s.z, vm, l.h);
-            z = advance(&z, k0 * 0.5 * (s.z + b) + k1 * (b - s.z) / l.h);
+            z = l
+                .zoh
+                .finish(&a, &p, k0 * 0.5 * (s.z + b) + k1 * (b - s.z) / l.h);
             s.z = b;
         }
         self.unpack(&z, motor, s);
