@@ -5,14 +5,19 @@
 //!   loop of the same arithmetic, in the same run (target: engine within 2×).
 //! - `trace_seed_2011`: the 2011 boundary trace of the seed device at 10 kHz
 //!   with one estimator (target: under 1 s).
+//! - `probe/*`: the frequency engine's BLA verdict at one (K, B) of the seed
+//!   device (1 kHz, Coulomb friction, quantization) and of the mode-and-lag
+//!   scene (10 kHz, two masses, amplifier, LuGre), per simulated step of the
+//!   excitation grid, beside `sample/bare_loop` (issue 34).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
 use zwidth::plant::Plant;
 use zwidth::zwidth::hit::{wall_hit, HitKnobs, NoTrace};
+use zwidth::zwidth::probe::{probe, substeps};
 use zwidth::zwidth::scene::SceneSpec;
 use zwidth::zwidth::search::map;
-use zwidth::zwidth::settings::{Accuracy, Criterion as Crit, MapSpec, Method, SearchKind};
+use zwidth::zwidth::settings::{Accuracy, Criterion as Crit, MapSpec, Method, Preset, SearchKind};
 
 fn bench(c: &mut Criterion) {
     // Linear single-rate 10 kHz scene, FDM, K = 20 000 N/m, B = 30 N·s/m,
@@ -60,6 +65,40 @@ fn bench(c: &mut Criterion) {
             black_box((mean, m2))
         })
     });
+    g.finish();
+
+    // One BLA verdict near each scene's boundary at standard accuracy (its
+    // realizations, their transient and averaged periods), per grid step:
+    // the steps are counted from the outcome's periods once, before timing.
+    let mut g = c.benchmark_group("probe");
+    g.sample_size(10);
+    for (name, json, k, b) in [
+        (
+            "seed_2018_realization_step",
+            include_str!("../examples/seed_2018.json"),
+            40_000.0,
+            0.0,
+        ),
+        (
+            "mode_lag_2011_realization_step",
+            include_str!("../examples/mode_lag_2011.json"),
+            100_000.0,
+            30.0,
+        ),
+    ] {
+        let sc = SceneSpec::from_json(json).unwrap().validate().unwrap();
+        let knobs = Accuracy::Preset(Preset::Standard)
+            .resolve(&sc)
+            .unwrap()
+            .probe;
+        let per_period = (sc.spec.control.sample_hz / sc.spec.probe.f_min_hz).round() as u64
+            * substeps(&sc) as u64;
+        let periods = u64::from(probe(&sc, k, b, knobs).periods_run);
+        g.throughput(Throughput::Elements(periods * per_period));
+        g.bench_function(name, |bch| {
+            bch.iter(|| black_box(probe(&sc, black_box(k), black_box(b), knobs)))
+        });
+    }
     g.finish();
 
     let seed = SceneSpec::from_json(include_str!("../examples/seed_2011.json")).unwrap();

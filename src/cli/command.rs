@@ -544,6 +544,10 @@ pub enum BenchCommand {
     },
     /// Wall time and K/B-width error against `reference` for each accuracy preset, on the example scenes.
     Tradeoff {
+        /// Only the examples whose name contains this (e.g. `seed_2018`,
+        /// `mode_lag`: its reference map alone takes minutes).
+        #[arg(long)]
+        scene: Option<String>,
         #[arg(long)]
         json: bool,
     },

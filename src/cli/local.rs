@@ -445,9 +445,9 @@ pub(super) fn run(
             write_either(stdout, json, &r, || r.table())
         }
         Command::Bench {
-            what: BenchCommand::Tradeoff { json },
+            what: BenchCommand::Tradeoff { scene, json },
         } => {
-            let rows = tradeoff::run()?;
+            let rows = tradeoff::run(scene.as_deref())?;
             write_either(stdout, json, &rows, || tradeoff::table(&rows))
         }
         Command::Bench {

@@ -5,13 +5,14 @@
 use serde::Serialize;
 use std::time::Instant;
 
+use super::point::Point;
 use super::scene::SceneSpec;
 use super::search::map;
 use super::settings::{Accuracy, Criterion, MapSpec, Method, Preset, SearchKind};
 use crate::error::SpecError;
 
 /// (name, scene JSON, criterion) of each example.
-pub const EXAMPLES: [(&str, &str, Criterion); 4] = [
+pub const EXAMPLES: [(&str, &str, Criterion); 5] = [
     (
         "linear_1khz (analytic)",
         include_str!("../../../../examples/linear_1khz.json"),
@@ -32,6 +33,13 @@ pub const EXAMPLES: [(&str, &str, Criterion); 4] = [
         include_str!("../../../../examples/linear_1khz.json"),
         Criterion::Stability,
     ),
+    // The realistic 10 kHz scene (two masses, amplifier, LuGre): its
+    // reference map takes minutes (docs/benchmarks.md).
+    (
+        "mode_lag_2011 (frequency)",
+        include_str!("../../../../examples/mode_lag_2011.json"),
+        Criterion::Impedance,
+    ),
 ];
 
 #[derive(Debug, Clone, Serialize)]
@@ -40,6 +48,12 @@ pub struct TradeoffRow {
     pub preset: Preset,
     pub wall_s: f64,
     pub trials: usize,
+    /// Simulated realizations: each trial's random-phase realizations (the
+    /// frequency engine's BLA) or replicate hits (the time engine), one for
+    /// a trial without (a deterministic simulation, a closed form).
+    pub realizations: u64,
+    /// `realizations / wall_s`: the engine's speed, whatever the search.
+    pub realizations_per_s: f64,
     pub k_width: f64,
     pub b_width: f64,
     /// Relative errors against the reference preset of the same scene.
@@ -53,9 +67,32 @@ pub struct TradeoffRow {
     pub overlaps_reference: Option<bool>,
 }
 
-/// Every preset on every example scene (`zwidth bench tradeoff`).
-pub fn run() -> Result<Vec<TradeoffRow>, SpecError> {
-    run_on(&EXAMPLES)
+/// Every preset on every example scene whose name contains `filter`
+/// (`zwidth bench tradeoff [--scene FILTER]`); an error names the choices
+/// when none does.
+pub fn run(filter: Option<&str>) -> Result<Vec<TradeoffRow>, SpecError> {
+    let chosen: Vec<_> = EXAMPLES
+        .iter()
+        .filter(|(name, _, _)| filter.is_none_or(|f| name.contains(f)))
+        .copied()
+        .collect();
+    if chosen.is_empty() {
+        let names: Vec<&str> = EXAMPLES.iter().map(|e| e.0).collect();
+        return Err(SpecError::new(
+            "scene",
+            filter.unwrap_or_default(),
+            format!("must be part of an example's name: {}", names.join(", ")),
+        ));
+    }
+    run_on(&chosen)
+}
+
+/// Realizations a map simulated (see [`TradeoffRow::realizations`]).
+fn realizations(points: &[Point]) -> u64 {
+    points
+        .iter()
+        .map(|p| u64::from(p.realizations.unwrap_or(1)))
+        .sum()
 }
 
 /// Every preset on the given scenes, each against its own reference.
@@ -87,11 +124,14 @@ fn run_on(examples: &[(&str, &str, Criterion)]) -> Result<Vec<TradeoffRow>, Spec
         let (kr, br) = (results[0].2.k_width, results[0].2.b_width);
         let ref_interval = results[0].2.k_width_interval;
         for (preset, wall_s, r) in results {
+            let realizations = realizations(&r.points);
             rows.push(TradeoffRow {
                 scene: name.to_string(),
                 preset,
                 wall_s,
                 trials: r.trials,
+                realizations,
+                realizations_per_s: realizations as f64 / wall_s.max(1e-9),
                 k_width: r.k_width,
                 b_width: r.b_width,
                 k_width_error: relative_error(r.k_width, kr),
@@ -119,11 +159,13 @@ fn relative_error(x: f64, r: f64) -> f64 {
 
 pub fn table(rows: &[TradeoffRow]) -> String {
     let mut s = format!(
-        "{:<24} {:<10} {:>9} {:>7} {:>12} {:>10} {:>9} {:>9} {:>27} {:>8}\n",
+        "{:<26} {:<10} {:>9} {:>7} {:>8} {:>10} {:>12} {:>10} {:>9} {:>9} {:>27} {:>8}\n",
         "scene",
         "preset",
         "wall (s)",
         "trials",
+        "realiz.",
+        "realiz./s",
         "K-width",
         "B-width",
         "K err",
@@ -137,11 +179,13 @@ pub fn table(rows: &[TradeoffRow]) -> String {
             .overlaps_reference
             .map_or("-", |o| if o { "yes" } else { "no" });
         s.push_str(&format!(
-            "{:<24} {:<10} {:>9.3} {:>7} {:>12.1} {:>10.2} {:>8.2}% {:>8.2}% {:>27} {:>8}\n",
+            "{:<26} {:<10} {:>9.3} {:>7} {:>8} {:>10.0} {:>12.1} {:>10.2} {:>8.2}% {:>8.2}% {:>27} {:>8}\n",
             r.scene,
             format!("{:?}", r.preset).to_lowercase(),
             r.wall_s,
             r.trials,
+            r.realizations,
+            r.realizations_per_s,
             r.k_width,
             r.b_width,
             100.0 * r.k_width_error,
@@ -167,6 +211,24 @@ pub fn interval_cell(k_width: f64, interval: Option<[f64; 2]>) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn realizations_count_each_trial_s_or_one() {
+        let p = |r: Option<u32>| Point {
+            realizations: r,
+            ..Point::default()
+        };
+        // 24 + 3 BLA realizations, and one deterministic trial.
+        assert_eq!(realizations(&[p(Some(24)), p(None), p(Some(3))]), 28);
+        assert_eq!(realizations(&[]), 0);
+    }
+
+    #[test]
+    fn an_unknown_scene_filter_names_the_examples() {
+        let e = run(Some("no such scene")).unwrap_err().to_string();
+        assert!(e.contains("scene") && e.contains("no such scene"), "{e}");
+        assert!(e.contains("mode_lag_2011 (frequency)"), "{e}");
+    }
 
     #[test]
     fn relative_errors_against_the_reference() {
@@ -212,6 +274,8 @@ mod tests {
             preset: Preset::Draft,
             wall_s: 1.5,
             trials: 7,
+            realizations: 84,
+            realizations_per_s: 56.0,
             k_width: 1000.0,
             b_width: 10.0,
             k_width_error: 0.034,
@@ -221,7 +285,16 @@ mod tests {
         };
         let t = table(&[row]);
         let last = t.lines().nth(1).unwrap();
-        for want in ["draft", "3.40%", "-12.50%", "[900, 1100] ±10.0%", " no"] {
+        // 84 realizations in 1.5 s: 56 a second.
+        for want in [
+            "draft",
+            " 84 ",
+            " 56 ",
+            "3.40%",
+            "-12.50%",
+            "[900, 1100] ±10.0%",
+            " no",
+        ] {
             assert!(last.contains(want), "{want:?} in {last:?}");
         }
         // Half the width over the K-width: 50·(1100 − 900)/1000 = 10 %.
