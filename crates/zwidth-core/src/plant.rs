@@ -555,6 +555,68 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_velocity_keeps_its_sign_only_where_it_surely_stops_after_the_step() {
+        // The seed device at 1 kHz sliding at 10 mm/s, decelerated by a net
+        // force f < 0. The exact velocity after the step, v0·e^{−a} +
+        // f·dt·φ(a)/m with a = b·dt/m, is zero at f* = −v0·c_vv/c_vf; the
+        // closed-form stopping time τ·ln(1 − v0·b/f) is then exactly dt.
+        let p = Plant::new(0.52, 13.2, 0.19, 1e-3);
+        let v0 = 0.01;
+        let f_star = -v0 * p.c_vv / p.c_vf;
+        for (scale, keeps) in [
+            (0.5, true),          // stops long after the step
+            (1.0 - 1e-6, true),   // just after it, far beyond rounding
+            (1.0 - 1e-12, false), // within 1e-9 of the terms: unsure
+            (1.0 + 1e-12, false),
+            (2.0, false), // stops within the step
+        ] {
+            let f = f_star * scale;
+            assert_eq!(p.keeps_sign(v0, f, 1.0), keeps, "f = {scale}·f*");
+            if keeps {
+                assert!(p.time_to_stop(v0, f) > p.dt, "{scale}");
+            }
+            // The mirror image: sliding the other way.
+            assert_eq!(p.keeps_sign(-v0, -f, -1.0), keeps, "mirror {scale}");
+        }
+        assert!(p.time_to_stop(v0, 2.0 * f_star) < p.dt);
+    }
+
+    #[test]
+    fn a_step_in_parts_is_the_whole_step_bit_for_bit() {
+        // Φ 5×5 and Γ 5×3 with entries of mixed sign and scale (an LCG, so
+        // the sums round differently row by row), and the 4×2 of a plant
+        // without LuGre: the parts LuGre's predictor and corrector share,
+        // completed by the last input, equal `step` to the last bit.
+        let mut x = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            x = x.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+            ((x >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 10f64.powi((x % 7) as i32 - 3)
+        };
+        for (n, m) in [(5, 3), (4, 2), (2, 2)] {
+            let phi: Mat = (0..n).map(|_| (0..n).map(|_| next()).collect()).collect();
+            let gamma: Mat = (0..n).map(|_| (0..m).map(|_| next()).collect()).collect();
+            let zs = ZohStep::new(&phi, &gamma);
+            for _ in 0..50 {
+                let z = [next(), next(), next(), next(), next()];
+                let u: Vec<f64> = (0..m).map(|_| next()).collect();
+                let whole = zs.step(&z, &u);
+                let (a, p) = zs.partial(&z, &u[..m - 1]);
+                let parts = zs.finish(&a, &p, u[m - 1]);
+                assert_eq!(whole.map(f64::to_bits), parts.map(f64::to_bits), "{n}×{m}");
+                for i in 0..n {
+                    assert_eq!(zs.row(i, &a, &p, u[m - 1]).to_bits(), whole[i].to_bits());
+                }
+                // The same as the matrices' own rows summed in order.
+                for i in 0..n {
+                    let want = dot(&phi[i], &z) + dot(&gamma[i], &u);
+                    assert_eq!(whole[i].to_bits(), want.to_bits(), "row {i}");
+                }
+                assert!(whole[n..].iter().all(|&v| v == 0.0));
+            }
+        }
+    }
+
+    #[test]
     fn series_and_closed_forms_agree() {
         // Reference: the closed forms φ(a) = (1 − e^{−a})/a and
         // ψ(a) = (a − 1 + e^{−a})/a² where they are well conditioned (a ≥
