@@ -1,6 +1,7 @@
 //! The `zwidth` Python package's native module: the estimators through
 //! zwidth-core (the JSON spec the API takes, with its messages), built
-//! from zwidth-dsp: the same bits as the simulator and the C ABI.
+//! from zwidth-dsp: the same bits as the simulator and the C ABI; and the
+//! engines (`engines.rs`).
 
 use numpy::{PyArray1, PyReadonlyArray1};
 use pyo3::exceptions::PyValueError;
@@ -8,6 +9,8 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 
 use zwidth_core::estimators::{Estimator as Built, EstimatorSpec, Sampling, VelocityEstimator};
+
+mod engines;
 
 /// A velocity estimator: `Estimator(spec, rate_hz, quantization)`.
 ///
@@ -123,6 +126,10 @@ fn dsp_identity(py: Python<'_>) -> PyResult<Py<PyAny>> {
 fn _zwidth(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Estimator>()?;
     m.add_function(wrap_pyfunction!(dsp_identity, m)?)?;
+    m.add_function(wrap_pyfunction!(engines::map_json, m)?)?;
+    m.add_function(wrap_pyfunction!(engines::compare_json, m)?)?;
+    m.add_function(wrap_pyfunction!(engines::trial_json, m)?)?;
+    m.add_function(wrap_pyfunction!(engines::impedance_json, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("dsp_version", zwidth_dsp::VERSION)?;
     Ok(())

@@ -1,14 +1,39 @@
 """zwidth from Python: the velocity estimators the simulator and a rig's
-controller run, bit for bit (crates/zwidth-dsp through zwidth-core).
+controller run, bit for bit (crates/zwidth-dsp through zwidth-core), and the
+Z-width engines in process.
 
     >>> import numpy as np, zwidth
     >>> e = zwidth.Estimator({"kind": "butterworth", "cutoff_hz": 100}, 10_000, 1e-6)
     >>> v = e.run(np.linspace(0, 1e-3, 100))   # m in, m/s out
+    >>> m = zwidth.map("examples/seed_2018.json", accuracy="draft", b=[0, 400])
+    >>> m.k_width, m.boundary["k_max"]           # N/m
 
-Units are SI. A bad spec, rate or position raises ValueError naming the
-field, its value and what is allowed.
+Units are SI. A bad spec, scene, rate or position raises ValueError naming
+the field, its value and what is allowed. The engines release the GIL while
+they run, and Ctrl-C cancels them.
 """
 
 from ._zwidth import Estimator, __version__, dsp_identity, dsp_version
+from .engines import (
+    CompareResult,
+    ImpedanceResult,
+    MapResult,
+    compare,
+    impedance,
+    map,
+    trial,
+)
 
-__all__ = ["Estimator", "__version__", "dsp_identity", "dsp_version"]
+__all__ = [
+    "CompareResult",
+    "Estimator",
+    "ImpedanceResult",
+    "MapResult",
+    "__version__",
+    "compare",
+    "dsp_identity",
+    "dsp_version",
+    "impedance",
+    "map",
+    "trial",
+]

@@ -1,0 +1,216 @@
+//! The engines from Python: a map, a comparison, one wall hit and the
+//! impedance at one (K, B), through zwidth-core with the same specs and
+//! the same JSON results as the CLI's `--json` and the API (the Python
+//! side, `zwidth/engines.py`, turns them into objects with numpy arrays).
+//! The GIL is released while they run; Ctrl-C, or an exception raised in
+//! the calling thread, cancels them within a tenth of a second.
+
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use serde::Serialize;
+
+use zwidth_core::error::parse_json;
+use zwidth_core::zwidth::compare::compare_observed;
+use zwidth_core::zwidth::evaluator::Evaluator;
+use zwidth_core::zwidth::hit::{wall_hit, HitKnobs, NoTrace};
+use zwidth_core::zwidth::scene::{validate_wall, SceneSpec};
+use zwidth_core::zwidth::search::{map_observed, Observer};
+use zwidth_core::zwidth::settings::{Accuracy, Criterion, MapSpec, Method};
+use zwidth_core::SpecError;
+
+fn value_error(e: impl std::fmt::Display) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+fn to_json(v: &impl Serialize) -> PyResult<String> {
+    serde_json::to_string(v).map_err(value_error)
+}
+
+/// How often the waiting thread looks for Ctrl-C or a pending exception.
+const POLL: Duration = Duration::from_millis(100);
+
+/// Run `work` on its own thread with an observer, the GIL released; every
+/// `POLL` take the GIL back to deliver Ctrl-C (`check_signals`, main
+/// thread) or an exception another thread raised in this one (a line of
+/// Python bytecode runs, which raises it): either cancels the work through
+/// its observer, waits for it to stop, and raises.
+fn cancellable<T: Send>(
+    py: Python<'_>,
+    work: impl FnOnce(Arc<Observer>) -> Result<T, SpecError> + Send,
+) -> PyResult<T> {
+    let observer = Arc::new(Observer::default());
+    std::thread::scope(|s| {
+        let worker = {
+            let observer = Arc::clone(&observer);
+            s.spawn(move || work(observer))
+        };
+        loop {
+            py.detach(|| {
+                let until = Instant::now() + POLL;
+                while !worker.is_finished() && Instant::now() < until {
+                    std::thread::sleep(Duration::from_millis(5));
+                }
+            });
+            if worker.is_finished() {
+                return match worker.join() {
+                    Ok(r) => r.map_err(value_error),
+                    Err(_) => Err(pyo3::exceptions::PyRuntimeError::new_err(
+                        "the engine stopped on an internal error (a bug: please report it)",
+                    )),
+                };
+            }
+            let interrupted = py
+                .check_signals()
+                .and_then(|()| py.run(c"pass", None, None));
+            if let Err(e) = interrupted {
+                observer.cancel.store(true, Ordering::Relaxed);
+                py.detach(|| {
+                    while !worker.is_finished() {
+                        std::thread::sleep(Duration::from_millis(5));
+                    }
+                });
+                return Err(e);
+            }
+        }
+    })
+}
+
+/// A map: the API's map spec (JSON text) in, `zwidth map --json` out.
+#[pyfunction]
+pub fn map_json(py: Python<'_>, spec: &str) -> PyResult<String> {
+    let spec: MapSpec = parse_json(spec, "spec", "map spec")
+        .map_err(|e| as_arguments(e, spec))
+        .map_err(value_error)?;
+    let r = cancellable(py, |o| map_observed(&spec, Some(o), 0))?;
+    to_json(&r)
+}
+
+/// Every estimator of the 2018 paper on one scene (JSON text; None: the
+/// paper's simulated device), `zwidth compare --json` out.
+#[pyfunction]
+#[pyo3(signature = (scene, accuracy, criterion))]
+pub fn compare_json(
+    py: Python<'_>,
+    scene: Option<&str>,
+    accuracy: &str,
+    criterion: &str,
+) -> PyResult<String> {
+    let scene = match scene {
+        Some(s) => SceneSpec::from_json(s).map_err(value_error)?,
+        None => zwidth_core::zwidth::compare::seed_2018_scene(),
+    };
+    let accuracy: Accuracy = parse_json(accuracy, "accuracy", "accuracy")
+        .map_err(|e| as_arguments(e, &format!(r#"{{"accuracy":{accuracy}}}"#)))
+        .map_err(value_error)?;
+    let criterion: Criterion = field("criterion", criterion)?;
+    scene.validate().map_err(value_error)?;
+    let r = cancellable(py, |o| {
+        compare_observed(&scene, &accuracy, criterion, None, Some(o))
+    })?;
+    to_json(&r)
+}
+
+/// One wall hit (time engine, the scene's own settle and measure times),
+/// `zwidth trial --json` out.
+#[pyfunction]
+pub fn trial_json(py: Python<'_>, scene: &str, k: f64, b: f64) -> PyResult<String> {
+    let sc = SceneSpec::from_json(scene)
+        .and_then(|s| s.validate())
+        .map_err(value_error)?;
+    validate_wall(k, b).map_err(value_error)?;
+    let knobs = HitKnobs {
+        settle_s: sc.spec.hit.settle_s,
+        measure_s: sc.spec.hit.measure_s,
+    };
+    let o = cancellable(py, |_| Ok(wall_hit(&sc, k, b, knobs, &mut NoTrace)))?;
+    to_json(&o)
+}
+
+/// The rendered wall's impedance over the probe band (analytic when the
+/// scene is linear, else simulated), `zwidth impedance --json` out.
+#[pyfunction]
+pub fn impedance_json(
+    py: Python<'_>,
+    scene: &str,
+    k: f64,
+    b: f64,
+    method: &str,
+    accuracy: &str,
+) -> PyResult<String> {
+    let sc = SceneSpec::from_json(scene)
+        .and_then(|s| s.validate())
+        .map_err(value_error)?;
+    validate_wall(k, b).map_err(value_error)?;
+    let method: Method = field("method", method)?;
+    if method == Method::Time {
+        return Err(PyValueError::new_err(
+            "method = time is not allowed: the impedance needs auto, analytic or frequency",
+        ));
+    }
+    let accuracy: Accuracy = parse_json(accuracy, "accuracy", "accuracy")
+        .map_err(|e| as_arguments(e, &format!(r#"{{"accuracy":{accuracy}}}"#)))
+        .map_err(value_error)?;
+    let res = accuracy.resolve(&sc).map_err(value_error)?;
+    let ev = Evaluator::new(sc, method, Criterion::Impedance, res).map_err(value_error)?;
+    #[derive(Serialize)]
+    struct Out {
+        model: String,
+        #[serde(flatten)]
+        curve: zwidth_core::zwidth::analytic::ImpedanceCurve,
+    }
+    let curve = cancellable(py, |_| {
+        ev.impedance(k, b).ok_or_else(|| {
+            SpecError::new(
+                "method",
+                "time",
+                "the impedance needs auto, analytic or frequency",
+            )
+        })
+    })?;
+    to_json(&Out {
+        model: ev.model_description(),
+        curve,
+    })
+}
+
+/// A spec's parse error as the Python arguments it came from: the field
+/// without the `spec.` prefix, and the value itself where it is a word or a
+/// number (`method = nope`, not `(as written)`).
+fn as_arguments(mut e: SpecError, text: &str) -> SpecError {
+    e.field = e.field.trim_start_matches("spec.").to_string();
+    if let Ok(doc) = serde_json::from_str::<serde_json::Value>(text) {
+        let pointer = format!("/{}", e.field.replace('.', "/"));
+        match doc.pointer(&pointer) {
+            Some(serde_json::Value::String(v)) => e.value = v.clone(),
+            Some(v @ (serde_json::Value::Number(_) | serde_json::Value::Bool(_))) => {
+                e.value = v.to_string()
+            }
+            _ => {}
+        }
+    }
+    e.allowed = e
+        .allowed
+        .split(" at line ")
+        .next()
+        .unwrap_or_default()
+        .to_string();
+    if e.field == "accuracy" && e.allowed.contains("untagged enum Accuracy") {
+        e.allowed = r#"must be draft, standard, reference or a dict of knobs ({"preset": "draft", "k_rel_tol": 0.02, …})"#.into();
+    }
+    e
+}
+
+/// A choice (`"draft"`, `"impedance"`, …) read as the API reads it, or a
+/// ValueError naming the field and the value.
+fn field<T: serde::de::DeserializeOwned>(name: &str, value: &str) -> PyResult<T> {
+    serde_json::from_value(serde_json::Value::String(value.to_string())).map_err(|e| {
+        PyValueError::new_err(format!(
+            "{name} = {value} is not allowed: {}",
+            e.to_string().split(" at line").next().unwrap_or_default()
+        ))
+    })
+}

@@ -1,0 +1,182 @@
+"""The engines from Python against the CLI on the same inputs: every result
+equal to `zwidth … --json` (the same computation, so to the bit, but the
+elapsed time), every bad input a ValueError naming the field, and a long map
+cancelled within a second by Ctrl-C or by an exception raised in its thread.
+
+The CLI is the build `cargo test` (or `cargo build`) left in target/, or
+$ZWIDTH_BIN; without one these tests fail, as CI's must."""
+
+import ctypes
+import json
+import os
+import pathlib
+import signal
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import zwidth
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+EX = ROOT / "examples"
+
+
+def cli():
+    """The zwidth binary: $ZWIDTH_BIN, else the newest in target/."""
+    if os.environ.get("ZWIDTH_BIN"):
+        return os.environ["ZWIDTH_BIN"]
+    found = [p for p in (ROOT / "target/release/zwidth", ROOT / "target/debug/zwidth") if p.exists()]
+    assert found, "no zwidth binary: run `cargo build` (or set ZWIDTH_BIN)"
+    return str(max(found, key=lambda p: p.stat().st_mtime))
+
+
+def cli_json(*args):
+    out = subprocess.run([cli(), *args, "--json"], check=True, capture_output=True, text=True)
+    return json.loads(out.stdout)
+
+
+def without_elapsed(d):
+    """A result without its wall-clock fields (the only ones that differ)."""
+    if isinstance(d, dict):
+        return {k: without_elapsed(v) for k, v in d.items() if k != "elapsed_s"}
+    if isinstance(d, list):
+        return [without_elapsed(v) for v in d]
+    return d
+
+
+@pytest.mark.parametrize(
+    "scene, method, criterion, accuracy, bs",
+    [
+        ("seed_2018.json", "frequency", "impedance", "draft", [0, 400]),
+        ("seed_2011.json", "time", "stability", "draft", [0, 300]),
+        ("linear_1khz.json", "auto", "impedance", "standard", [0, 300]),
+    ],
+)
+def test_a_map_equals_the_cli_s(scene, method, criterion, accuracy, bs):
+    args = ["map", "--scene", str(EX / scene), "--method", method, "--criterion", criterion,
+            "--accuracy", accuracy, "--b", ",".join(str(b) for b in bs)]
+    want = cli_json(*args)
+    got = zwidth.map(EX / scene, method=method, criterion=criterion, accuracy=accuracy, b=bs)
+    assert without_elapsed(got.to_dict()) == without_elapsed(want)
+    # The arrays are the JSON's numbers.
+    assert got.k_width == want["k_width"]
+    assert list(got.boundary["k_max"]) == [p["k_max"] for p in want["boundary"]]
+    assert list(got.trials["k"]) == [p["k"] for p in want["points"]]
+    assert got.trials["ok"].dtype == bool and len(got.trials["ok"]) == want["trials"]
+
+
+def test_a_scene_may_be_a_dict_json_text_or_a_path():
+    text = (EX / "seed_2011.json").read_text()
+    runs = [zwidth.map(s, method="time", criterion="stability", accuracy="draft", b=[300])
+            for s in (json.loads(text), text, str(EX / "seed_2011.json"), EX / "seed_2011.json")]
+    first = without_elapsed(runs[0].to_dict())
+    assert all(without_elapsed(r.to_dict()) == first for r in runs[1:])
+
+
+def test_a_noisy_map_carries_its_intervals_as_arrays():
+    m = zwidth.map(EX / "seed_2018.json", accuracy="draft", b=[0, 400])
+    lo, hi = m.k_width_interval
+    assert lo <= m.k_width <= hi
+    assert np.all(m.boundary["k_lo"] <= m.boundary["k_max"])
+    assert np.all(m.boundary["k_max"] <= m.boundary["k_hi"])
+    # Every BLA trial ran at least one realization, at most draft's 10.
+    r = m.trials["realizations"]
+    assert r.min() >= 1 and r.max() <= 10
+
+
+def test_compare_equals_the_cli_s():
+    want = cli_json("compare", "--accuracy", "draft")
+    got = zwidth.compare(accuracy="draft")
+    assert without_elapsed(got.to_dict()) == without_elapsed(want)
+    assert list(got.maps) == [r["name"] for r in want["rows"]]
+    for row in want["rows"]:
+        assert got.maps[row["name"]].k_width == row["map"]["k_width"]
+
+
+def test_a_trial_and_an_impedance_equal_the_cli_s():
+    want = cli_json("trial", "--scene", str(EX / "seed_2011.json"), "--k", "20000", "--b", "30")
+    assert zwidth.trial(EX / "seed_2011.json", 20000, 30) == want
+    want = cli_json("impedance", "--scene", str(EX / "linear_1khz.json"), "--k", "20000", "--b", "30")
+    got = zwidth.impedance(EX / "linear_1khz.json", 20000, 30)
+    assert got.to_dict() == want
+    assert list(got.magnitude) == want["magnitude"] and got.passive == want["passive"]
+
+
+@pytest.mark.parametrize(
+    "call, field, value",
+    [
+        (lambda: zwidth.map({"device": {"mass": -1}}), "scene.device.mass", "-1"),
+        (lambda: zwidth.map(EX / "seed_2018.json", method="nope"), "method", "nope"),
+        (lambda: zwidth.map(EX / "seed_2018.json", accuracy="drafty"), "accuracy", "drafty"),
+        (lambda: zwidth.map(EX / "seed_2018.json", accuracy={"preset": "draft", "k_rel_tol": 0.9}),
+         "accuracy.k_rel_tol", "0.9"),
+        (lambda: zwidth.map(EX / "seed_2018.json", accuracy="drafty"), "accuracy", "draft, standard"),
+        (lambda: zwidth.map(EX / "seed_2018.json", b_max=float("inf")), "b_max", "inf"),
+        (lambda: zwidth.map(EX / "seed_2018.json", b=[0, float("nan")]), "b[1]", "nan"),
+        (lambda: zwidth.trial(EX / "seed_2011.json", "stiff", 1), "k", "stiff"),
+        (lambda: zwidth.map(EX / "no_such.json"), "scene", "no_such.json"),
+        (lambda: zwidth.compare(accuracy="draft", criterion="loud"), "criterion", "loud"),
+        (lambda: zwidth.trial(EX / "seed_2011.json", float("nan"), 1), "k", "NaN"),
+        (lambda: zwidth.trial(EX / "seed_2011.json", 1000, 1e9), "b", "1000000000"),
+        (lambda: zwidth.impedance(EX / "linear_1khz.json", 1000, 1, method="time"), "method", "time"),
+    ],
+)
+def test_bad_input_raises_value_error_naming_the_field(call, field, value):
+    with pytest.raises(ValueError) as e:
+        call()
+    msg = str(e.value)
+    assert msg.startswith(f"{field} = "), msg
+    assert value in msg and "allowed" in msg, msg
+    assert "untagged" not in msg and "(as written)" not in msg, msg
+
+
+LONG = dict(scene=EX / "mode_lag_2011.json", accuracy="reference")  # minutes
+
+
+def test_an_exception_raised_in_the_map_s_thread_stops_it_within_a_second():
+    raised = []
+
+    def run():
+        try:
+            zwidth.map(**LONG)
+        except KeyboardInterrupt:
+            raised.append(time.monotonic())
+
+    t = threading.Thread(target=run)
+    t.start()
+    time.sleep(0.5)
+    sent = time.monotonic()
+    n = ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(t.ident), ctypes.py_object(KeyboardInterrupt))
+    assert n == 1
+    t.join(timeout=5)
+    assert not t.is_alive() and raised, "the map did not stop"
+    assert raised[0] - sent < 1.0, raised[0] - sent
+
+
+def test_ctrl_c_stops_a_map_within_a_second_and_the_gil_is_free_meanwhile():
+    ticks = []
+    stop = threading.Event()
+
+    def tick():  # runs only while the map has released the GIL
+        while not stop.is_set():
+            ticks.append(time.monotonic())
+            time.sleep(0.01)
+
+    ticker = threading.Thread(target=tick)
+    ticker.start()
+    timer = threading.Timer(0.5, lambda: os.kill(os.getpid(), signal.SIGINT))
+    timer.start()
+    start = time.monotonic()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            zwidth.map(**LONG)
+        elapsed = time.monotonic() - start
+    finally:
+        stop.set()
+        ticker.join()
+        timer.cancel()
+    assert elapsed < 1.5, elapsed  # 0.5 s before the signal, then < 1 s
+    assert len([t for t in ticks if start < t < start + 0.5]) > 20, len(ticks)

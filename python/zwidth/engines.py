@@ -1,0 +1,256 @@
+"""The Z-width engines in process: a map, a comparison of estimators, one
+wall hit, the impedance at one (K, B).
+
+Scenes and specs are the API's (docs/service.md): a dict, JSON text or the
+path of a JSON file. Results carry numpy arrays and `.to_dict()`, which is
+exactly what `zwidth map --json` (`compare`, `trial`, `impedance`) prints for
+the same inputs (but the elapsed time). Units are SI: K in N/m, B in N·s/m.
+
+The GIL is released while an engine runs, and Ctrl-C (or an exception raised
+in the calling thread) cancels it within a tenth of a second. A bad input
+raises ValueError naming the field, its value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from typing import Any, Dict, Optional, Sequence, Union
+
+import numpy as np
+
+from . import _zwidth
+
+SceneLike = Union[Dict[str, Any], str, "os.PathLike[str]"]
+AccuracyLike = Union[str, Dict[str, Any]]
+
+__all__ = [
+    "MapResult",
+    "CompareResult",
+    "ImpedanceResult",
+    "map",
+    "compare",
+    "trial",
+    "impedance",
+]
+
+
+def _scene_dict(scene: SceneLike) -> Dict[str, Any]:
+    """A scene as a dict: a dict as it is, JSON text parsed, a path read."""
+    if isinstance(scene, dict):
+        return scene
+    if isinstance(scene, os.PathLike) or (
+        isinstance(scene, str) and not scene.lstrip().startswith("{")
+    ):
+        path = os.fspath(scene)
+        try:
+            with open(path, encoding="utf-8") as f:
+                text = f.read()
+        except OSError as e:
+            raise ValueError(
+                f"scene = {path} is not allowed: a scene dict, JSON text or a readable JSON file ({e.strerror})"
+            ) from None
+    elif isinstance(scene, str):
+        text = scene
+    else:
+        raise ValueError(
+            f"scene = {type(scene).__name__} is not allowed: a scene dict, JSON text or the path of a JSON file"
+        )
+    try:
+        parsed = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"scene = (as written) is not allowed: not JSON ({e})") from None
+    if not isinstance(parsed, dict):
+        raise ValueError("scene = (as written) is not allowed: a JSON object")
+    return parsed
+
+
+def _column(rows: Sequence[Dict[str, Any]], key: str, dtype: Any = float) -> np.ndarray:
+    """One field of every row as an array; NaN (or False) where a row has none."""
+    missing = np.nan if dtype is float else False
+    return np.array([r.get(key, missing) for r in rows], dtype=dtype)
+
+
+@dataclass(frozen=True)
+class MapResult:
+    """A Z-width map: its boundary (with intervals on a noisy scene) and
+    every trial that found it.
+
+    `boundary` holds arrays `b`, `k_max`, `k_lo`, `k_hi` (NaN where a point
+    has no interval); `trials` arrays `k`, `b`, `ok` (renders: passive or
+    stable), `decided`, `margin`, `margin_se`, `realizations`, `fidelity`
+    (NaN or False where a trial has none).
+    """
+
+    k_width: float
+    b_width: float
+    k_width_interval: Optional[tuple]
+    b_width_interval: Optional[tuple]
+    boundary: Dict[str, np.ndarray]
+    trials: Dict[str, np.ndarray]
+    raw: Dict[str, Any] = field(repr=False)
+
+    @classmethod
+    def _from(cls, raw: Dict[str, Any]) -> "MapResult":
+        bd = raw["boundary"]
+        pts = raw["points"]
+        ok = [p.get("passive", p.get("stable", False)) for p in pts]
+        return cls(
+            k_width=raw["k_width"],
+            b_width=raw["b_width"],
+            k_width_interval=tuple(raw["k_width_interval"]) if raw.get("k_width_interval") else None,
+            b_width_interval=tuple(raw["b_width_interval"]) if raw.get("b_width_interval") else None,
+            boundary={k: _column(bd, k) for k in ("b", "k_max", "k_lo", "k_hi")},
+            trials={
+                "k": _column(pts, "k"),
+                "b": _column(pts, "b"),
+                "ok": np.array(ok, dtype=bool),
+                "decided": np.array([p.get("decided", True) for p in pts], dtype=bool),
+                "margin": _column(pts, "margin"),
+                "margin_se": _column(pts, "margin_se"),
+                "realizations": np.array([p.get("realizations", 1) for p in pts], dtype=np.int64),
+                "fidelity": _column(pts, "fidelity"),
+            },
+            raw=raw,
+        )
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The result as `zwidth map --json` prints it."""
+        return self.raw
+
+
+@dataclass(frozen=True)
+class CompareResult:
+    """Every estimator's map on one scene (the 2018 paper's Table I):
+    `maps` by estimator name, and the table as the CLI prints it."""
+
+    maps: Dict[str, MapResult]
+    raw: Dict[str, Any] = field(repr=False)
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The result as `zwidth compare --json` prints it."""
+        return self.raw
+
+
+@dataclass(frozen=True)
+class ImpedanceResult:
+    """The rendered wall's impedance on the probe's lines: `freq_hz`,
+    `magnitude` (N·s/m), `phase_deg`; `passive` and `fidelity` (N·s/m)."""
+
+    freq_hz: np.ndarray
+    magnitude: np.ndarray
+    phase_deg: np.ndarray
+    passive: bool
+    fidelity: float
+    raw: Dict[str, Any] = field(repr=False)
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The result as `zwidth impedance --json` prints it."""
+        return self.raw
+
+
+def _number(name: str, x: Any) -> float:
+    """A wall parameter as a float, or ValueError naming it (the engine
+    checks its range)."""
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} = {x!r} is not allowed: must be a number") from None
+
+
+def _finite(name: str, x: Any, unit: str) -> None:
+    """JSON has no inf or NaN: say so by the argument's name."""
+    try:
+        ok = np.isfinite(float(x))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"{name} = {x} is not allowed: must be a finite number ({unit})")
+
+
+def _accuracy(accuracy: AccuracyLike) -> str:
+    return json.dumps(accuracy)
+
+
+def map(  # noqa: A001 - the product's word for it
+    scene: SceneLike,
+    *,
+    method: str = "auto",
+    criterion: str = "impedance",
+    search: str = "bisect",
+    accuracy: AccuracyLike = "standard",
+    b: Optional[Sequence[float]] = None,
+    b_max: float = 1000.0,
+    k_max: float = 1e7,
+) -> MapResult:
+    """The Z-width map of `scene`: the (K, B) region it renders.
+
+    `method`: auto | analytic | time | frequency; `criterion`: impedance |
+    stability | strict_passivity; `search`: bisect | robust_bisect | trace |
+    grid; `accuracy`: draft | standard | reference, or a dict of knobs
+    (`{"preset": "draft", "k_rel_tol": 0.02}`); `b`: only these dampings
+    (N·s/m); `b_max` (N·s/m) and `k_max` (N/m) bound the search.
+    """
+    _finite("b_max", b_max, "N·s/m")
+    _finite("k_max", k_max, "N/m")
+    for i, x in enumerate(b or []):
+        _finite(f"b[{i}]", x, "N·s/m")
+    spec: Dict[str, Any] = {
+        "scene": _scene_dict(scene),
+        "method": method,
+        "criterion": criterion,
+        "search": search,
+        "accuracy": accuracy,
+        "b_max": b_max,
+        "k_max": k_max,
+    }
+    if b is not None:
+        spec["b"] = [float(x) for x in b]
+    return MapResult._from(json.loads(_zwidth.map_json(json.dumps(spec))))
+
+
+def compare(
+    scene: Optional[SceneLike] = None,
+    *,
+    accuracy: AccuracyLike = "standard",
+    criterion: str = "impedance",
+) -> CompareResult:
+    """Every estimator of the 2018 paper on `scene` (None: the paper's
+    simulated device), each mapped with the paper's parameters."""
+    text = None if scene is None else json.dumps(_scene_dict(scene))
+    raw = json.loads(_zwidth.compare_json(text, _accuracy(accuracy), criterion))
+    maps = {row["name"]: MapResult._from(row["map"]) for row in raw["rows"]}
+    return CompareResult(maps=maps, raw=raw)
+
+
+def trial(scene: SceneLike, k: float, b: float) -> Dict[str, Any]:
+    """One wall hit (the 2011 paper's §2.4, time engine) at K (N/m) and
+    B (N·s/m): whether it is stable, and its measures."""
+    return json.loads(_zwidth.trial_json(json.dumps(_scene_dict(scene)), _number("k", k), _number("b", b)))
+
+
+def impedance(
+    scene: SceneLike,
+    k: float,
+    b: float,
+    *,
+    method: str = "auto",
+    accuracy: AccuracyLike = "standard",
+) -> ImpedanceResult:
+    """The impedance of the wall (K N/m, B N·s/m) rendered on `scene` over
+    the probe band: the closed form on a linear scene, else the simulated
+    probe (`method`: auto | analytic | frequency)."""
+    raw = json.loads(
+        _zwidth.impedance_json(
+            json.dumps(_scene_dict(scene)), _number("k", k), _number("b", b), method, _accuracy(accuracy)
+        )
+    )
+    return ImpedanceResult(
+        freq_hz=np.array(raw["freq_hz"]),
+        magnitude=np.array(raw["magnitude"]),
+        phase_deg=np.array(raw["phase_deg"]),
+        passive=raw["passive"],
+        fidelity=raw["fidelity"],
+        raw=raw,
+    )
