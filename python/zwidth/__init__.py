@@ -10,10 +10,11 @@ Z-width engines in process.
 
 Units are SI. A bad spec, scene, rate or position raises ValueError naming
 the field, its value and what is allowed. The engines release the GIL while
-they run, and Ctrl-C cancels them.
+they run, and Ctrl-C cancels them. `zwidth.Client` drives a running service.
 """
 
 from ._zwidth import Estimator, __version__, dsp_identity, dsp_version
+from .client import ApiError, Client
 from .engines import (
     CompareResult,
     ImpedanceResult,
@@ -25,6 +26,8 @@ from .engines import (
 )
 
 __all__ = [
+    "ApiError",
+    "Client",
     "CompareResult",
     "Estimator",
     "ImpedanceResult",

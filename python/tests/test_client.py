@@ -1,0 +1,93 @@
+"""zwidth.Client against a real `zwidth serve` (the CLI's build in target/,
+or $ZWIDTH_BIN) on a free port with a throwaway database: submit, watch,
+results equal to the in-process engine's, trials, compare, cancel, rigs,
+and every refusal an ApiError naming the field."""
+
+import json
+import re
+import subprocess
+import time
+
+import pytest
+
+import zwidth
+from test_engines import EX, cli, without_elapsed
+
+
+@pytest.fixture(scope="module")
+def service(tmp_path_factory):
+    db = tmp_path_factory.mktemp("svc") / "zwidth.db"
+    p = subprocess.Popen([cli(), "serve", "--db", str(db), "--bind", "127.0.0.1:0"],
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    url = None
+    deadline = time.monotonic() + 60
+    while url is None and time.monotonic() < deadline:
+        line = p.stdout.readline()
+        m = re.search(r"serving on (http://\S+)", line)
+        if m:
+            url = m.group(1)
+    assert url, "the service did not start"
+    token = (db.parent / "zwidth.db.token").read_text().strip()
+    yield url, token
+    p.terminate()
+    p.wait(timeout=30)
+
+
+def test_a_map_submitted_watched_and_read_equals_the_engine_in_process(service):
+    url, token = service
+    c = zwidth.Client(url, token=token)
+    scene = json.loads((EX / "seed_2011.json").read_text())
+    spec = {"kind": "map", "scene": scene, "method": "time", "criterion": "stability",
+            "accuracy": "draft", "b": [0.0, 300.0]}
+    e = c.submit(spec)
+    assert e["state"] in ("queued", "running") and e["estimate"]["trials"] > 0
+    done = c.watch(e["id"], poll_s=0.1, progress=True, timeout_s=120)
+    assert done["state"] == "succeeded", done
+    got = c.results(e["id"])
+    want = zwidth.map(scene, method="time", criterion="stability", accuracy="draft", b=[0, 300])
+    assert without_elapsed(got) == without_elapsed(want.to_dict())
+    trials = c.trials(e["id"])
+    assert len(trials) == want.to_dict()["trials"]
+    # Two runs side by side: the same scene, so the table compares them.
+    e2 = c.submit(spec)
+    c.watch(e2["id"], poll_s=0.1, progress=False, timeout_s=120)
+    table = c.compare([e["id"], e2["id"]], format="text")
+    assert "K-width" in table
+    assert isinstance(c.compare([e["id"], e2["id"]]), dict)
+    # Ended: no cancel (409), and the refusal says so.
+    with pytest.raises(zwidth.ApiError) as err:
+        c.cancel(e["id"])
+    assert err.value.status == 409
+
+
+def test_a_running_experiment_cancels(service):
+    url, token = service
+    c = zwidth.Client(url, token=token)
+    scene = json.loads((EX / "mode_lag_2011.json").read_text())
+    e = c.submit({"kind": "map", "scene": scene, "accuracy": "reference"})
+    c.cancel(e["id"])
+    done = c.watch(e["id"], poll_s=0.1, progress=False, timeout_s=60)
+    assert done["state"] == "cancelled"
+    with pytest.raises(ValueError, match="state is cancelled"):
+        c.results(e["id"])
+
+
+def test_refusals_raise_api_error_naming_the_field(service):
+    url, token = service
+    c = zwidth.Client(url, token=token)
+    with pytest.raises(zwidth.ApiError) as err:
+        c.submit({"kind": "map", "scene": {"device": {"mass": -1}}, "accuracy": "draft"})
+    assert err.value.status == 422 and err.value.field == "scene.device.mass", err.value
+    assert isinstance(err.value, ValueError)
+    # Without the token: 401, nothing stored.
+    with pytest.raises(zwidth.ApiError) as err:
+        zwidth.Client(url).submit({"kind": "compare", "accuracy": "draft"})
+    assert err.value.status == 401
+    with pytest.raises(zwidth.ApiError) as err:
+        c.status("no-such-id")
+    assert err.value.status in (404, 422)
+    assert isinstance(c.rigs(), list) and c.rigs()[0]["id"]
+    for bad in (lambda: zwidth.Client("localhost:8080"), lambda: c.compare(["a"], format="xml"),
+                lambda: c.watch("x", poll_s=0)):
+        with pytest.raises(ValueError):
+            bad()
