@@ -6,8 +6,9 @@
 //! the calling thread, cancels them within a tenth of a second.
 
 use std::sync::atomic::Ordering;
+use std::sync::mpsc::RecvTimeoutError;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -43,36 +44,33 @@ fn cancellable<T: Send>(
     work: impl FnOnce(Arc<Observer>) -> Result<T, SpecError> + Send,
 ) -> PyResult<T> {
     let observer = Arc::new(Observer::default());
+    let (done, mut finished) = std::sync::mpsc::channel();
     std::thread::scope(|s| {
-        let worker = {
+        {
             let observer = Arc::clone(&observer);
-            s.spawn(move || work(observer))
-        };
+            // A panic drops `done` unsent: the receiver sees it disconnect.
+            s.spawn(move || done.send(work(observer)));
+        }
         loop {
-            py.detach(|| {
-                let until = Instant::now() + POLL;
-                while !worker.is_finished() && Instant::now() < until {
-                    std::thread::sleep(Duration::from_millis(5));
-                }
-            });
-            if worker.is_finished() {
-                return match worker.join() {
-                    Ok(r) => r.map_err(value_error),
-                    Err(_) => Err(pyo3::exceptions::PyRuntimeError::new_err(
+            // The receiver is Send, not Sync: it goes into the GIL-free
+            // closure and comes back out.
+            let got;
+            (got, finished) = py.detach(move || (finished.recv_timeout(POLL), finished));
+            match got {
+                Ok(r) => return r.map_err(value_error),
+                Err(RecvTimeoutError::Disconnected) => {
+                    return Err(pyo3::exceptions::PyRuntimeError::new_err(
                         "the engine stopped on an internal error (a bug: please report it)",
-                    )),
-                };
+                    ))
+                }
+                Err(RecvTimeoutError::Timeout) => {}
             }
             let interrupted = py
                 .check_signals()
                 .and_then(|()| py.run(c"pass", None, None));
             if let Err(e) = interrupted {
                 observer.cancel.store(true, Ordering::Relaxed);
-                py.detach(|| {
-                    while !worker.is_finished() {
-                        std::thread::sleep(Duration::from_millis(5));
-                    }
-                });
+                // The scope joins the worker, which stops within one trial.
                 return Err(e);
             }
         }

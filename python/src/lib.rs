@@ -11,6 +11,7 @@ use pyo3::types::{PyDict, PyString};
 use zwidth_core::estimators::{Estimator as Built, EstimatorSpec, Sampling, VelocityEstimator};
 
 mod engines;
+mod identify;
 
 /// A velocity estimator: `Estimator(spec, rate_hz, quantization)`.
 ///
@@ -130,6 +131,8 @@ fn _zwidth(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(engines::compare_json, m)?)?;
     m.add_function(wrap_pyfunction!(engines::trial_json, m)?)?;
     m.add_function(wrap_pyfunction!(engines::impedance_json, m)?)?;
+    m.add_function(wrap_pyfunction!(identify::record_csv, m)?)?;
+    m.add_function(wrap_pyfunction!(identify::identify_json, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("dsp_version", zwidth_dsp::VERSION)?;
     Ok(())

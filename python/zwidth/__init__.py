@@ -15,6 +15,7 @@ they run, and Ctrl-C cancels them. `zwidth.Client` drives a running service.
 
 from ._zwidth import Estimator, __version__, dsp_identity, dsp_version
 from .client import ApiError, Client
+from .identify import Identification, identify, record
 from .engines import (
     CompareResult,
     ImpedanceResult,
@@ -30,13 +31,16 @@ __all__ = [
     "Client",
     "CompareResult",
     "Estimator",
+    "Identification",
     "ImpedanceResult",
     "MapResult",
     "__version__",
     "compare",
     "dsp_identity",
     "dsp_version",
+    "identify",
     "impedance",
     "map",
+    "record",
     "trial",
 ]

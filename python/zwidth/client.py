@@ -16,9 +16,7 @@ from __future__ import annotations
 import json
 import sys
 import time
-import urllib.error
 import urllib.parse
-import urllib.request
 from typing import Any, Dict, Iterable, List, Optional, Union
 
 __all__ = ["ApiError", "Client", "ENDED"]
@@ -53,6 +51,10 @@ class Client:
 
     def _request(self, method: str, path: str, body: Any = None,
                  query: Optional[Dict[str, Any]] = None, raw: bool = False) -> Any:
+        # Imported here: `import zwidth` need not load the HTTP stack (22 ms).
+        import urllib.error
+        import urllib.request
+
         url = self.url + path
         if query:
             url += "?" + urllib.parse.urlencode({k: v for k, v in query.items() if v is not None})

@@ -14,13 +14,16 @@ raises ValueError naming the field, its value and what is allowed.
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import dataclass, field
-from typing import Any, Dict, Optional, Sequence, Union
-
-import numpy as np
+from functools import cached_property
+from typing import TYPE_CHECKING, Any, Dict, Optional, Sequence, Union
 
 from . import _zwidth
+
+if TYPE_CHECKING:
+    import numpy as np
 
 SceneLike = Union[Dict[str, Any], str, "os.PathLike[str]"]
 AccuracyLike = Union[str, Dict[str, Any]]
@@ -66,13 +69,15 @@ def _scene_dict(scene: SceneLike) -> Dict[str, Any]:
     return parsed
 
 
-def _column(rows: Sequence[Dict[str, Any]], key: str, dtype: Any = float) -> np.ndarray:
-    """One field of every row as an array; NaN (or False) where a row has none."""
-    missing = np.nan if dtype is float else False
-    return np.array([r.get(key, missing) for r in rows], dtype=dtype)
+def _column(rows: Sequence[Dict[str, Any]], key: str) -> "np.ndarray":
+    """One field of every row as a float array; NaN where a row has none.
+    (numpy is imported on first use: `import zwidth` and a map's JSON need
+    it not.)"""
+    import numpy as np
+
+    return np.array([r.get(key, np.nan) for r in rows], dtype=float)
 
 
-@dataclass(frozen=True)
 class MapResult:
     """A Z-width map: its boundary (with intervals on a noisy scene) and
     every trial that found it.
@@ -80,44 +85,49 @@ class MapResult:
     `boundary` holds arrays `b`, `k_max`, `k_lo`, `k_hi` (NaN where a point
     has no interval); `trials` arrays `k`, `b`, `ok` (renders: passive or
     stable), `decided`, `margin`, `margin_se`, `realizations`, `fidelity`
-    (NaN or False where a trial has none).
+    (NaN where a trial has none).
     """
 
-    k_width: float
-    b_width: float
-    k_width_interval: Optional[tuple]
-    b_width_interval: Optional[tuple]
-    boundary: Dict[str, np.ndarray]
-    trials: Dict[str, np.ndarray]
-    raw: Dict[str, Any] = field(repr=False)
+    def __init__(self, raw: Dict[str, Any]):
+        self.raw = raw
+        self.k_width: float = raw["k_width"]
+        self.b_width: float = raw["b_width"]
+        kwi, bwi = raw.get("k_width_interval"), raw.get("b_width_interval")
+        self.k_width_interval: Optional[tuple] = tuple(kwi) if kwi else None
+        self.b_width_interval: Optional[tuple] = tuple(bwi) if bwi else None
 
     @classmethod
     def _from(cls, raw: Dict[str, Any]) -> "MapResult":
-        bd = raw["boundary"]
-        pts = raw["points"]
-        ok = [p.get("passive", p.get("stable", False)) for p in pts]
-        return cls(
-            k_width=raw["k_width"],
-            b_width=raw["b_width"],
-            k_width_interval=tuple(raw["k_width_interval"]) if raw.get("k_width_interval") else None,
-            b_width_interval=tuple(raw["b_width_interval"]) if raw.get("b_width_interval") else None,
-            boundary={k: _column(bd, k) for k in ("b", "k_max", "k_lo", "k_hi")},
-            trials={
-                "k": _column(pts, "k"),
-                "b": _column(pts, "b"),
-                "ok": np.array(ok, dtype=bool),
-                "decided": np.array([p.get("decided", True) for p in pts], dtype=bool),
-                "margin": _column(pts, "margin"),
-                "margin_se": _column(pts, "margin_se"),
-                "realizations": np.array([p.get("realizations", 1) for p in pts], dtype=np.int64),
-                "fidelity": _column(pts, "fidelity"),
-            },
-            raw=raw,
-        )
+        return cls(raw)
+
+    @cached_property
+    def boundary(self) -> Dict[str, "np.ndarray"]:
+        bd = self.raw["boundary"]
+        return {k: _column(bd, k) for k in ("b", "k_max", "k_lo", "k_hi")}
+
+    @cached_property
+    def trials(self) -> Dict[str, "np.ndarray"]:
+        import numpy as np
+
+        pts = self.raw["points"]
+        return {
+            "k": _column(pts, "k"),
+            "b": _column(pts, "b"),
+            "ok": np.array([p.get("passive", p.get("stable", False)) for p in pts], dtype=bool),
+            "decided": np.array([p.get("decided", True) for p in pts], dtype=bool),
+            "margin": _column(pts, "margin"),
+            "margin_se": _column(pts, "margin_se"),
+            "realizations": np.array([p.get("realizations", 1) for p in pts], dtype=np.int64),
+            "fidelity": _column(pts, "fidelity"),
+        }
 
     def to_dict(self) -> Dict[str, Any]:
         """The result as `zwidth map --json` prints it."""
         return self.raw
+
+    def __repr__(self) -> str:
+        return (f"MapResult(k_width={self.k_width}, b_width={self.b_width}, "
+                f"k_width_interval={self.k_width_interval}, trials={self.raw['trials']})")
 
 
 @dataclass(frozen=True)
@@ -136,11 +146,12 @@ class CompareResult:
 @dataclass(frozen=True)
 class ImpedanceResult:
     """The rendered wall's impedance on the probe's lines: `freq_hz`,
-    `magnitude` (N·s/m), `phase_deg`; `passive` and `fidelity` (N·s/m)."""
+    `magnitude` (N·s/m), `phase_deg` (numpy arrays); `passive` and
+    `fidelity` (N·s/m)."""
 
-    freq_hz: np.ndarray
-    magnitude: np.ndarray
-    phase_deg: np.ndarray
+    freq_hz: "np.ndarray"
+    magnitude: "np.ndarray"
+    phase_deg: "np.ndarray"
     passive: bool
     fidelity: float
     raw: Dict[str, Any] = field(repr=False)
@@ -162,7 +173,7 @@ def _number(name: str, x: Any) -> float:
 def _finite(name: str, x: Any, unit: str) -> None:
     """JSON has no inf or NaN: say so by the argument's name."""
     try:
-        ok = np.isfinite(float(x))
+        ok = math.isfinite(float(x))
     except (TypeError, ValueError):
         ok = False
     if not ok:
@@ -246,6 +257,8 @@ def impedance(
             json.dumps(_scene_dict(scene)), _number("k", k), _number("b", b), method, _accuracy(accuracy)
         )
     )
+    import numpy as np
+
     return ImpedanceResult(
         freq_hz=np.array(raw["freq_hz"]),
         magnitude=np.array(raw["magnitude"]),

@@ -20,6 +20,7 @@
 pub mod estimate;
 pub mod mode;
 pub mod record;
+pub mod scene;
 pub mod trace;
 
 use serde::Serialize;
