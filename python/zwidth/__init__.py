@@ -13,6 +13,7 @@ the field, its value and what is allowed. The engines release the GIL while
 they run, and Ctrl-C cancels them. `zwidth.Client` drives a running service.
 """
 
+from . import diff
 from ._zwidth import Estimator, __version__, dsp_identity, dsp_version
 from .client import ApiError, Client
 from .identify import Identification, identify, record
@@ -36,6 +37,7 @@ __all__ = [
     "MapResult",
     "__version__",
     "compare",
+    "diff",
     "dsp_identity",
     "dsp_version",
     "identify",
