@@ -1,5 +1,5 @@
-//! The engines from Python: a map, a comparison, one wall hit and the
-//! impedance at one (K, B), through zwidth-core with the same specs and
+//! The engines from Python: a map, a comparison, a tune, one wall hit and
+//! the impedance at one (K, B), through zwidth-core with the same specs and
 //! the same JSON results as the CLI's `--json` and the API (the Python
 //! side, `zwidth/engines.py`, turns them into objects with numpy arrays).
 //! The GIL is released while they run; Ctrl-C, or an exception raised in
@@ -15,6 +15,7 @@ use pyo3::prelude::*;
 use serde::Serialize;
 
 use zwidth_core::error::parse_json;
+use zwidth_core::tune::TuneSpec;
 use zwidth_core::zwidth::compare::compare_observed;
 use zwidth_core::zwidth::evaluator::Evaluator;
 use zwidth_core::zwidth::hit::{wall_hit, HitKnobs, NoTrace};
@@ -43,6 +44,16 @@ fn cancellable<T: Send>(
     py: Python<'_>,
     work: impl FnOnce(Arc<Observer>) -> Result<T, SpecError> + Send,
 ) -> PyResult<T> {
+    cancellable_with_progress(py, None, work)
+}
+
+/// [`cancellable`], calling `progress(fraction)` (0 to 1, the observer's)
+/// at every poll; an exception it raises cancels the work like Ctrl-C.
+fn cancellable_with_progress<T: Send>(
+    py: Python<'_>,
+    progress: Option<&Bound<'_, PyAny>>,
+    work: impl FnOnce(Arc<Observer>) -> Result<T, SpecError> + Send,
+) -> PyResult<T> {
     let observer = Arc::new(Observer::default());
     let (done, mut finished) = std::sync::mpsc::channel();
     std::thread::scope(|s| {
@@ -67,7 +78,11 @@ fn cancellable<T: Send>(
             }
             let interrupted = py
                 .check_signals()
-                .and_then(|()| py.run(c"pass", None, None));
+                .and_then(|()| py.run(c"pass", None, None))
+                .and_then(|()| match progress {
+                    Some(f) => f.call1((observer.fraction(),)).map(drop),
+                    None => Ok(()),
+                });
             if let Err(e) = interrupted {
                 observer.cancel.store(true, Ordering::Relaxed);
                 // The scope joins the worker, which stops within one trial.
@@ -84,6 +99,23 @@ pub fn map_json(py: Python<'_>, spec: &str) -> PyResult<String> {
         .map_err(|e| as_arguments(e, spec))
         .map_err(value_error)?;
     let r = cancellable(py, |o| map_observed(&spec, Some(o), 0))?;
+    to_json(&r)
+}
+
+/// A tune: the API's tune spec (JSON text) in, `zwidth tune --json` out;
+/// `progress(fraction)` is called every tenth of a second while it runs.
+#[pyfunction]
+#[pyo3(signature = (spec, progress))]
+pub fn tune_json(
+    py: Python<'_>,
+    spec: &str,
+    progress: Option<Bound<'_, PyAny>>,
+) -> PyResult<String> {
+    let parsed: TuneSpec = parse_json(spec, "spec", "tune spec")
+        .map_err(|e| as_arguments(e, spec))
+        .map_err(value_error)?;
+    let tune = parsed.validate().map_err(value_error)?;
+    let r = cancellable_with_progress(py, progress.as_ref(), |o| tune.run(Some(o)))?;
     to_json(&r)
 }
 

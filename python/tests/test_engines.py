@@ -38,10 +38,15 @@ def cli_json(*args):
     return json.loads(out.stdout)
 
 
+# Wall-clock measures in results: the only fields two runs may differ in.
+CLOCK = {"elapsed_s", "search_s", "final_s", "mean_search_evaluation_s",
+         "mean_final_evaluation_s", "saved_s"}
+
+
 def without_elapsed(d):
     """A result without its wall-clock fields (the only ones that differ)."""
     if isinstance(d, dict):
-        return {k: without_elapsed(v) for k, v in d.items() if k != "elapsed_s"}
+        return {k: without_elapsed(v) for k, v in d.items() if k not in CLOCK}
     if isinstance(d, list):
         return [without_elapsed(v) for v in d]
     return d
@@ -180,3 +185,34 @@ def test_ctrl_c_stops_a_map_within_a_second_and_the_gil_is_free_meanwhile():
         timer.cancel()
     assert elapsed < 1.5, elapsed  # 0.5 s before the signal, then < 1 s
     assert len([t for t in ticks if start < t < start + 0.5]) > 20, len(ticks)
+
+
+def test_a_tune_equals_the_cli_s_and_reports_progress():
+    # A small tune of the seed device's Butterworth cutoff: 6 evaluations at
+    # draft on two B columns, one finalist re-mapped at standard.
+    params = {"cutoff_hz": {"min": 50, "max": 499}}
+    want = cli_json("tune", "--scene", str(EX / "seed_2018.json"), "--params", json.dumps(params),
+                    "--objective", "k_width", "--max-evaluations", "6", "--finalists", "1",
+                    "--replicates", "1", "--final-accuracy", "standard", "--b", "0,300")
+    seen = []
+    real = zwidth._zwidth.tune_json
+    try:  # watch the fractions the progress bar is given
+        zwidth._zwidth.tune_json = lambda spec, cb: real(spec, lambda f: (seen.append(f), cb and cb(f)))
+        got = zwidth.tune(EX / "seed_2018.json", params, "k_width", max_evaluations=6, finalists=1,
+                          replicates=1, final_accuracy="standard", b=[0, 300])
+    finally:
+        zwidth._zwidth.tune_json = real
+    assert without_elapsed(got.to_dict()) == without_elapsed(want)
+    ev = got.evaluations
+    assert len(ev["cutoff_hz"]) == len(want["history"])
+    assert np.all((50 <= ev["cutoff_hz"]) & (ev["cutoff_hz"] <= 499))
+    assert ev["final"].sum() >= 1 and got.best["params"]["cutoff_hz"] in ev["cutoff_hz"]
+    assert seen == sorted(seen) and all(0 <= f <= 1 for f in seen)
+
+
+def test_a_bad_tune_names_the_field():
+    with pytest.raises(ValueError, match=r"^params\.cutoff_hz"):
+        zwidth.tune(EX / "seed_2018.json", {"cutoff_hz": {"min": 600, "max": 10}}, progress=False)
+    with pytest.raises(ValueError, match=r"^max_evaluations = "):
+        zwidth.tune(EX / "seed_2018.json", {"cutoff_hz": {"min": 50, "max": 400}},
+                    max_evaluations=0, progress=False)

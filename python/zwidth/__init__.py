@@ -23,8 +23,10 @@ from .engines import (
     MapResult,
     compare,
     impedance,
+    TuneResult,
     map,
     trial,
+    tune,
 )
 
 __all__ = [
@@ -45,4 +47,6 @@ __all__ = [
     "map",
     "record",
     "trial",
+    "tune",
+    "TuneResult",
 ]

@@ -19,6 +19,8 @@ import time
 import urllib.parse
 from typing import Any, Dict, Iterable, List, Optional, Union
 
+from ._progress import Bar
+
 __all__ = ["ApiError", "Client", "ENDED"]
 
 #: States after which an experiment changes no more (docs/service.md).
@@ -96,7 +98,7 @@ class Client:
         installed). `timeout_s` gives up with TimeoutError."""
         if poll_s <= 0:
             raise ValueError(f"poll_s = {poll_s} is not allowed: must be > 0 s")
-        bar = _Bar(id) if progress else None
+        bar = Bar(id[:12]) if progress else None
         start = time.monotonic()
         try:
             while True:
@@ -148,32 +150,3 @@ class Client:
         """The rigs with their capabilities, windows and queues."""
         r = self._request("GET", "/v1/rigs")
         return r["rigs"] if isinstance(r, dict) and "rigs" in r else r
-
-
-class _Bar:
-    """tqdm when installed, else one line on stderr redrawn."""
-
-    def __init__(self, id: str):  # noqa: A002
-        try:
-            from tqdm.auto import tqdm  # type: ignore
-
-            self._t = tqdm(total=100, desc=id[:12], unit="%")
-        except ImportError:
-            self._t = None
-        self._last = 0
-
-    def update(self, fraction: float, state: str) -> None:
-        pct = int(round(100 * max(0.0, min(1.0, fraction))))
-        if self._t is not None:
-            self._t.update(pct - self._last)
-            self._t.set_postfix_str(state)
-        else:
-            sys.stderr.write(f"\r[{'#' * (pct * 30 // 100):<30}] {pct:3d} % {state:<10}")
-            sys.stderr.flush()
-        self._last = pct
-
-    def close(self) -> None:
-        if self._t is not None:
-            self._t.close()
-        else:
-            sys.stderr.write("\n")

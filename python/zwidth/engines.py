@@ -34,6 +34,8 @@ __all__ = [
     "ImpedanceResult",
     "map",
     "compare",
+    "tune",
+    "TuneResult",
     "trial",
     "impedance",
 ]
@@ -233,6 +235,85 @@ def compare(
     raw = json.loads(_zwidth.compare_json(text, _accuracy(accuracy), criterion))
     maps = {row["name"]: MapResult._from(row["map"]) for row in raw["rows"]}
     return CompareResult(maps=maps, raw=raw)
+
+
+class TuneResult:
+    """A tune's outcome (`zwidth tune --json`): `best` (its parameters,
+    objective and map), and `evaluations`, every evaluation as arrays: one
+    per tuned parameter by name, plus `score` (the objective as one number
+    to maximize), `feasible`, `final` (re-evaluated at the final accuracy)
+    and `trials`."""
+
+    def __init__(self, raw: Dict[str, Any]):
+        self.raw = raw
+        self.best: Dict[str, Any] = raw["best"]
+
+    @cached_property
+    def evaluations(self) -> Dict[str, "np.ndarray"]:
+        import numpy as np
+
+        h = self.raw["history"]
+        names = sorted({k for e in h for k in e["params"]})
+        out = {n: np.array([e["params"].get(n, np.nan) for e in h], dtype=float) for n in names}
+        out["score"] = np.array([e["score"] for e in h], dtype=float)
+        out["feasible"] = np.array([e["feasible"] for e in h], dtype=bool)
+        out["final"] = np.array([e["phase"] == "final" for e in h], dtype=bool)
+        out["trials"] = np.array([e["trials"] for e in h], dtype=np.int64)
+        return out
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The result as `zwidth tune --json` prints it."""
+        return self.raw
+
+    def __repr__(self) -> str:
+        return f"TuneResult(best={self.best.get('params')}, evaluations={self.raw['evaluations']})"
+
+
+def tune(
+    scene: SceneLike,
+    params: Dict[str, Dict[str, Any]],
+    objective: Union[str, Dict[str, float]] = "k_width",
+    *,
+    method: str = "auto",
+    criterion: str = "impedance",
+    search: str = "robust_bisect",
+    accuracy: AccuracyLike = "draft",
+    final_accuracy: AccuracyLike = "reference",
+    finalists: int = 3,
+    replicates: int = 3,
+    solver: str = "auto",
+    seed: int = 0,
+    max_evaluations: int = 40,
+    constraint: Optional[str] = None,
+    b: Optional[Sequence[float]] = None,
+    progress: bool = True,
+) -> TuneResult:
+    """Tune the scene's estimator parameters (docs/tuning.md): `params`
+    maps each to its bounds (`{"cutoff_hz": {"min": 10, "max": 499}}`),
+    `objective` is k_width | b_width | max_fidelity_error | area or a
+    weighted dict. With `progress`, a bar on stderr (tqdm's when installed)."""
+    spec: Dict[str, Any] = {
+        "scene": _scene_dict(scene), "params": params, "objective": objective,
+        "method": method, "criterion": criterion, "search": search,
+        "accuracy": accuracy, "final_accuracy": final_accuracy, "finalists": finalists,
+        "replicates": replicates, "solver": solver, "seed": seed,
+        "max_evaluations": max_evaluations, "b_max": 1000.0, "k_max": 1e7,
+    }
+    if constraint is not None:
+        spec["constraint"] = constraint
+    if b is not None:
+        for i, x in enumerate(b):
+            _finite(f"b[{i}]", x, "N·s/m")
+        spec["b"] = [float(x) for x in b]
+    from ._progress import Bar
+
+    bar = Bar("tune") if progress else None
+    try:
+        raw = _zwidth.tune_json(json.dumps(spec), bar.update if bar else None)
+    finally:
+        if bar:
+            bar.close()
+    return TuneResult(json.loads(raw))
 
 
 def trial(scene: SceneLike, k: float, b: float) -> Dict[str, Any]:
