@@ -91,3 +91,33 @@ def test_refusals_raise_api_error_naming_the_field(service):
                 lambda: c.watch("x", poll_s=0)):
         with pytest.raises(ValueError):
             bad()
+
+
+def test_every_call_of_the_client_is_a_route_of_the_openapi_document(monkeypatch):
+    # Each method's request (method, path, query names) recorded without a
+    # server, then looked up in api/openapi.json: a route renamed or a query
+    # parameter dropped in the API fails here.
+    doc = json.loads((EX.parent / "api/openapi.json").read_text())
+    calls = []
+
+    def record(self, method, path, body=None, query=None, raw=False):
+        calls.append((method, path, sorted(k for k, v in (query or {}).items() if v is not None)))
+        return {"state": "succeeded", "result": {}, "trials": []} if method == "GET" else {}
+
+    monkeypatch.setattr(zwidth.Client, "_request", record)
+    c = zwidth.Client("http://h")
+    c.submit({"kind": "map"}, priority=1, rig="r", not_before_ms=5)
+    c.status("e1")
+    c.results("e1")
+    c.trials("e1", scope=0)
+    c.compare(["e1", "e2"], format="text")
+    c.cancel("e1")
+    c.rigs()
+    c.watch("e1", progress=False)
+    assert len(calls) == 8  # results and watch read the status once each
+    for method, path, query in calls:
+        route = re.sub(r"/e1(?=/|$)", "/{id}", path)
+        op = doc["paths"].get(route, {}).get(method.lower())
+        assert op is not None, f"{method} {route} is not in api/openapi.json"
+        names = {p["name"] for p in op.get("parameters", []) if p["in"] == "query"}
+        assert set(query) <= names, f"{method} {route}: {set(query) - names} not documented"

@@ -579,6 +579,9 @@ mod tests {
             assert_eq!(p.keeps_sign(-v0, -f, -1.0), keeps, "mirror {scale}");
         }
         assert!(p.time_to_stop(v0, 2.0 * f_star) < p.dt);
+        // At rest with no force there is no sign to keep (strictly above the
+        // margin, never at it).
+        assert!(!p.keeps_sign(0.0, 0.0, 1.0));
     }
 
     #[test]
