@@ -15,6 +15,7 @@ use pyo3::prelude::*;
 use serde::Serialize;
 
 use zwidth_core::error::parse_json;
+use zwidth_core::estimators::EstimatorSpec;
 use zwidth_core::tune::TuneSpec;
 use zwidth_core::zwidth::compare::compare_observed;
 use zwidth_core::zwidth::evaluator::Evaluator;
@@ -119,15 +120,17 @@ pub fn tune_json(
     to_json(&r)
 }
 
-/// Every estimator of the 2018 paper on one scene (JSON text; None: the
-/// paper's simulated device), `zwidth compare --json` out.
+/// Every estimator of the 2018 paper (or `estimators`, a JSON list of
+/// specs) on one scene (JSON text; None: the paper's simulated device),
+/// `zwidth compare --json` out.
 #[pyfunction]
-#[pyo3(signature = (scene, accuracy, criterion))]
+#[pyo3(signature = (scene, accuracy, criterion, estimators))]
 pub fn compare_json(
     py: Python<'_>,
     scene: Option<&str>,
     accuracy: &str,
     criterion: &str,
+    estimators: Option<&str>,
 ) -> PyResult<String> {
     let scene = match scene {
         Some(s) => SceneSpec::from_json(s).map_err(value_error)?,
@@ -137,9 +140,13 @@ pub fn compare_json(
         .map_err(|e| as_arguments(e, &format!(r#"{{"accuracy":{accuracy}}}"#)))
         .map_err(value_error)?;
     let criterion: Criterion = field("criterion", criterion)?;
+    let estimators: Option<Vec<EstimatorSpec>> = estimators
+        .map(|e| parse_json(e, "estimators", "list of estimator specs"))
+        .transpose()
+        .map_err(value_error)?;
     scene.validate().map_err(value_error)?;
     let r = cancellable(py, |o| {
-        compare_observed(&scene, &accuracy, criterion, None, Some(o))
+        compare_observed(&scene, &accuracy, criterion, estimators.as_deref(), Some(o))
     })?;
     to_json(&r)
 }

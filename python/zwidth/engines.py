@@ -228,11 +228,14 @@ def compare(
     *,
     accuracy: AccuracyLike = "standard",
     criterion: str = "impedance",
+    estimators: Optional[Sequence[Dict[str, Any]]] = None,
 ) -> CompareResult:
     """Every estimator of the 2018 paper on `scene` (None: the paper's
-    simulated device), each mapped with the paper's parameters."""
+    simulated device), each mapped with the paper's parameters; or the
+    `estimators` given (API estimator specs, `[{"kind": "fdm"}, …]`)."""
     text = None if scene is None else json.dumps(_scene_dict(scene))
-    raw = json.loads(_zwidth.compare_json(text, _accuracy(accuracy), criterion))
+    est = None if estimators is None else json.dumps(list(estimators))
+    raw = json.loads(_zwidth.compare_json(text, _accuracy(accuracy), criterion, est))
     maps = {row["name"]: MapResult._from(row["map"]) for row in raw["rows"]}
     return CompareResult(maps=maps, raw=raw)
 
