@@ -241,6 +241,20 @@ fn as_arguments(mut e: SpecError, text: &str) -> SpecError {
     e
 }
 
+/// The 2011 paper's Fig. 2 study: every estimator's RMS velocity error at
+/// each sample rate (Hz) through an encoder of step `quantization` (m),
+/// `zwidth accuracy --json` out.
+#[pyfunction]
+pub fn accuracy_json(py: Python<'_>, rates: Vec<f64>, quantization: f64) -> PyResult<String> {
+    let cfg = zwidth_core::accuracy::AccuracyConfig {
+        rates,
+        quantization,
+        ..Default::default()
+    };
+    let report = cancellable(py, |_| zwidth_core::accuracy::run(&cfg))?;
+    to_json(&report)
+}
+
 /// A choice (`"draft"`, `"impedance"`, …) read as the API reads it, or a
 /// ValueError naming the field and the value.
 fn field<T: serde::de::DeserializeOwned>(name: &str, value: &str) -> PyResult<T> {

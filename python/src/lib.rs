@@ -130,6 +130,7 @@ fn _zwidth(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(engines::map_json, m)?)?;
     m.add_function(wrap_pyfunction!(engines::compare_json, m)?)?;
     m.add_function(wrap_pyfunction!(engines::tune_json, m)?)?;
+    m.add_function(wrap_pyfunction!(engines::accuracy_json, m)?)?;
     m.add_function(wrap_pyfunction!(engines::trial_json, m)?)?;
     m.add_function(wrap_pyfunction!(engines::impedance_json, m)?)?;
     m.add_function(wrap_pyfunction!(identify::record_csv, m)?)?;

@@ -216,3 +216,13 @@ def test_a_bad_tune_names_the_field():
     with pytest.raises(ValueError, match=r"^max_evaluations = "):
         zwidth.tune(EX / "seed_2018.json", {"cutoff_hz": {"min": 50, "max": 400}},
                     max_evaluations=0, progress=False)
+
+
+def test_the_accuracy_study_equals_the_cli_s():
+    want = cli_json("accuracy", "--rates", "1000,10000", "--quantization", "1e-6")
+    got = zwidth.accuracy([1000, 10000], quantization=1e-6)
+    assert without_elapsed(got) == without_elapsed(want)
+    with pytest.raises(ValueError, match=r"^rates\[1\] = inf is not allowed"):
+        zwidth.accuracy([1000, float("inf")])
+    with pytest.raises(ValueError, match=r"quantization"):
+        zwidth.accuracy([1000], quantization=-1)

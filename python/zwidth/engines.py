@@ -38,6 +38,7 @@ __all__ = [
     "TuneResult",
     "trial",
     "impedance",
+    "accuracy",
 ]
 
 
@@ -351,3 +352,18 @@ def impedance(
         fidelity=raw["fidelity"],
         raw=raw,
     )
+
+
+def accuracy(
+    rates: Sequence[float] = (1e3, 2e3, 5e3, 1e4, 2e4, 5e4, 1e5),
+    *,
+    quantization: float = 1e-6,
+) -> Dict[str, Any]:
+    """The 2011 paper's Fig. 2 study: every estimator's RMS velocity error
+    (m/s) on its test signal at each sample rate (Hz) through an encoder of
+    step `quantization` (m); `zwidth accuracy --json`'s report (`rates`,
+    and per estimator `name` and `rms_error`, one per rate)."""
+    for i, r in enumerate(rates):
+        _finite(f"rates[{i}]", r, "Hz")
+    _finite("quantization", quantization, "m")
+    return json.loads(_zwidth.accuracy_json([float(r) for r in rates], float(quantization)))
