@@ -582,6 +582,12 @@ mod tests {
         // At rest with no force there is no sign to keep (strictly above the
         // margin, never at it).
         assert!(!p.keeps_sign(0.0, 0.0, 1.0));
+        // The margin is relative to the terms' sum, at any speed: 0.1 mm/s
+        // ending 1e-10 of the way from zero is unsure too.
+        let slow = 1e-4;
+        let f_slow = -slow * p.c_vv / p.c_vf;
+        assert!(!p.keeps_sign(slow, f_slow * (1.0 - 1e-10), 1.0));
+        assert!(p.keeps_sign(slow, f_slow * (1.0 - 1e-6), 1.0));
     }
 
     #[test]
