@@ -38,11 +38,22 @@ fn plans(n: usize) -> MutexGuard<'static, Plans> {
         .lock()
         // A panic while planning leaves the cache as it was: still usable.
         .unwrap_or_else(PoisonError::into_inner);
-    if p.lengths.insert(n) && p.lengths.len() > MAX_PLANNED_LENGTHS {
+    if admit(&mut p.lengths, n) {
         p.planner = RealFftPlanner::new();
-        p.lengths = HashSet::from([n]);
     }
     p
+}
+
+/// Record that length `n` is (about to be) planned; true when that makes
+/// more than [`MAX_PLANNED_LENGTHS`] distinct lengths, and the cache starts
+/// afresh with `n` alone.
+fn admit(lengths: &mut HashSet<usize>, n: usize) -> bool {
+    if lengths.insert(n) && lengths.len() > MAX_PLANNED_LENGTHS {
+        lengths.clear();
+        lengths.insert(n);
+        return true;
+    }
+    false
 }
 
 #[derive(Debug, Clone)]
@@ -167,6 +178,22 @@ impl LineAnalyzer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_plan_cache_holds_at_most_its_cap_of_lengths() {
+        let mut kept = HashSet::new();
+        // Distinct lengths are kept up to the cap, a repeat changes nothing.
+        for n in 1..=MAX_PLANNED_LENGTHS {
+            assert!(!admit(&mut kept, n), "{n}");
+            assert!(!admit(&mut kept, n), "{n} again");
+            assert_eq!(kept.len(), n);
+        }
+        // One more starts afresh with it alone.
+        assert!(admit(&mut kept, 1000));
+        assert_eq!(kept, HashSet::from([1000]));
+        assert!(!admit(&mut kept, 7));
+        assert_eq!(kept.len(), 2);
+    }
 
     #[test]
     fn lines_recover_the_designed_amplitudes() {
