@@ -116,14 +116,20 @@ pub fn student_t_quantile(p: f64, nu: f64) -> f64 {
             return t;
         }
         let t = t_quantile_by_bisection(p, nu);
-        let mut kept = kept.borrow_mut();
-        // A few dozen keys in practice; never more than this many.
-        if kept.len() >= 4096 {
-            kept.clear();
-        }
-        kept.insert(key, t);
+        keep(&mut kept.borrow_mut(), key, t);
         t
     })
+}
+
+/// Most quantiles kept per thread (a few dozen in practice).
+const MAX_KEPT_QUANTILES: usize = 4096;
+
+/// Keep `t` under `key`, starting afresh when the cap is reached.
+fn keep(kept: &mut std::collections::HashMap<(u64, u64), f64>, key: (u64, u64), t: f64) {
+    if kept.len() >= MAX_KEPT_QUANTILES {
+        kept.clear();
+    }
+    kept.insert(key, t);
 }
 
 fn t_quantile_by_bisection(p: f64, nu: f64) -> f64 {
@@ -211,6 +217,19 @@ mod tests {
         assert!((student_t_cdf(0.0, 3.0) - 0.5).abs() < 1e-15);
         let (a, b) = (student_t_cdf(1.7, 4.0), student_t_cdf(-1.7, 4.0));
         assert!((a + b - 1.0).abs() < 1e-14);
+    }
+
+    #[test]
+    fn the_kept_quantiles_never_pass_their_cap() {
+        let mut kept = std::collections::HashMap::new();
+        for i in 0..MAX_KEPT_QUANTILES as u64 {
+            keep(&mut kept, (i, 0), 1.0);
+        }
+        assert_eq!(kept.len(), MAX_KEPT_QUANTILES);
+        // Full: the next one starts afresh.
+        keep(&mut kept, (u64::MAX, 0), 2.0);
+        assert_eq!(kept.len(), 1);
+        assert_eq!(kept[&(u64::MAX, 0)], 2.0);
     }
 
     #[test]

@@ -255,6 +255,10 @@ mod tests {
         for r in &rows {
             assert_eq!(r.scene, "linear_1khz (analytic)");
             assert!(r.k_width > 0.0 && r.trials > 0, "{r:?}");
+            // A closed form has no realizations: one per trial, and the
+            // speed is their count over the wall time.
+            assert_eq!(r.realizations, r.trials as u64);
+            assert_eq!(r.realizations_per_s, r.trials as f64 / r.wall_s.max(1e-9));
             assert_eq!(r.k_width_error, relative_error(r.k_width, rows[0].k_width));
             assert_eq!(r.b_width_error, relative_error(r.b_width, rows[0].b_width));
             assert!(r.k_width_error.abs() <= 0.05, "{r:?}");
