@@ -93,6 +93,16 @@ fn cancellable_with_progress<T: Send>(
     })
 }
 
+/// A scene checked as the API checks it (JSON text in), with every
+/// default filled in (JSON text out).
+#[pyfunction]
+pub fn scene_json(scene: &str) -> PyResult<String> {
+    let spec = SceneSpec::from_json(scene).map_err(value_error)?;
+    spec.validate()
+        .map_err(|e| value_error(e.within("scene")))?;
+    to_json(&spec)
+}
+
 /// A map: the API's map spec (JSON text) in, `zwidth map --json` out.
 #[pyfunction]
 pub fn map_json(py: Python<'_>, spec: &str) -> PyResult<String> {

@@ -127,6 +127,7 @@ fn dsp_identity(py: Python<'_>) -> PyResult<Py<PyAny>> {
 fn _zwidth(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Estimator>()?;
     m.add_function(wrap_pyfunction!(dsp_identity, m)?)?;
+    m.add_function(wrap_pyfunction!(engines::scene_json, m)?)?;
     m.add_function(wrap_pyfunction!(engines::map_json, m)?)?;
     m.add_function(wrap_pyfunction!(engines::compare_json, m)?)?;
     m.add_function(wrap_pyfunction!(engines::tune_json, m)?)?;

@@ -73,10 +73,12 @@ def test_a_map_equals_the_cli_s(scene, method, criterion, accuracy, bs):
     assert got.trials["ok"].dtype == bool and len(got.trials["ok"]) == want["trials"]
 
 
-def test_a_scene_may_be_a_dict_json_text_or_a_path():
+def test_a_scene_may_be_a_scene_a_dict_json_text_or_a_path():
     text = (EX / "seed_2011.json").read_text()
+    sources = (zwidth.Scene(EX / "seed_2011.json"), json.loads(text), text,
+               str(EX / "seed_2011.json"), EX / "seed_2011.json")
     runs = [zwidth.map(s, method="time", criterion="stability", accuracy="draft", b=[300])
-            for s in (json.loads(text), text, str(EX / "seed_2011.json"), EX / "seed_2011.json")]
+            for s in sources]
     first = without_elapsed(runs[0].to_dict())
     assert all(without_elapsed(r.to_dict()) == first for r in runs[1:])
 
@@ -226,3 +228,16 @@ def test_the_accuracy_study_equals_the_cli_s():
         zwidth.accuracy([1000, float("inf")])
     with pytest.raises(ValueError, match=r"quantization"):
         zwidth.accuracy([1000], quantization=-1)
+
+
+def test_a_scene_is_checked_and_completed_as_the_api_does():
+    s = zwidth.Scene({"device": {"mass": 0.3}})
+    # Every default filled in: the loop is SceneSpec's default
+    # (crates/zwidth-core/src/zwidth/scene, the 2011 paper's 10 kHz).
+    assert s.to_dict()["device"]["mass"] == 0.3
+    assert s.to_dict()["loop"]["sample_hz"] == 10_000
+    assert zwidth.Scene(s.to_dict()).to_dict() == s.to_dict()
+    with pytest.raises(ValueError, match=r"^scene\.device\.mass = -1 is not allowed"):
+        zwidth.Scene({"device": {"mass": -1}})
+    with pytest.raises(ValueError, match=r"^scene\.device\.nope = \(as written\)"):
+        zwidth.Scene({"device": {"nope": 1}})

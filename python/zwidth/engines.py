@@ -25,10 +25,11 @@ from . import _zwidth
 if TYPE_CHECKING:
     import numpy as np
 
-SceneLike = Union[Dict[str, Any], str, "os.PathLike[str]"]
+SceneLike = Union["Scene", Dict[str, Any], str, "os.PathLike[str]"]
 AccuracyLike = Union[str, Dict[str, Any]]
 
 __all__ = [
+    "Scene",
     "MapResult",
     "CompareResult",
     "ImpedanceResult",
@@ -42,8 +43,30 @@ __all__ = [
 ]
 
 
-def _scene_dict(scene: SceneLike) -> Dict[str, Any]:
-    """A scene as a dict: a dict as it is, JSON text parsed, a path read."""
+class Scene:
+    """A scene, checked as the API checks it (`docs/service.md`), every
+    default filled in: `Scene(dict | JSON text | path)`. A bad field
+    raises ValueError naming it (`scene.device.mass = -1 is not allowed:
+    …`). Every engine takes a Scene where it takes a scene."""
+
+    def __init__(self, source: "SceneLike"):
+        self.spec: Dict[str, Any] = json.loads(_zwidth.scene_json(json.dumps(_scene_dict(source))))
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The scene as the API stores it (defaults filled in)."""
+        return self.spec
+
+    def __repr__(self) -> str:
+        d, loop, est = self.spec["device"], self.spec["loop"], self.spec["estimator"]
+        return (f"Scene(mass={d['mass']} kg, sample_hz={loop['sample_hz']}, "
+                f"estimator={est.get('kind')!r})")
+
+
+def _scene_dict(scene: "SceneLike") -> Dict[str, Any]:
+    """A scene as a dict: a Scene's spec, a dict as it is, JSON text
+    parsed, a path read."""
+    if isinstance(scene, Scene):
+        return scene.spec
     if isinstance(scene, dict):
         return scene
     if isinstance(scene, os.PathLike) or (
