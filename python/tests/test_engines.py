@@ -241,3 +241,17 @@ def test_a_scene_is_checked_and_completed_as_the_api_does():
         zwidth.Scene({"device": {"mass": -1}})
     with pytest.raises(ValueError, match=r"^scene\.device\.nope = \(as written\)"):
         zwidth.Scene({"device": {"nope": 1}})
+
+
+def test_estimate_equals_the_cli_s():
+    # `zwidth estimate` reads positions (one per line) on stdin and prints
+    # velocities: the same numbers, printed to round-trip.
+    x = np.round(1e-3 * np.sin(np.arange(500) * 0.02) / 1e-6) * 1e-6
+    spec = {"kind": "butterworth", "cutoff_hz": 100}
+    out = subprocess.run([cli(), "estimate", "--rate", "1000", "--estimator", json.dumps(spec)],
+                         input="\n".join(repr(float(v)) for v in x), check=True, capture_output=True,
+                         text=True).stdout.split()
+    got = zwidth.estimate(x, spec, 1000.0)
+    assert [float(v) for v in out] == list(got)
+    with pytest.raises(ValueError, match=r"cutoff_hz"):
+        zwidth.estimate(x, {"kind": "butterworth", "cutoff_hz": -1}, 1000.0)

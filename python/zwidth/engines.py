@@ -40,6 +40,7 @@ __all__ = [
     "trial",
     "impedance",
     "accuracy",
+    "estimate",
 ]
 
 
@@ -390,3 +391,16 @@ def accuracy(
         _finite(f"rates[{i}]", r, "Hz")
     _finite("quantization", quantization, "m")
     return json.loads(_zwidth.accuracy_json([float(r) for r in rates], float(quantization)))
+
+
+def estimate(positions: Any, estimator: Union[str, Dict[str, Any]], rate_hz: float,
+             quantization: float = 1e-6) -> "np.ndarray":
+    """Velocities (m/s) for positions (m) sampled at `rate_hz` through an
+    encoder of step `quantization` (m), by `estimator` (an API estimator
+    spec): `zwidth estimate` in process, the same bits (zwidth-dsp)."""
+    import numpy as np
+
+    from ._zwidth import Estimator
+
+    return Estimator(estimator, float(rate_hz), float(quantization)).run(
+        np.ascontiguousarray(positions, dtype=float))
