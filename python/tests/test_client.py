@@ -88,9 +88,14 @@ def test_refusals_raise_api_error_naming_the_field(service):
     assert err.value.status in (404, 422)
     assert isinstance(c.rigs(), list) and c.rigs()[0]["id"]
     for bad in (lambda: zwidth.Client("localhost:8080"), lambda: c.compare(["a"], format="xml"),
-                lambda: c.watch("x", poll_s=0)):
+                lambda: c.watch("x", poll_s=0), lambda: zwidth.Client(url, timeout=float("nan")),
+                lambda: zwidth.Client(url, timeout=None), lambda: zwidth.Client(url, timeout="5"),
+                lambda: zwidth.Client("http://a b")):
         with pytest.raises(ValueError):
             bad()
+    # Nothing listens on port 1: a clear ConnectionError, at once.
+    with pytest.raises(ConnectionError, match="cannot reach the service"):
+        zwidth.Client("http://127.0.0.1:1", timeout=5).rigs()
 
 
 def test_every_call_of_the_client_is_a_route_of_the_openapi_document(monkeypatch):

@@ -8,12 +8,15 @@ experiments, list rigs (docs/service.md, api/openapi.json).
 
 Standard library only (urllib). A refusal (a 4xx or 5xx problem+json,
 RFC 9457) raises ApiError with its status, title, detail and the field to
-blame; a 4xx that names a field is also a ValueError.
+blame (a ValueError); a service that cannot be reached raises
+ConnectionError, one that does not answer in `timeout` s TimeoutError.
 """
 
 from __future__ import annotations
 
 import json
+import math
+import socket
 import sys
 import time
 import urllib.parse
@@ -43,10 +46,16 @@ class Client:
 
     def __init__(self, url: str = "http://127.0.0.1:8080", token: Optional[str] = None,
                  timeout: float = 30.0):
-        if not url.startswith(("http://", "https://")):
-            raise ValueError(f"url = {url} is not allowed: must start with http:// or https://")
-        if timeout <= 0:
-            raise ValueError(f"timeout = {timeout} is not allowed: must be > 0 s")
+        if not isinstance(url, str) or not url.startswith(("http://", "https://")) or any(
+                c.isspace() for c in url):
+            raise ValueError(f"url = {url!r} is not allowed: must start with http:// or https://, "
+                             "without spaces")
+        try:
+            ok = isinstance(timeout, (int, float)) and math.isfinite(timeout) and timeout > 0
+        except TypeError:
+            ok = False
+        if not ok:
+            raise ValueError(f"timeout = {timeout!r} is not allowed: must be a finite number > 0 (s)")
         self.url = url.rstrip("/")
         self.token = token
         self.timeout = timeout
@@ -78,6 +87,10 @@ class Client:
             raise ApiError(e.code, p.get("title", e.reason or "error"),
                            p.get("detail", payload.decode(errors="replace")[:500]),
                            p.get("field")) from None
+        except urllib.error.URLError as e:
+            raise ConnectionError(f"{self.url}: cannot reach the service ({e.reason})") from None
+        except (TimeoutError, socket.timeout):
+            raise TimeoutError(f"{self.url}: no answer within {self.timeout} s") from None
         return payload.decode() if raw else json.loads(payload)
 
     def submit(self, spec: Dict[str, Any], *, priority: Optional[int] = None,
