@@ -129,6 +129,16 @@ def test_a_trial_and_an_impedance_equal_the_cli_s():
         (lambda: zwidth.trial(EX / "seed_2011.json", float("nan"), 1), "k", "NaN"),
         (lambda: zwidth.trial(EX / "seed_2011.json", 1000, 1e9), "b", "1000000000"),
         (lambda: zwidth.impedance(EX / "linear_1khz.json", 1000, 1, method="time"), "method", "time"),
+        (lambda: zwidth.impedance(EX / "linear_1khz.json", 1000, 1, method=None), "method", "None"),
+        (lambda: zwidth.map(EX / "seed_2018.json", b="12"), "b", "'12'"),
+        (lambda: zwidth.map(EX / "seed_2018.json", b=5), "b", "5"),
+        (lambda: zwidth.trial(EX / "seed_2011.json", 10**400, 1), "k", "1000"),
+        (lambda: zwidth.Scene("[1, 2]"), "scene", "JSON object"),
+        (lambda: zwidth.Scene("/bin/ls"), "scene", "not UTF-8"),
+        (lambda: zwidth.identify(EX / "seed_2018.json", None), "model", "None"),
+        # 3.6e9 samples at 1 MHz: refused, not an allocation that ends the process.
+        (lambda: zwidth.record({"loop": {"sample_hz": 1e6, "render_hz": 1000}}, duration_s=3600),
+         "duration_s", "3600"),
     ],
 )
 def test_bad_input_raises_value_error_naming_the_field(call, field, value):
@@ -255,3 +265,11 @@ def test_estimate_equals_the_cli_s():
     assert [float(v) for v in out] == list(got)
     with pytest.raises(ValueError, match=r"cutoff_hz"):
         zwidth.estimate(x, {"kind": "butterworth", "cutoff_hz": -1}, 1000.0)
+
+
+def test_b_may_be_a_numpy_array():
+    a = zwidth.map(EX / "seed_2011.json", method="time", criterion="stability", accuracy="draft",
+                   b=np.array([0.0, 300.0]))
+    want = zwidth.map(EX / "seed_2011.json", method="time", criterion="stability", accuracy="draft",
+                      b=[0, 300])
+    assert without_elapsed(a.to_dict()) == without_elapsed(want.to_dict())

@@ -109,8 +109,8 @@ class Client:
         """Poll until the experiment ends (succeeded, failed or cancelled);
         its last status. With `progress`, a bar on stderr (tqdm's when it is
         installed). `timeout_s` gives up with TimeoutError."""
-        if poll_s <= 0:
-            raise ValueError(f"poll_s = {poll_s} is not allowed: must be > 0 s")
+        if not (isinstance(poll_s, (int, float)) and math.isfinite(poll_s) and poll_s > 0):
+            raise ValueError(f"poll_s = {poll_s!r} is not allowed: must be a finite number > 0 (s)")
         bar = Bar(id[:12]) if progress else None
         start = time.monotonic()
         try:

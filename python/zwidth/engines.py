@@ -70,16 +70,18 @@ def _scene_dict(scene: "SceneLike") -> Dict[str, Any]:
         return scene.spec
     if isinstance(scene, dict):
         return scene
-    if isinstance(scene, os.PathLike) or (
-        isinstance(scene, str) and not scene.lstrip().startswith("{")
-    ):
+    # A str is JSON text unless it names a file (or cannot be JSON).
+    is_text = isinstance(scene, str) and (
+        scene.lstrip().startswith("{") or (not os.path.exists(scene) and _is_json(scene)))
+    if isinstance(scene, os.PathLike) or (isinstance(scene, str) and not is_text):
         path = os.fspath(scene)
         try:
             with open(path, encoding="utf-8") as f:
                 text = f.read()
-        except OSError as e:
+        except (OSError, UnicodeDecodeError) as e:
+            why = getattr(e, "strerror", None) or "not UTF-8 text"
             raise ValueError(
-                f"scene = {path} is not allowed: a scene dict, JSON text or a readable JSON file ({e.strerror})"
+                f"scene = {path} is not allowed: a scene dict, JSON text or a readable JSON file ({why})"
             ) from None
     elif isinstance(scene, str):
         text = scene
@@ -92,8 +94,33 @@ def _scene_dict(scene: "SceneLike") -> Dict[str, Any]:
     except json.JSONDecodeError as e:
         raise ValueError(f"scene = (as written) is not allowed: not JSON ({e})") from None
     if not isinstance(parsed, dict):
-        raise ValueError("scene = (as written) is not allowed: a JSON object")
+        raise ValueError(f"scene = {text.strip()[:60]} is not allowed: must be a JSON object (a scene)")
     return parsed
+
+
+def _is_json(text: str) -> bool:
+    try:
+        json.loads(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _word(name: str, value: Any) -> str:
+    """A choice argument (`method`, `criterion`, …) as a str, or ValueError."""
+    if not isinstance(value, str):
+        raise ValueError(f"{name} = {value!r} is not allowed: must be a word such as 'auto' (a str)")
+    return value
+
+
+def _numbers(name: str, values: Any, unit: str) -> list:
+    """A list of finite numbers (a list, tuple or 1-D array), or ValueError."""
+    if isinstance(values, (str, bytes, dict)) or not hasattr(values, "__iter__"):
+        raise ValueError(f"{name} = {values!r} is not allowed: must be a list of numbers ({unit})")
+    out = list(values)
+    for i, x in enumerate(out):
+        _finite(f"{name}[{i}]", x, unit)
+    return [float(x) for x in out]
 
 
 def _column(rows: Sequence[Dict[str, Any]], key: str) -> "np.ndarray":
@@ -193,7 +220,7 @@ def _number(name: str, x: Any) -> float:
     checks its range)."""
     try:
         return float(x)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValueError(f"{name} = {x!r} is not allowed: must be a number") from None
 
 
@@ -201,7 +228,7 @@ def _finite(name: str, x: Any, unit: str) -> None:
     """JSON has no inf or NaN: say so by the argument's name."""
     try:
         ok = math.isfinite(float(x))
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         ok = False
     if not ok:
         raise ValueError(f"{name} = {x} is not allowed: must be a finite number ({unit})")
@@ -232,19 +259,17 @@ def map(  # noqa: A001 - the product's word for it
     """
     _finite("b_max", b_max, "N·s/m")
     _finite("k_max", k_max, "N/m")
-    for i, x in enumerate(b or []):
-        _finite(f"b[{i}]", x, "N·s/m")
     spec: Dict[str, Any] = {
         "scene": _scene_dict(scene),
-        "method": method,
-        "criterion": criterion,
-        "search": search,
+        "method": _word("method", method),
+        "criterion": _word("criterion", criterion),
+        "search": _word("search", search),
         "accuracy": accuracy,
         "b_max": b_max,
         "k_max": k_max,
     }
     if b is not None:
-        spec["b"] = [float(x) for x in b]
+        spec["b"] = _numbers("b", b, "N·s/m")
     return MapResult._from(json.loads(_zwidth.map_json(json.dumps(spec))))
 
 
@@ -260,7 +285,7 @@ def compare(
     `estimators` given (API estimator specs, `[{"kind": "fdm"}, …]`)."""
     text = None if scene is None else json.dumps(_scene_dict(scene))
     est = None if estimators is None else json.dumps(list(estimators))
-    raw = json.loads(_zwidth.compare_json(text, _accuracy(accuracy), criterion, est))
+    raw = json.loads(_zwidth.compare_json(text, _accuracy(accuracy), _word("criterion", criterion), est))
     maps = {row["name"]: MapResult._from(row["map"]) for row in raw["rows"]}
     return CompareResult(maps=maps, raw=raw)
 
@@ -330,9 +355,7 @@ def tune(
     if constraint is not None:
         spec["constraint"] = constraint
     if b is not None:
-        for i, x in enumerate(b):
-            _finite(f"b[{i}]", x, "N·s/m")
-        spec["b"] = [float(x) for x in b]
+        spec["b"] = _numbers("b", b, "N·s/m")
     from ._progress import Bar
 
     bar = Bar("tune") if progress else None
@@ -363,7 +386,8 @@ def impedance(
     probe (`method`: auto | analytic | frequency)."""
     raw = json.loads(
         _zwidth.impedance_json(
-            json.dumps(_scene_dict(scene)), _number("k", k), _number("b", b), method, _accuracy(accuracy)
+            json.dumps(_scene_dict(scene)), _number("k", k), _number("b", b), _word("method", method),
+            _accuracy(accuracy)
         )
     )
     import numpy as np
@@ -387,10 +411,9 @@ def accuracy(
     (m/s) on its test signal at each sample rate (Hz) through an encoder of
     step `quantization` (m); `zwidth accuracy --json`'s report (`rates`,
     and per estimator `name` and `rms_error`, one per rate)."""
-    for i, r in enumerate(rates):
-        _finite(f"rates[{i}]", r, "Hz")
+    rates = _numbers("rates", rates, "Hz")
     _finite("quantization", quantization, "m")
-    return json.loads(_zwidth.accuracy_json([float(r) for r in rates], float(quantization)))
+    return json.loads(_zwidth.accuracy_json(rates, float(quantization)))
 
 
 def estimate(positions: Any, estimator: Union[str, Dict[str, Any]], rate_hz: float,

@@ -85,6 +85,8 @@ def identify(
     the device from (default: the default scene at the trace's rate)."""
     base = None if scene is None else json.dumps(_scene_dict(scene))
     mode = None if mode_trace is None else _csv("mode_trace", mode_trace)
+    if not isinstance(model, str):
+        raise ValueError(f"model = {model!r} is not allowed: mass_damper_coulomb, mass_damper or two_mass")
     raw = _zwidth.identify_json(_csv("trace", trace), model, mode, base)
     return Identification(json.loads(raw))
 
@@ -103,8 +105,9 @@ def _csv(name: str, trace: Any) -> str:
         try:
             with open(path, encoding="utf-8") as f:
                 return f.read()
-        except OSError as e:
-            raise ValueError(f"{name} = {path} is not allowed: a readable CSV file ({e.strerror})") from None
+        except (OSError, UnicodeDecodeError) as e:
+            why = getattr(e, "strerror", None) or "not UTF-8 text"
+            raise ValueError(f"{name} = {path} is not allowed: a readable CSV file ({why})") from None
     import numpy as np
 
     if hasattr(trace, "columns") or isinstance(trace, dict):
@@ -112,7 +115,7 @@ def _csv(name: str, trace: Any) -> str:
         if missing:
             raise ValueError(f"{name} = (columns {list(trace.keys())}) is not allowed: "
                              f"needs the columns {', '.join(COLUMNS)}; missing {', '.join(missing)}")
-        cols = [np.asarray(trace[c], dtype=float) for c in COLUMNS]
+        cols = [np.atleast_1d(np.asarray(trace[c], dtype=float)) for c in COLUMNS]
     else:
         a = np.asarray(trace, dtype=float)
         if a.ndim != 2 or a.shape[1] != 3:

@@ -56,6 +56,10 @@ impl Default for Excitation {
     }
 }
 
+/// Most samples one recorded trace may hold (10 million: 240 MB of
+/// columns, ~600 MB of CSV).
+pub const MAX_RECORD_SAMPLES: f64 = 1e7;
+
 impl Excitation {
     pub fn validate(&self, scene: &Scene) -> Result<(), SpecError> {
         require_range("period_s", self.period_s, 0.01, 1000.0, "s")?;
@@ -69,6 +73,19 @@ impl Excitation {
             "Hz; from the lowest line 1/period_s to the Nyquist frequency",
         )?;
         require_range("duration_s", self.duration_s, 1.0, 3600.0, "s")?;
+        // A trace is kept whole (and written as CSV, ~60 bytes a row): at
+        // 1 MHz an hour would be 3.6e9 samples and end the process.
+        if self.duration_s / scene.dt > MAX_RECORD_SAMPLES {
+            return Err(SpecError::new(
+                "duration_s",
+                self.duration_s,
+                format!(
+                    "would record {:.3e} samples at the scene's {} Hz; at most {MAX_RECORD_SAMPLES:e} (shorten it or lower loop.sample_hz)",
+                    self.duration_s / scene.dt,
+                    1.0 / scene.dt
+                ),
+            ));
+        }
         if (self.duration_s / scene.dt) < super::trace::MIN_SAMPLES as f64 {
             return Err(SpecError::new(
                 "duration_s",
@@ -211,6 +228,19 @@ mod tests {
             ),
             Err("f_max_hz".into())
         );
+        // At 1 MHz an hour is 3.6e9 samples, past MAX_RECORD_SAMPLES (1e7);
+        // 10 s is exactly 1e7.
+        let at_1m = scene(r#"{"loop":{"sample_hz":1e6,"render_hz":1000}}"#);
+        let hour = Excitation {
+            duration_s: 3600.0,
+            ..ex.clone()
+        };
+        assert_eq!(field(&at_1m, hour), Err("duration_s".into()));
+        let ten = Excitation {
+            duration_s: 10.0,
+            ..ex.clone()
+        };
+        assert_eq!(field(&at_1m, ten), Ok(()));
         // At 100 Hz, 5 s is 500 samples, fewer than a trace needs (1 000);
         // 10 s is exactly 1 000.
         let at_100 = scene(r#"{"loop":{"sample_hz":100,"render_hz":100},"probe":{"f_max_hz":20}}"#);
