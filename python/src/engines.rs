@@ -22,7 +22,7 @@ use zwidth_core::zwidth::evaluator::Evaluator;
 use zwidth_core::zwidth::hit::{wall_hit, HitKnobs, NoTrace};
 use zwidth_core::zwidth::scene::{validate_wall, SceneSpec};
 use zwidth_core::zwidth::search::{map_observed, Observer};
-use zwidth_core::zwidth::settings::{Accuracy, Criterion, MapSpec, Method};
+use zwidth_core::zwidth::settings::{Accuracy, AccuracyKnobs, Criterion, MapSpec, Method};
 use zwidth_core::SpecError;
 
 fn value_error(e: impl std::fmt::Display) -> PyErr {
@@ -247,6 +247,20 @@ fn as_arguments(mut e: SpecError, text: &str) -> SpecError {
         .to_string();
     if e.field == "accuracy" && e.allowed.contains("untagged enum Accuracy") {
         e.allowed = r#"must be draft, standard, reference or a dict of knobs ({"preset": "draft", "k_rel_tol": 0.02, …})"#.into();
+        // A dict of knobs: say which knob, read as knobs alone (the
+        // untagged enum's error names none).
+        let knobs = serde_json::from_str::<serde_json::Value>(text)
+            .ok()
+            .and_then(|d| {
+                d.get("accuracy")
+                    .filter(|a| a.is_object())
+                    .map(|a| a.to_string())
+            });
+        if let Some(k) = knobs {
+            if let Err(inner) = parse_json::<AccuracyKnobs>(&k, "accuracy", "accuracy") {
+                return as_arguments(inner, &format!(r#"{{"accuracy":{k}}}"#));
+            }
+        }
     }
     e
 }
