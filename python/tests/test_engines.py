@@ -278,3 +278,12 @@ def test_b_may_be_a_numpy_array():
     want = zwidth.map(EX / "seed_2011.json", method="time", criterion="stability", accuracy="draft",
                       b=[0, 300])
     assert without_elapsed(a.to_dict()) == without_elapsed(want.to_dict())
+
+
+def test_an_estimator_given_twice_keeps_both_rows():
+    c = zwidth.compare(EX / "linear_1khz.json", accuracy="draft",
+                       estimators=[{"kind": "fdm"}, {"kind": "fdm"}])
+    assert len(c.to_dict()["rows"]) == 2
+    first, second = list(c.maps)
+    assert second == f"{first} (2)"
+    assert without_elapsed(c.maps[first].to_dict()) == without_elapsed(c.maps[second].to_dict())

@@ -187,7 +187,8 @@ class MapResult:
 @dataclass(frozen=True)
 class CompareResult:
     """Every estimator's map on one scene (the 2018 paper's Table I):
-    `maps` by estimator name, and the table as the CLI prints it."""
+    `maps` by estimator name in the rows' order (a name given twice: its
+    second row as "name (2)"), and the raw result."""
 
     maps: Dict[str, MapResult]
     raw: Dict[str, Any] = field(repr=False)
@@ -286,7 +287,14 @@ def compare(
     text = None if scene is None else json.dumps(_scene_dict(scene))
     est = None if estimators is None else json.dumps(list(estimators))
     raw = json.loads(_zwidth.compare_json(text, _accuracy(accuracy), _word("criterion", criterion), est))
-    maps = {row["name"]: MapResult._from(row["map"]) for row in raw["rows"]}
+    maps: Dict[str, MapResult] = {}
+    for row in raw["rows"]:
+        # An estimator given twice keeps both rows: "name (2)" for the second.
+        key, n = row["name"], 1
+        while key in maps:
+            n += 1
+            key = f"{row['name']} ({n})"
+        maps[key] = MapResult._from(row["map"])
     return CompareResult(maps=maps, raw=raw)
 
 
