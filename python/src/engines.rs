@@ -12,6 +12,8 @@ use std::time::Duration;
 
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+
+use crate::value_error;
 use serde::Serialize;
 
 use zwidth_core::error::parse_json;
@@ -24,10 +26,6 @@ use zwidth_core::zwidth::scene::{validate_wall, SceneSpec};
 use zwidth_core::zwidth::search::{map_observed, Observer};
 use zwidth_core::zwidth::settings::{Accuracy, AccuracyKnobs, Criterion, MapSpec, Method};
 use zwidth_core::SpecError;
-
-fn value_error(e: impl std::fmt::Display) -> PyErr {
-    PyValueError::new_err(e.to_string())
-}
 
 fn to_json(v: &impl Serialize) -> PyResult<String> {
     serde_json::to_string(v).map_err(value_error)

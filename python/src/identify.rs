@@ -6,6 +6,8 @@
 
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+
+use crate::value_error;
 use serde::Serialize;
 
 use zwidth_core::error::parse_json;
@@ -13,10 +15,6 @@ use zwidth_core::identify::record::{record, Excitation};
 use zwidth_core::identify::scene::identified_scene;
 use zwidth_core::identify::{identify, with_mode, Identified, Model, Trace};
 use zwidth_core::zwidth::scene::SceneSpec;
-
-fn value_error(e: impl std::fmt::Display) -> PyErr {
-    PyValueError::new_err(e.to_string())
-}
 
 /// An open-loop trace of the scene's device under a multisine force (the
 /// excitation as JSON: `period_s`, `f_max_hz`, `peak_force`,

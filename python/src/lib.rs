@@ -42,7 +42,8 @@ fn spec_text(spec: &Bound<'_, PyAny>) -> PyResult<String> {
     )))
 }
 
-fn value_error(e: impl std::fmt::Display) -> PyErr {
+/// Any error as a ValueError with its message (the spec errors name the field).
+pub(crate) fn value_error(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
 }
 
