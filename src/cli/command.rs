@@ -304,6 +304,15 @@ pub enum Command {
         /// `<db>.agent-token`, made owner-only on first start).
         #[arg(long, env = "ZWIDTH_AGENT_TOKEN_FILE")]
         agent_token_file: Option<PathBuf>,
+        /// Agents' tokens (comma-separated), besides the file's: how a
+        /// container is given them (docker-compose.yml's ZWIDTH_AGENT_TOKENS).
+        #[arg(
+            long = "agent-token",
+            env = "ZWIDTH_AGENT_TOKENS",
+            value_delimiter = ',',
+            hide_env_values = true
+        )]
+        agent_token: Vec<String>,
         /// Attached rigs: the agents' heartbeat interval (ms) …
         #[arg(long, default_value_t = 2000)]
         agent_heartbeat_ms: u64,

@@ -16,6 +16,7 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             allow_origins,
             rigs,
             agent_token_file,
+            agent_token,
             agent_heartbeat_ms,
             agent_ttl_ms,
             agent_grace_ms,
@@ -24,20 +25,21 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             api_only,
             lease_ms,
         } => {
-            let agent_tokens = match &agent_token_file {
-                Some(f) => std::fs::read_to_string(f)
-                    .map_err(|e| {
-                        CliError::Input(format!(
-                            "--agent-token-file {} cannot be read: {e}",
-                            f.display()
-                        ))
-                    })?
-                    .lines()
-                    .map(|t| t.trim().to_string())
-                    .filter(|t| !t.is_empty())
-                    .collect(),
-                None => Vec::new(),
-            };
+            let mut agent_tokens = agent_token;
+            if let Some(f) = &agent_token_file {
+                let text = std::fs::read_to_string(f).map_err(|e| {
+                    CliError::Input(format!(
+                        "--agent-token-file {} cannot be read: {e}",
+                        f.display()
+                    ))
+                })?;
+                agent_tokens.extend(text.lines().map(str::to_owned));
+            }
+            let agent_tokens: Vec<String> = agent_tokens
+                .into_iter()
+                .map(|t| t.trim().to_string())
+                .filter(|t| !t.is_empty())
+                .collect();
             let lease = crate::rig::lease::Timing {
                 heartbeat_ms: agent_heartbeat_ms,
                 ttl_ms: agent_ttl_ms,

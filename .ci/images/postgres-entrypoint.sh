@@ -1,0 +1,28 @@
+#!/bin/sh
+# First start: make the cluster in $PGDATA (user, password and database from
+# the environment, password authentication from any address); every start:
+# run the server as the postgres user. An initialised $PGDATA is kept.
+set -eu
+: "${POSTGRES_PASSWORD:?set POSTGRES_PASSWORD}"
+user="${POSTGRES_USER:-postgres}"
+db="${POSTGRES_DB:-$user}"
+if [ "$(id -u)" = 0 ]; then
+  mkdir -p "$PGDATA"
+  chown postgres:postgres "$PGDATA"
+  chmod 700 "$PGDATA"
+  exec setpriv --reuid=postgres --regid=postgres --init-groups "$0" "$@"
+fi
+if [ ! -s "$PGDATA/PG_VERSION" ]; then
+  echo "postgres-entrypoint: initialising $PGDATA (user $user, database $db)"
+  pw=$(mktemp)
+  printf '%s\n' "$POSTGRES_PASSWORD" > "$pw"
+  initdb --username="$user" --pwfile="$pw" --auth=scram-sha-256 --encoding=UTF8 -D "$PGDATA" >/dev/null
+  rm -f "$pw"
+  echo "host all all all scram-sha-256" >> "$PGDATA/pg_hba.conf"
+  echo "listen_addresses = '*'" >> "$PGDATA/postgresql.conf"
+  if [ "$db" != postgres ]; then
+    echo "CREATE DATABASE \"$db\" OWNER \"$user\";" | postgres --single -D "$PGDATA" postgres >/dev/null
+  fi
+  echo "postgres-entrypoint: initialised"
+fi
+exec "$@"
