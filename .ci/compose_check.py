@@ -1,8 +1,9 @@
-"""Check docker-compose.yml without a Docker engine: valid against the
-Compose Specification's JSON schema (as shipped in the docker-compose 1.29.2
-wheel, fetched from PyPI), and the wiring issue 14 asks for: PostgreSQL with
-a health check, the API and the workers waiting for it to be healthy, a
-worker replica count, the API's health check.
+"""Check docker-compose.yml's text: valid against the Compose Specification's
+JSON schema (as shipped in the docker-compose 1.29.2 wheel, fetched from
+PyPI), and the wiring issue 14 asks for: PostgreSQL with a health check, the
+API and the workers waiting for it to be healthy, a worker replica count,
+the API's health check; the agent dialling the API by its service name.
+(.ci/compose brings the same file up on a Docker engine.)
 
 usage: python3 .ci/compose_check.py SCHEMA.json docker-compose.yml
 """
@@ -39,6 +40,9 @@ check("worker has a replica count", services["worker"].get("deploy", {}).get("re
 check("worker runs `zwidth worker`", services["worker"]["command"][:2] == ["zwidth", "worker"])
 check("api runs `zwidth serve --api-only`", services["api"]["command"] == ["zwidth", "serve", "--api-only"])
 check("api has a health check", "test" in services["api"].get("healthcheck", {}))
+check("api takes the agents' tokens from ZWIDTH_AGENT_TOKENS", "ZWIDTH_AGENT_TOKENS" in services["api"]["environment"])
+check("agent dials the API by its service name", services["agent"]["environment"]["ZWIDTH_SERVER"] == "http://api:8080")
+check("agent runs `zwidth agent`", services["agent"]["command"][:2] == ["zwidth", "agent"])
 for name, svc in services.items():
     for dep in svc.get("depends_on", {}):
         check(f"{name} depends on a service that exists ({dep})", dep in services)
