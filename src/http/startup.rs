@@ -18,7 +18,8 @@ pub struct ServeConfig {
     pub bind: String,
     pub tokens: Vec<String>,
     /// Agent tokens; empty: the one in `<db>.agent-token` (made on first
-    /// start; with PostgreSQL, none: agents need `--agent-token-file`).
+    /// start; with PostgreSQL, none: agents need `--agent-token-file` or
+    /// `ZWIDTH_AGENT_TOKENS`).
     pub agent_tokens: Vec<String>,
     pub allow_origins: Vec<String>,
     pub rigs: Vec<Arc<dyn Rig>>,
@@ -110,7 +111,7 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         (false, _) => agent_tokens,
         (true, Some(path)) => vec![secret_file(path, "agent-token")?],
         (true, None) => {
-            tracing::warn!("no --agent-token-file: attached rigs' agents cannot connect");
+            tracing::warn!("no --agent-token-file or ZWIDTH_AGENT_TOKENS: attached rigs' agents cannot connect");
             vec![random_secret()]
         }
     };
