@@ -1,7 +1,8 @@
 #!/bin/sh
-# First start: make the cluster in $PGDATA (user, password and database from
-# the environment, password authentication from any address); every start:
-# run the server as the postgres user. An initialised $PGDATA is kept.
+# First start: make the cluster in $PGDATA as the official image does (user,
+# password and database from the environment; trust on the container's own
+# socket, a scram password over the network); every start: run the server as
+# the postgres user. An initialised $PGDATA is kept.
 set -eu
 : "${POSTGRES_PASSWORD:?set POSTGRES_PASSWORD}"
 user="${POSTGRES_USER:-postgres}"
@@ -16,7 +17,7 @@ if [ ! -s "$PGDATA/PG_VERSION" ]; then
   echo "postgres-entrypoint: initialising $PGDATA (user $user, database $db)"
   pw=$(mktemp)
   printf '%s\n' "$POSTGRES_PASSWORD" > "$pw"
-  initdb --username="$user" --pwfile="$pw" --auth=scram-sha-256 --encoding=UTF8 -D "$PGDATA" >/dev/null
+  initdb --username="$user" --pwfile="$pw" --auth-local=trust --auth-host=scram-sha-256 --encoding=UTF8 -D "$PGDATA" >/dev/null
   rm -f "$pw"
   echo "host all all all scram-sha-256" >> "$PGDATA/pg_hba.conf"
   echo "listen_addresses = '*'" >> "$PGDATA/postgresql.conf"

@@ -25,21 +25,11 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             api_only,
             lease_ms,
         } => {
-            let mut agent_tokens = agent_token;
-            if let Some(f) = &agent_token_file {
-                let text = std::fs::read_to_string(f).map_err(|e| {
-                    CliError::Input(format!(
-                        "--agent-token-file {} cannot be read: {e}",
-                        f.display()
-                    ))
-                })?;
-                agent_tokens.extend(text.lines().map(str::to_owned));
-            }
-            let agent_tokens: Vec<String> = agent_tokens
-                .into_iter()
-                .map(|t| t.trim().to_string())
-                .filter(|t| !t.is_empty())
-                .collect();
+            let agent_tokens = secrets(
+                agent_token,
+                agent_token_file.as_deref(),
+                "--agent-token-file",
+            )?;
             let lease = crate::rig::lease::Timing {
                 heartbeat_ms: agent_heartbeat_ms,
                 ttl_ms: agent_ttl_ms,
@@ -54,13 +44,7 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
                     "--agent-heartbeat-ms = {agent_heartbeat_ms}, --agent-ttl-ms = {agent_ttl_ms}, --agent-grace-ms = {agent_grace_ms}: the heartbeat must be 10 to 60000 ms, the TTL at least two heartbeats and at most 600000 ms, the grace at most 3600000 ms"
                 )));
             }
-            let mut tokens = tokens;
-            if let Some(f) = &token_file {
-                let text = std::fs::read_to_string(f).map_err(|e| {
-                    CliError::Input(format!("--token-file {} cannot be read: {e}", f.display()))
-                })?;
-                tokens.extend(text.lines().map(str::to_owned));
-            }
+            let tokens = secrets(tokens, token_file.as_deref(), "--token-file")?;
             let rigs = crate::rig::parse_list(&rigs)
                 .map_err(|e| CliError::Input(format!("--rigs: {e}")))?;
             let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
@@ -77,11 +61,6 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             }
             init_logs();
             let rt = runtime()?;
-            let tokens: Vec<String> = tokens
-                .into_iter()
-                .map(|t| t.trim().to_string())
-                .filter(|t| !t.is_empty())
-                .collect();
             rt.block_on(crate::http::serve(crate::http::ServeConfig {
                 db,
                 bind,
@@ -249,6 +228,26 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
     }
 }
 
+/// Tokens given on the command line (or comma-separated in the
+/// environment) and one per line in `file`, trimmed, the empty ones left out.
+fn secrets(
+    given: Vec<String>,
+    file: Option<&std::path::Path>,
+    flag: &str,
+) -> Result<Vec<String>, CliError> {
+    let mut all = given;
+    if let Some(f) = file {
+        let text = std::fs::read_to_string(f)
+            .map_err(|e| CliError::Input(format!("{flag} {} cannot be read: {e}", f.display())))?;
+        all.extend(text.lines().map(str::to_owned));
+    }
+    Ok(all
+        .into_iter()
+        .map(|t| t.trim().to_string())
+        .filter(|t| !t.is_empty())
+        .collect())
+}
+
 /// A lease from 300 ms (tests) to 10 minutes.
 fn check_lease_ms(lease_ms: i64) -> Result<(), CliError> {
     if (300..=600_000).contains(&lease_ms) {
@@ -280,4 +279,32 @@ fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
         .enable_all()
         .build()
         .map_err(|e| CliError::Failure(format!("cannot start the runtime: {e}")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--token`/`ZWIDTH_TOKENS` and `--agent-token`/`ZWIDTH_AGENT_TOKENS`
+    /// with their files: every non-empty token once trimmed, the flag's own
+    /// values first; an unreadable file named with its flag.
+    #[test]
+    fn secrets_merge_the_flag_and_the_file_and_drop_blanks() {
+        let dir = std::env::temp_dir().join(format!("zwidth-secrets-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("tokens");
+        std::fs::write(&f, "b\n\n  c \r\n").unwrap();
+        let got = secrets(vec![" a ".into(), String::new()], Some(&f), "--token-file").unwrap();
+        assert_eq!(got, ["a", "b", "c"]);
+        assert_eq!(secrets(vec!["x".into()], None, "--token-file").unwrap(), ["x"]);
+        let missing = dir.join("nope");
+        match secrets(vec![], Some(&missing), "--agent-token-file") {
+            Err(CliError::Input(m)) => {
+                assert!(m.starts_with("--agent-token-file "), "{m}");
+                assert!(m.contains("nope"), "{m}");
+            }
+            other => panic!("{other:?}"),
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
