@@ -296,7 +296,10 @@ mod tests {
         std::fs::write(&f, "b\n\n  c \r\n").unwrap();
         let got = secrets(vec![" a ".into(), String::new()], Some(&f), "--token-file").unwrap();
         assert_eq!(got, ["a", "b", "c"]);
-        assert_eq!(secrets(vec!["x".into()], None, "--token-file").unwrap(), ["x"]);
+        assert_eq!(
+            secrets(vec!["x".into()], None, "--token-file").unwrap(),
+            ["x"]
+        );
         let missing = dir.join("nope");
         match secrets(vec![], Some(&missing), "--agent-token-file") {
             Err(CliError::Input(m)) => {
