@@ -13,10 +13,7 @@ the field, its value and what is allowed. The engines release the GIL while
 they run, and Ctrl-C cancels them. `zwidth.Client` drives a running service.
 """
 
-from . import diff
 from ._zwidth import Estimator, __version__, dsp_identity, dsp_version
-from .client import ApiError, Client
-from .identify import Identification, identify, record
 from .engines import (
     CompareResult,
     ImpedanceResult,
@@ -31,6 +28,28 @@ from .engines import (
     trial,
     tune,
 )
+from .identify import Identification, identify, record
+
+# The client and the PyNumDiff-shaped functions load on first use
+# (`zwidth.Client`, `zwidth.diff`; `zwidth.plot` needs matplotlib): `import
+# zwidth` stays a few milliseconds (docs/python.md, "Speed").
+_LAZY = {"ApiError": "client", "Client": "client", "diff": None, "plot": None}
+
+
+def __getattr__(name: str):
+    if name not in _LAZY:
+        raise AttributeError(f"module 'zwidth' has no attribute {name!r}")
+    import importlib
+
+    module = importlib.import_module(f".{_LAZY[name] or name}", __name__)
+    value = module if _LAZY[name] is None else getattr(module, name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __all__ = [
     "ApiError",

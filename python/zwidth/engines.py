@@ -16,17 +16,21 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING, Any, Dict, Optional, Sequence, Union
 
 from . import _zwidth
 
+# The annotations are for type checkers only (`from __future__ import
+# annotations` keeps them unevaluated): `typing` and `dataclasses` cost half
+# of `import zwidth` (docs/python.md, "Speed").
+TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from typing import Any, Dict, Optional, Sequence, Union
+
     import numpy as np
 
-SceneLike = Union["Scene", Dict[str, Any], str, "os.PathLike[str]"]
-AccuracyLike = Union[str, Dict[str, Any]]
+    SceneLike = Union["Scene", Dict[str, Any], str, "os.PathLike[str]"]
+    AccuracyLike = Union[str, Dict[str, Any]]
 
 __all__ = [
     "Scene",
@@ -184,32 +188,67 @@ class MapResult:
                 f"k_width_interval={self.k_width_interval}, trials={self.raw['trials']})")
 
 
-@dataclass(frozen=True)
-class CompareResult:
+class _Record:
+    """A read-only record of named fields (what a frozen dataclass gives,
+    without importing dataclasses): equal when every field is; `raw` left
+    out of the repr."""
+
+    _fields: tuple = ()
+
+    def __init__(self, **values: Any):
+        if set(values) != set(self._fields):
+            raise TypeError(f"{type(self).__name__} takes {', '.join(self._fields)}")
+        for k in self._fields:
+            object.__setattr__(self, k, values[k])
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError(f"{type(self).__name__} is read-only: cannot set {name}")
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return all(_same(getattr(self, k), getattr(other, k)) for k in self._fields)
+
+    __hash__ = None  # type: ignore[assignment]  # equal by value, mutable fields
+
+    def __repr__(self) -> str:
+        shown = ", ".join(f"{k}={getattr(self, k)!r}" for k in self._fields if k != "raw")
+        return f"{type(self).__name__}({shown})"
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Field equality, numpy arrays compared whole."""
+    if hasattr(a, "shape") and hasattr(b, "shape"):
+        return a.shape == b.shape and bool((a == b).all())
+    return bool(a == b)
+
+
+class CompareResult(_Record):
     """Every estimator's map on one scene (the 2018 paper's Table I):
     `maps` by estimator name in the rows' order (a name given twice: its
     second row as "name (2)"), and the raw result."""
 
+    _fields = ("maps", "raw")
     maps: Dict[str, MapResult]
-    raw: Dict[str, Any] = field(repr=False)
+    raw: Dict[str, Any]
 
     def to_dict(self) -> Dict[str, Any]:
         """The result as `zwidth compare --json` prints it."""
         return self.raw
 
 
-@dataclass(frozen=True)
-class ImpedanceResult:
+class ImpedanceResult(_Record):
     """The rendered wall's impedance on the probe's lines: `freq_hz`,
     `magnitude` (N·s/m), `phase_deg` (numpy arrays); `passive` and
     `fidelity` (N·s/m)."""
 
-    freq_hz: "np.ndarray"
-    magnitude: "np.ndarray"
-    phase_deg: "np.ndarray"
+    _fields = ("freq_hz", "magnitude", "phase_deg", "passive", "fidelity", "raw")
+    freq_hz: np.ndarray
+    magnitude: np.ndarray
+    phase_deg: np.ndarray
     passive: bool
     fidelity: float
-    raw: Dict[str, Any] = field(repr=False)
+    raw: Dict[str, Any]
 
     def to_dict(self) -> Dict[str, Any]:
         """The result as `zwidth impedance --json` prints it."""

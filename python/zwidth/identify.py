@@ -14,10 +14,15 @@ from __future__ import annotations
 
 import json
 import os
-from typing import Any, Dict, Optional
 
 from . import _zwidth
-from .engines import SceneLike, _scene_dict
+from .engines import _scene_dict
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from typing import Any, Dict, Optional
+
+    from .engines import SceneLike
 
 __all__ = ["COLUMNS", "Identification", "record", "identify"]
 
