@@ -488,6 +488,31 @@ fn hello(edit: impl FnOnce(&mut serde_json::Value)) -> String {
     .to_string()
 }
 
+/// Agents' tokens given to `serve` on its command line (`--agent-token`,
+/// comma-separated: `ZWIDTH_AGENT_TOKENS`, how docker-compose.yml gives
+/// the API container one): each opens an agent's link, trimmed; no
+/// `<db>.agent-token` is made; a token never given is refused.
+#[test]
+fn agent_tokens_given_on_the_command_line_open_links_and_no_file_is_made() {
+    let s = start_with(
+        fresh_dir(),
+        &[
+            "--rigs",
+            "sim:1,bench:attached",
+            "--agent-token",
+            " first-agent-token ,second-agent-token",
+        ],
+    );
+    for t in ["first-agent-token", "second-agent-token"] {
+        assert!(dial(&s, t).is_ok(), "{t}");
+    }
+    assert_eq!(
+        dial(&s, "never-given-token").err().unwrap(),
+        "HTTP 403 Forbidden"
+    );
+    assert!(!s._dir.join("test.db.agent-token").exists());
+}
+
 #[test]
 fn tokens_open_sessions_only_for_agents_and_bad_hellos_are_refused_saying_why() {
     let dir = fresh_dir();
