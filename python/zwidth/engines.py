@@ -189,11 +189,17 @@ class MapResult:
 
 
 class _Record:
-    """A read-only record of named fields (what a frozen dataclass gives,
-    without importing dataclasses): equal when every field is; `raw` left
-    out of the repr."""
+    """A read-only record of the fields a subclass annotates (what a frozen
+    dataclass gives, without importing dataclasses): equal when every field
+    is; `raw` left out of the repr."""
 
-    _fields: tuple = ()
+    _fields = ()
+
+    def __init_subclass__(cls) -> None:
+        # The subclass's own annotations, in order (unevaluated strings; on
+        # Python 3.14 they may live behind the class's __annotations__ only).
+        own = cls.__dict__.get("__annotations__")
+        cls._fields = tuple(own if own is not None else cls.__annotations__)
 
     def __init__(self, **values: Any):
         if set(values) != set(self._fields):
@@ -228,7 +234,6 @@ class CompareResult(_Record):
     `maps` by estimator name in the rows' order (a name given twice: its
     second row as "name (2)"), and the raw result."""
 
-    _fields = ("maps", "raw")
     maps: Dict[str, MapResult]
     raw: Dict[str, Any]
 
@@ -242,7 +247,6 @@ class ImpedanceResult(_Record):
     `magnitude` (N·s/m), `phase_deg` (numpy arrays); `passive` and
     `fidelity` (N·s/m)."""
 
-    _fields = ("freq_hz", "magnitude", "phase_deg", "passive", "fidelity", "raw")
     freq_hz: np.ndarray
     magnitude: np.ndarray
     phase_deg: np.ndarray
