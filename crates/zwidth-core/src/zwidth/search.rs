@@ -443,19 +443,115 @@ fn bisect_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryP
         let points = r.iter().flat_map(|(_, p)| p.clone()).collect();
         return (r.into_iter().map(|(b, _)| b).collect(), points);
     }
-    // Batches of B in parallel; the map ends at the first two B values in
-    // a row that surely render nothing (on a noisy scene, an empty column
-    // whose verdicts at the smallest K were undecided does not count:
-    // B-width's interval needs the columns beyond it). A batch may run
-    // columns past that end: they are dropped, trials and all, so the map
-    // is the same on any number of threads (issue 14).
+    // B in parallel; the map ends at the first two B values in a row that
+    // surely render nothing (on a noisy scene, an empty column whose
+    // verdicts at the smallest K were undecided does not count: B-width's
+    // interval needs the columns beyond it). Columns run past that end are
+    // dropped, trials and all, so the map is the same on any number of
+    // threads (issue 14). Columns farmed out go in the farm's batches; a
+    // map computed (or replayed whole) here takes its columns in order, one
+    // per free thread.
     let k_floor = ev.res.k_step;
-    // Columns farmed out go in the farm's batches; a map computed (or
-    // replayed whole) here runs batches of its threads.
-    let batch = match ev.farm() {
-        Some(f) if !whole_map_unit(spec, ev) => f.batch().max(2),
-        _ => rayon::current_num_threads().max(2),
+    let columns = match ev.farm() {
+        Some(f) if !whole_map_unit(spec, ev) => {
+            farmed_batches(ev, spec, b_auto, f.batch().max(2), &one)
+        }
+        _ => in_order(ev, b_auto, &one),
     };
+    let points = columns
+        .iter()
+        .flat_map(|(_, p)| p.iter().cloned())
+        .collect();
+    let mut boundary: Vec<BoundaryPoint> = columns.into_iter().map(|(bp, _)| bp).collect();
+    // Drop the trailing B values that render nothing but the first.
+    while boundary.len() >= 2
+        && boundary[boundary.len() - 1].surely_empty(k_floor)
+        && boundary[boundary.len() - 2].surely_empty(k_floor)
+    {
+        boundary.pop();
+    }
+    (boundary, points)
+}
+
+/// One column of a bisection map (`bisect_column` with its spec bound).
+type ColumnOf<'a> = dyn Fn(f64) -> (BoundaryPoint, Vec<Point>) + Sync + 'a;
+
+/// The automatic B range computed here: each thread takes the next column
+/// in B order as soon as it is free, so none waits for a batch's slowest
+/// column. No column is started past a pair of surely empty columns in a
+/// row once both are done (the range ends there or before); those started
+/// past the range's end are dropped, trials and all, as a batch's are, so
+/// the map is the same on any number of threads (issue 14).
+fn in_order(ev: &Classifier, b_auto: &[f64], one: &ColumnOf) -> Vec<(BoundaryPoint, Vec<Point>)> {
+    use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
+    let k_floor = ev.res.k_step;
+    let n = b_auto.len();
+    let next = AtomicUsize::new(0);
+    // Columns from this index on are not started.
+    let limit = AtomicUsize::new(n);
+    let done = std::sync::Mutex::new(
+        (0..n)
+            .map(|_| None)
+            .collect::<Vec<Option<(BoundaryPoint, Vec<Point>)>>>(),
+    );
+    let cancelled = || ev.observer.as_ref().is_some_and(|o| o.cancelled());
+    let empty = |c: &Option<(BoundaryPoint, Vec<Point>)>| {
+        c.as_ref().is_some_and(|(bp, _)| bp.surely_empty(k_floor))
+    };
+    let work = || loop {
+        let i = next.fetch_add(1, Relaxed);
+        if i >= limit.load(Relaxed) {
+            return;
+        }
+        let column = one(b_auto[i]);
+        let mut d = done.lock().unwrap_or_else(|e| e.into_inner());
+        d[i] = Some(column);
+        // A cancelled run answers every trial "not passive": its columns
+        // say nothing about where the map ends.
+        if cancelled() {
+            limit.store(0, Relaxed);
+            return;
+        }
+        if empty(&d[i]) {
+            // The pair ending at i, or the one ending after it.
+            for j in [i, i + 1] {
+                if (1..n).contains(&j) && empty(&d[j - 1]) && empty(&d[j]) {
+                    limit.fetch_min(j + 1, Relaxed);
+                }
+            }
+        }
+        let first: Vec<BoundaryPoint> = d
+            .iter()
+            .map_while(|c| c.as_ref().map(|(bp, _)| *bp))
+            .collect();
+        ev.report(first.len() as f64 / planned_b(&first, n, ev.res.b_step) as f64);
+    };
+    rayon::scope(|s| {
+        for _ in 0..rayon::current_num_threads().max(1) {
+            s.spawn(|_| work());
+        }
+    });
+    // Every column below the limit is done (the limit only falls), so the
+    // first empty pair among the columns done is the range's end.
+    let done = done.into_inner().unwrap_or_else(|e| e.into_inner());
+    let mut columns: Vec<(BoundaryPoint, Vec<Point>)> = done.into_iter().flatten().collect();
+    if let Some(end) = end_of_auto_range(&columns, 0, k_floor).filter(|_| !cancelled()) {
+        cut_at_end(ev, &mut columns, b_auto, end);
+    }
+    columns
+}
+
+/// The automatic B range with its columns farmed out: batches of `batch`
+/// columns, each computed elsewhere and replayed here, until the range's
+/// end (the batch past it dropped).
+fn farmed_batches(
+    ev: &Classifier,
+    spec: &MapSpec,
+    b_auto: &[f64],
+    batch: usize,
+    one: &ColumnOf,
+) -> Vec<(BoundaryPoint, Vec<Point>)> {
+    let k_floor = ev.res.k_step;
     let mut columns: Vec<(BoundaryPoint, Vec<Point>)> = Vec::new();
     for chunk in b_auto.chunks(batch) {
         let from = columns.len();
@@ -473,31 +569,33 @@ fn bisect_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryP
             break;
         }
         if let Some(end) = end_of_auto_range(&columns, from, k_floor) {
-            columns.truncate(end);
-            // Everything from the column after the end on is not the map's:
-            // this run's batch past it, and whatever an earlier attempt (on
-            // more threads) stored there.
-            if let (Some(o), Some(&b)) = (&ev.observer, b_auto.get(end)) {
-                o.drop_columns(ev.scope, b);
-            }
+            cut_at_end(ev, &mut columns, b_auto, end);
             break;
         }
-        let boundary: Vec<BoundaryPoint> = columns.iter().map(|(bp, _)| *bp).collect();
-        ev.report(boundary.len() as f64 / planned_b(&boundary, b_auto.len(), ev.res.b_step) as f64);
+        report_columns(ev, &columns, b_auto.len());
     }
-    let points = columns
-        .iter()
-        .flat_map(|(_, p)| p.iter().cloned())
-        .collect();
-    let mut boundary: Vec<BoundaryPoint> = columns.into_iter().map(|(bp, _)| bp).collect();
-    // Drop the trailing B values that render nothing but the first.
-    while boundary.len() >= 2
-        && boundary[boundary.len() - 1].surely_empty(k_floor)
-        && boundary[boundary.len() - 2].surely_empty(k_floor)
-    {
-        boundary.pop();
+    columns
+}
+
+/// End the automatic range after `end` columns: everything from the
+/// column after the end on is not the map's, what this run computed past
+/// it and whatever an earlier attempt (on more threads) stored there.
+fn cut_at_end(
+    ev: &Classifier,
+    columns: &mut Vec<(BoundaryPoint, Vec<Point>)>,
+    b_auto: &[f64],
+    end: usize,
+) {
+    columns.truncate(end);
+    if let (Some(o), Some(&b)) = (&ev.observer, b_auto.get(end)) {
+        o.drop_columns(ev.scope, b);
     }
-    (boundary, points)
+}
+
+/// Report the share of the automatic range's likely columns done.
+fn report_columns(ev: &Classifier, columns: &[(BoundaryPoint, Vec<Point>)], n_auto: usize) {
+    let boundary: Vec<BoundaryPoint> = columns.iter().map(|(bp, _)| *bp).collect();
+    ev.report(boundary.len() as f64 / planned_b(&boundary, n_auto, ev.res.b_step) as f64);
 }
 
 /// Where an automatic B range ends, given its columns so far of which
@@ -807,6 +905,54 @@ mod tests {
                     assert_eq!(r.k_width.to_bits(), r0.k_width.to_bits());
                 }
             }
+        }
+    }
+
+    #[test]
+    fn columns_are_taken_in_order_and_none_is_started_past_the_known_end() {
+        // A stand-in column: K_max 1000 N/m below B = 500 N·s/m, nothing
+        // from there on, so the range ends with the columns at 500 and 600
+        // (7 columns; the first dropped is at 700). Column 0 is the slowest,
+        // so on several threads the others finish first and wait for it.
+        let spec = auto_b_map(SearchKind::Bisect);
+        for threads in [1, 2, 3] {
+            let o = std::sync::Arc::new(Observer::default());
+            let (ev, b_auto) = map_evaluator(&spec, Some(o.clone()), 0).unwrap();
+            assert_eq!(
+                b_auto[..8],
+                [0.0, 100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0]
+            );
+            let started = std::sync::Mutex::new(Vec::new());
+            let column = |b: f64| {
+                started.lock().unwrap().push(b);
+                if b == 0.0 {
+                    std::thread::sleep(std::time::Duration::from_millis(50));
+                }
+                let k = if b < 500.0 { 1000.0 } else { 0.0 };
+                (BoundaryPoint::new(b, k), Vec::new())
+            };
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let columns = pool.install(|| in_order(&ev, &b_auto, &column));
+            let bs: Vec<f64> = columns.iter().map(|(bp, _)| bp.b).collect();
+            assert_eq!(
+                bs,
+                [0.0, 100.0, 200.0, 300.0, 400.0, 500.0, 600.0],
+                "{threads} threads"
+            );
+            assert_eq!(o.take_dropped(), [(0, 700.0)], "{threads} threads");
+            let past = started
+                .lock()
+                .unwrap()
+                .iter()
+                .filter(|&&b| b >= 700.0)
+                .count();
+            assert!(
+                past < threads,
+                "{threads} threads started {past} columns past the end"
+            );
         }
     }
 
