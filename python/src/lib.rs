@@ -12,6 +12,7 @@ use zwidth_core::estimators::{Estimator as Built, EstimatorSpec, Sampling, Veloc
 
 mod engines;
 mod identify;
+mod json;
 
 /// A velocity estimator: `Estimator(spec, rate_hz, quantization)`.
 ///
@@ -27,14 +28,13 @@ struct Estimator {
     fingerprint: u64,
 }
 
-/// The spec as JSON text: a str as it is, a dict through `json.dumps`.
+/// The spec as JSON text: a str as it is, a dict written as JSON.
 fn spec_text(spec: &Bound<'_, PyAny>) -> PyResult<String> {
     if spec.is_instance_of::<PyString>() {
         return spec.extract::<String>();
     }
     if spec.is_instance_of::<PyDict>() {
-        let json = spec.py().import("json")?;
-        return json.call_method1("dumps", (spec,))?.extract();
+        return json::dumps(spec, "spec");
     }
     Err(PyValueError::new_err(format!(
         "spec = {} is not allowed: a JSON estimator spec, as a str or a dict",
@@ -120,8 +120,7 @@ impl Estimator {
 fn dsp_identity(py: Python<'_>) -> PyResult<Py<PyAny>> {
     let text = serde_json::to_string(&zwidth_core::estimators::identity::DspIdentity::ours())
         .map_err(value_error)?;
-    let json = py.import("json")?;
-    Ok(json.call_method1("loads", (text,))?.unbind())
+    json::loads(py, &text)
 }
 
 #[pymodule]
@@ -137,6 +136,8 @@ fn _zwidth(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(engines::impedance_json, m)?)?;
     m.add_function(wrap_pyfunction!(identify::record_csv, m)?)?;
     m.add_function(wrap_pyfunction!(identify::identify_json, m)?)?;
+    m.add_function(wrap_pyfunction!(json::loads, m)?)?;
+    m.add_function(wrap_pyfunction!(json::dumps, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("dsp_version", zwidth_dsp::VERSION)?;
     Ok(())

@@ -139,6 +139,9 @@ def test_a_trial_and_an_impedance_equal_the_cli_s():
         (lambda: zwidth.map(EX / "seed_2018.json", b=5), "b", "5"),
         (lambda: zwidth.trial(EX / "seed_2011.json", 10**400, 1), "k", "1000"),
         (lambda: zwidth.Scene("[1, 2]"), "scene", "JSON object"),
+        # A NaN inside a dict, named by its path (the package's own JSON).
+        (lambda: zwidth.Scene({"device": {"mass": float("nan")}}), "scene.device.mass", "nan"),
+        (lambda: zwidth.map({"loop": {"sample_hz": float("inf")}}), "scene.loop.sample_hz", "inf"),
         (lambda: zwidth.Scene("/bin/ls"), "scene", "not UTF-8"),
         (lambda: zwidth.identify(EX / "seed_2018.json", None), "model", "None"),
         # 3.6e9 samples at 1 MHz: refused, not an allocation that ends the process.

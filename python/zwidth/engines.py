@@ -13,10 +13,8 @@ raises ValueError naming the field, its value and what is allowed.
 
 from __future__ import annotations
 
-import json
 import math
 import os
-from functools import cached_property
 
 from . import _zwidth
 
@@ -55,7 +53,7 @@ class Scene:
     …`). Every engine takes a Scene where it takes a scene."""
 
     def __init__(self, source: "SceneLike"):
-        self.spec: Dict[str, Any] = json.loads(_zwidth.scene_json(json.dumps(_scene_dict(source))))
+        self.spec: Dict[str, Any] = _zwidth.loads(_zwidth.scene_json(_zwidth.dumps(_scene_dict(source), "scene")))
 
     def to_dict(self) -> Dict[str, Any]:
         """The scene as the API stores it (defaults filled in)."""
@@ -94,8 +92,8 @@ def _scene_dict(scene: "SceneLike") -> Dict[str, Any]:
             f"scene = {type(scene).__name__} is not allowed: a scene dict, JSON text or the path of a JSON file"
         )
     try:
-        parsed = json.loads(text)
-    except json.JSONDecodeError as e:
+        parsed = _zwidth.loads(text)
+    except ValueError as e:
         raise ValueError(f"scene = (as written) is not allowed: not JSON ({e})") from None
     if not isinstance(parsed, dict):
         raise ValueError(f"scene = {text.strip()[:60]} is not allowed: must be a JSON object (a scene)")
@@ -104,7 +102,7 @@ def _scene_dict(scene: "SceneLike") -> Dict[str, Any]:
 
 def _is_json(text: str) -> bool:
     try:
-        json.loads(text)
+        _zwidth.loads(text)
     except ValueError:
         return False
     return True
@@ -136,6 +134,21 @@ def _column(rows: Sequence[Dict[str, Any]], key: str) -> "np.ndarray":
     return np.array([r.get(key, np.nan) for r in rows], dtype=float)
 
 
+class _once:
+    """A property computed on first read and kept in the instance (what
+    `functools.cached_property` does, without importing functools: `import
+    zwidth` stays about a millisecond)."""
+
+    def __init__(self, f: Any):
+        self.f, self.name, self.__doc__ = f, f.__name__, f.__doc__
+
+    def __get__(self, obj: Any, cls: Any = None) -> Any:
+        if obj is None:
+            return self
+        value = obj.__dict__[self.name] = self.f(obj)
+        return value
+
+
 class MapResult:
     """A Z-width map: its boundary (with intervals on a noisy scene) and
     every trial that found it.
@@ -158,12 +171,12 @@ class MapResult:
     def _from(cls, raw: Dict[str, Any]) -> "MapResult":
         return cls(raw)
 
-    @cached_property
+    @_once
     def boundary(self) -> Dict[str, "np.ndarray"]:
         bd = self.raw["boundary"]
         return {k: _column(bd, k) for k in ("b", "k_max", "k_lo", "k_hi")}
 
-    @cached_property
+    @_once
     def trials(self) -> Dict[str, "np.ndarray"]:
         import numpy as np
 
@@ -279,7 +292,7 @@ def _finite(name: str, x: Any, unit: str) -> None:
 
 
 def _accuracy(accuracy: AccuracyLike) -> str:
-    return json.dumps(accuracy)
+    return _zwidth.dumps(accuracy, "accuracy")
 
 
 def map(  # noqa: A001 - the product's word for it
@@ -314,7 +327,7 @@ def map(  # noqa: A001 - the product's word for it
     }
     if b is not None:
         spec["b"] = _numbers("b", b, "N·s/m")
-    return MapResult._from(json.loads(_zwidth.map_json(json.dumps(spec))))
+    return MapResult._from(_zwidth.loads(_zwidth.map_json(_zwidth.dumps(spec, ""))))
 
 
 def compare(
@@ -327,9 +340,9 @@ def compare(
     """Every estimator of the 2018 paper on `scene` (None: the paper's
     simulated device), each mapped with the paper's parameters; or the
     `estimators` given (API estimator specs, `[{"kind": "fdm"}, …]`)."""
-    text = None if scene is None else json.dumps(_scene_dict(scene))
-    est = None if estimators is None else json.dumps(list(estimators))
-    raw = json.loads(_zwidth.compare_json(text, _accuracy(accuracy), _word("criterion", criterion), est))
+    text = None if scene is None else _zwidth.dumps(_scene_dict(scene), "scene")
+    est = None if estimators is None else _zwidth.dumps(list(estimators), "estimators")
+    raw = _zwidth.loads(_zwidth.compare_json(text, _accuracy(accuracy), _word("criterion", criterion), est))
     maps: Dict[str, MapResult] = {}
     for row in raw["rows"]:
         # An estimator given twice keeps both rows: "name (2)" for the second.
@@ -352,7 +365,7 @@ class TuneResult:
         self.raw = raw
         self.best: Dict[str, Any] = raw["best"]
 
-    @cached_property
+    @_once
     def evaluations(self) -> Dict[str, "np.ndarray"]:
         import numpy as np
 
@@ -411,17 +424,17 @@ def tune(
 
     bar = Bar("tune") if progress else None
     try:
-        raw = _zwidth.tune_json(json.dumps(spec), bar.update if bar else None)
+        raw = _zwidth.tune_json(_zwidth.dumps(spec, ""), bar.update if bar else None)
     finally:
         if bar:
             bar.close()
-    return TuneResult(json.loads(raw))
+    return TuneResult(_zwidth.loads(raw))
 
 
 def trial(scene: SceneLike, k: float, b: float) -> Dict[str, Any]:
     """One wall hit (the 2011 paper's §2.4, time engine) at K (N/m) and
     B (N·s/m): whether it is stable, and its measures."""
-    return json.loads(_zwidth.trial_json(json.dumps(_scene_dict(scene)), _number("k", k), _number("b", b)))
+    return _zwidth.loads(_zwidth.trial_json(_zwidth.dumps(_scene_dict(scene), "scene"), _number("k", k), _number("b", b)))
 
 
 def impedance(
@@ -435,9 +448,9 @@ def impedance(
     """The impedance of the wall (K N/m, B N·s/m) rendered on `scene` over
     the probe band: the closed form on a linear scene, else the simulated
     probe (`method`: auto | analytic | frequency)."""
-    raw = json.loads(
+    raw = _zwidth.loads(
         _zwidth.impedance_json(
-            json.dumps(_scene_dict(scene)), _number("k", k), _number("b", b), _word("method", method),
+            _zwidth.dumps(_scene_dict(scene), "scene"), _number("k", k), _number("b", b), _word("method", method),
             _accuracy(accuracy)
         )
     )
@@ -464,7 +477,7 @@ def accuracy(
     and per estimator `name` and `rms_error`, one per rate)."""
     rates = _numbers("rates", rates, "Hz")
     _finite("quantization", quantization, "m")
-    return json.loads(_zwidth.accuracy_json(rates, float(quantization)))
+    return _zwidth.loads(_zwidth.accuracy_json(rates, float(quantization)))
 
 
 def estimate(positions: Any, estimator: Union[str, Dict[str, Any]], rate_hz: float,

@@ -12,7 +12,6 @@ allowed: …`; line 1 is the header, so row i of a DataFrame is line i + 2).
 
 from __future__ import annotations
 
-import json
 import os
 
 from . import _zwidth
@@ -51,7 +50,7 @@ def record(
                           "peak_force": peak_force, "duration_s": duration_s}
     if band is not None:
         ex["band"] = band
-    csv = _zwidth.record_csv(json.dumps(_scene_dict(scene)), _json("excitation", ex))
+    csv = _zwidth.record_csv(_zwidth.dumps(_scene_dict(scene), "scene"), _zwidth.dumps(ex, ""))
     # Python's float() reads each shortest round-trip number back exactly.
     rows = [tuple(map(float, line.split(","))) for line in csv.splitlines()[1:] if line]
     return {name: np.array([r[i] for r in rows]) for i, name in enumerate(COLUMNS)}
@@ -88,19 +87,12 @@ def identify(
     two_mass (with `mode_trace`, a second trace recorded with a band around
     the mode, fitted for the mode); `scene`: the scene to take everything but
     the device from (default: the default scene at the trace's rate)."""
-    base = None if scene is None else json.dumps(_scene_dict(scene))
+    base = None if scene is None else _zwidth.dumps(_scene_dict(scene), "scene")
     mode = None if mode_trace is None else _csv("mode_trace", mode_trace)
     if not isinstance(model, str):
         raise ValueError(f"model = {model!r} is not allowed: mass_damper_coulomb, mass_damper or two_mass")
     raw = _zwidth.identify_json(_csv("trace", trace), model, mode, base)
-    return Identification(json.loads(raw))
-
-
-def _json(name: str, value: Any) -> str:
-    try:
-        return json.dumps(value, allow_nan=False)
-    except ValueError:
-        raise ValueError(f"{name} = {value} is not allowed: every number must be finite") from None
+    return Identification(_zwidth.loads(raw))
 
 
 def _csv(name: str, trace: Any) -> str:
