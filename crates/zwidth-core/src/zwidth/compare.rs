@@ -106,10 +106,55 @@ pub struct RowTuning {
     pub elapsed_s: f64,
 }
 
+/// Two rows' K-widths in order, and whether the order is resolved.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PairOrder {
+    /// The row with the larger K-width estimate, and the other (names).
+    pub wider: String,
+    pub narrower: String,
+    /// The wider row's K-width interval lies wholly above the other's: the
+    /// order is wrong only if the wider's lower bound or the narrower's
+    /// upper bound is, each with probability at most α = 1 − the scene's
+    /// confidence (docs/zwidth.md, "Boundaries with intervals").
+    pub resolved: bool,
+    /// That probability's bound, 2α (a resolved order); the measured
+    /// coverage of one standard map's interval is in docs/zwidth.md.
+    pub error_at_most: f64,
+}
+
+/// Every pair of rows whose maps have K-width intervals (noisy scenes), in
+/// the rows' order: which is wider and whether the intervals say so.
+pub fn pair_orders(rows: &[CompareRow], confidence: f64) -> Vec<PairOrder> {
+    let mut out = Vec::new();
+    for (i, a) in rows.iter().enumerate() {
+        for b in &rows[i + 1..] {
+            let (Some(ia), Some(ib)) = (a.map.k_width_interval, b.map.k_width_interval) else {
+                continue;
+            };
+            let ((w, iw), (n, in_)) = if b.map.k_width > a.map.k_width {
+                ((b, ib), (a, ia))
+            } else {
+                ((a, ia), (b, ib))
+            };
+            out.push(PairOrder {
+                wider: w.name.clone(),
+                narrower: n.name.clone(),
+                resolved: iw[0] > in_[1],
+                error_at_most: 2.0 * (1.0 - confidence),
+            });
+        }
+    }
+    out
+}
+
 #[derive(Debug, Clone, Serialize)]
 pub struct CompareResult {
     pub lipschitz: CEstimate,
     pub rows: Vec<CompareRow>,
+    /// Noisy scenes: each pair of rows' K-widths in order, resolved or not
+    /// by their intervals (`pair_orders`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub order: Vec<PairOrder>,
     /// The objective every row was tuned for, or absent: the paper's fixed
     /// parameters.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -246,6 +291,7 @@ pub fn compare_rows(
         .collect::<Result<Vec<_>, SpecError>>()?;
     Ok(CompareResult {
         lipschitz: c,
+        order: pair_orders(&rows, scene.probe.confidence),
         rows,
         tuned_for: None,
         elapsed_s: start.elapsed().as_secs_f64(),
@@ -289,6 +335,23 @@ impl CompareResult {
                 .unwrap_or("-".into())
         });
         row("Trials", &|r| r.map.trials.to_string());
+        if let Some(p) = self.order.first() {
+            s.push_str(&format!(
+                "K-width order (resolved: the intervals do not overlap, wrong with probability at most {:.0} %):\n",
+                100.0 * p.error_at_most
+            ));
+            for p in &self.order {
+                let verdict = if p.resolved {
+                    "resolved"
+                } else {
+                    "not resolved (the intervals overlap)"
+                };
+                s.push_str(&format!(
+                    "  {:<12} > {:<12} {verdict}\n",
+                    p.wider, p.narrower
+                ));
+            }
+        }
         match &self.tuned_for {
             Some(objective) => s.push_str(&format!(
                 "Tunable parameters, each tuned for {objective} (argmin, draft search, finalists re-mapped):\n"
@@ -377,6 +440,75 @@ mod tests {
     }
 
     #[test]
+    fn pairs_are_ordered_by_estimate_and_resolved_only_by_disjoint_intervals() {
+        // One quick map (a linear scene, B = 0) to carry made-up widths.
+        let spec = MapSpec {
+            b: Some(vec![0.0]),
+            ..map_spec(
+                SceneSpec::from_json(r#"{"device":{"coulomb":0,"quantization":0}}"#).unwrap(),
+                &Accuracy::Preset(crate::zwidth::settings::Preset::Draft),
+                Criterion::Impedance,
+            )
+        };
+        let base = map_observed(&spec, None, 0).unwrap();
+        let row = |name: &str, k: f64, interval: Option<[f64; 2]>| CompareRow {
+            name: name.into(),
+            parameters: String::new(),
+            estimator: EstimatorKind::Fdm {}.into(),
+            map: MapResult {
+                k_width: k,
+                k_width_interval: interval,
+                ..base.clone()
+            },
+            tuning: None,
+        };
+        let rows = [
+            row("A", 100.0, Some([90.0, 110.0])),
+            row("B", 120.0, Some([111.0, 130.0])),
+            row("C", 105.0, Some([95.0, 125.0])),
+            row("D", 50.0, None),
+            row("E", 200.0, Some([110.0, 210.0])),
+        ];
+        let o = pair_orders(&rows, 0.95);
+        let got: Vec<(&str, &str, bool)> = o
+            .iter()
+            .map(|p| (p.wider.as_str(), p.narrower.as_str(), p.resolved))
+            .collect();
+        // D has no interval; B's [111, 130] lies above A's [90, 110]; C's
+        // overlaps both; E's [110, 210] only touches A's upper end.
+        assert_eq!(
+            got,
+            [
+                ("B", "A", true),
+                ("C", "A", false),
+                ("E", "A", false),
+                ("B", "C", false),
+                ("E", "B", false),
+                ("E", "C", false),
+            ]
+        );
+        // Each of the two facing bounds wrong with probability ≤ α = 5 %.
+        assert!(o.iter().all(|p| (p.error_at_most - 0.10).abs() < 1e-12));
+        let t = CompareResult {
+            lipschitz: estimate_c(&seed_2018_scene()).unwrap(),
+            rows: rows.to_vec(),
+            order: o,
+            tuned_for: None,
+            elapsed_s: 0.0,
+        }
+        .table();
+        assert!(t.contains("K-width order (resolved: the intervals do not overlap, wrong with probability at most 10 %)"), "{t}");
+        assert!(
+            t.contains("  B            > A            resolved\n"),
+            "{t}"
+        );
+        assert!(
+            t.contains("  C            > A            not resolved (the intervals overlap)\n"),
+            "{t}"
+        );
+    }
+
+    #[test]
     fn the_paper_cutoff_stays_below_nyquist() {
         assert_eq!(paper_cutoff_hz(1000.0), 499.0);
         assert_eq!(paper_cutoff_hz(10_000.0), 499.0);
@@ -405,6 +537,7 @@ mod tests {
         let t = CompareResult {
             lipschitz: c.clone(),
             rows: Vec::new(),
+            order: Vec::new(),
             tuned_for: None,
             elapsed_s: 0.0,
         }
