@@ -64,7 +64,6 @@ pub(super) fn read_scene(path: &std::path::Path) -> Result<SceneSpec, CliError> 
     SceneSpec::from_json(&text).map_err(|e| CliError::Input(format!("{}: {e}", path.display())))
 }
 
-/// A snake_case enum value from a flag, with serde's message naming the choices.
 /// Run `work` while drawing a progress bar on stderr from `observer` (only
 /// when stderr is a terminal).
 pub(super) fn with_progress<T>(
@@ -75,9 +74,20 @@ pub(super) fn with_progress<T>(
     if !std::io::stderr().is_terminal() {
         return work();
     }
+    with_bar(observer, std::time::Duration::from_millis(200), work)
+}
+
+/// `work` with the bar redrawn every `tick`. The bar's thread is woken when
+/// the work ends, so the command does not wait out a tick (up to 200 ms at
+/// the end of every command run in a terminal, before 2026-12-06).
+fn with_bar<T>(
+    observer: &crate::zwidth::search::Observer,
+    tick: std::time::Duration,
+    work: impl FnOnce() -> T,
+) -> T {
     let done = std::sync::atomic::AtomicBool::new(false);
     std::thread::scope(|s| {
-        s.spawn(|| {
+        let bar = s.spawn(|| {
             let start = std::time::Instant::now();
             while !done.load(std::sync::atomic::Ordering::Relaxed) {
                 let f = observer.fraction();
@@ -94,16 +104,18 @@ pub(super) fn with_progress<T>(
                     ".".repeat(30 - filled.min(30)),
                     100.0 * f
                 );
-                std::thread::sleep(std::time::Duration::from_millis(200));
+                std::thread::park_timeout(tick);
             }
             eprintln!();
         });
         let r = work();
         done.store(true, std::sync::atomic::Ordering::Relaxed);
+        bar.thread().unpark();
         r
     })
 }
 
+/// A snake_case enum value from a flag, with serde's message naming the choices.
 pub(super) fn parse_choice<T: serde::de::DeserializeOwned>(
     flag: &str,
     value: &str,
@@ -225,4 +237,23 @@ criterion: {:?}, search: {:?}, resolution: {}
         s.push_str(&format!("saturation: {why}\n"));
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_bar_does_not_hold_the_command_past_its_work() {
+        // A tick of a minute: a bar that waited out its tick would hold
+        // this instant job for 60 s.
+        let o = crate::zwidth::search::Observer::default();
+        let start = std::time::Instant::now();
+        assert_eq!(with_bar(&o, std::time::Duration::from_secs(60), || 7), 7);
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(30),
+            "{:?}",
+            start.elapsed()
+        );
+    }
 }

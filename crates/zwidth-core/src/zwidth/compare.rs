@@ -109,7 +109,8 @@ pub struct RowTuning {
 /// Two rows' K-widths in order, and whether the order is resolved.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PairOrder {
-    /// The row with the larger K-width estimate, and the other (names).
+    /// The row with the larger K-width estimate (of equal ones, the
+    /// earlier), and the other (names).
     pub wider: String,
     pub narrower: String,
     /// The wider row's K-width interval lies wholly above the other's: the
@@ -486,6 +487,18 @@ mod tests {
                 ("E", "B", false),
                 ("E", "C", false),
             ]
+        );
+        // Equal estimates: the earlier row is named first.
+        let tie = pair_orders(
+            &[
+                row("P", 1.0, Some([0.5, 2.0])),
+                row("Q", 1.0, Some([0.9, 1.1])),
+            ],
+            0.95,
+        );
+        assert_eq!(
+            (tie[0].wider.as_str(), tie[0].narrower.as_str()),
+            ("P", "Q")
         );
         // Each of the two facing bounds wrong with probability ≤ α = 5 %.
         assert!(o.iter().all(|p| (p.error_at_most - 0.10).abs() < 1e-12));
