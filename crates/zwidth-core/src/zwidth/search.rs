@@ -908,6 +908,11 @@ mod tests {
         }
     }
 
+    /// How many of the columns `started` lie at B ≥ `b`.
+    fn started_from(started: &std::sync::Mutex<Vec<f64>>, b: f64) -> usize {
+        started.lock().unwrap().iter().filter(|&&x| x >= b).count()
+    }
+
     #[test]
     fn columns_are_taken_in_order_and_none_is_started_past_the_known_end() {
         // A stand-in column: K_max 1000 N/m below B = 500 N·s/m, nothing
@@ -950,12 +955,7 @@ mod tests {
                 "{threads} threads"
             );
             assert_eq!(o.take_dropped(), [(0, 700.0)], "{threads} threads");
-            let past = started
-                .lock()
-                .unwrap()
-                .iter()
-                .filter(|&&b| b >= 700.0)
-                .count();
+            let past = started_from(&started, 700.0);
             assert!(
                 past < threads,
                 "{threads} threads started {past} columns past the end"
@@ -1006,12 +1006,7 @@ mod tests {
             .unwrap();
         let columns = pool.install(|| in_order(&ev, &b_auto, &column));
         assert_eq!(columns.len(), 7);
-        let past = started
-            .lock()
-            .unwrap()
-            .iter()
-            .filter(|&&b| b >= 700.0)
-            .count();
+        let past = started_from(&started, 700.0);
         assert!(past <= 4, "{past} columns started past the end");
     }
 
