@@ -524,7 +524,7 @@ fn in_order(ev: &Classifier, b_auto: &[f64], one: &ColumnOf) -> Vec<(BoundaryPoi
             .iter()
             .map_while(|c| c.as_ref().map(|(bp, _)| *bp))
             .collect();
-        ev.report(first.len() as f64 / planned_b(&first, n, ev.res.b_step) as f64);
+        report_done(ev, &first, n);
     };
     rayon::scope(|s| {
         for _ in 0..rayon::current_num_threads().max(1) {
@@ -572,7 +572,8 @@ fn farmed_batches(
             cut_at_end(ev, &mut columns, b_auto, end);
             break;
         }
-        report_columns(ev, &columns, b_auto.len());
+        let boundary: Vec<BoundaryPoint> = columns.iter().map(|(bp, _)| *bp).collect();
+        report_done(ev, &boundary, b_auto.len());
     }
     columns
 }
@@ -592,10 +593,10 @@ fn cut_at_end(
     }
 }
 
-/// Report the share of the automatic range's likely columns done.
-fn report_columns(ev: &Classifier, columns: &[(BoundaryPoint, Vec<Point>)], n_auto: usize) {
-    let boundary: Vec<BoundaryPoint> = columns.iter().map(|(bp, _)| *bp).collect();
-    ev.report(boundary.len() as f64 / planned_b(&boundary, n_auto, ev.res.b_step) as f64);
+/// Report the share of the automatic range's likely columns done, from the
+/// boundary of the columns done in a row from the first.
+fn report_done(ev: &Classifier, boundary: &[BoundaryPoint], n_auto: usize) {
+    ev.report(boundary.len() as f64 / planned_b(boundary, n_auto, ev.res.b_step) as f64);
 }
 
 /// Where an automatic B range ends, given its columns so far of which
