@@ -246,10 +246,15 @@ mod tests {
     #[test]
     fn the_bar_does_not_hold_the_command_past_its_work() {
         // A tick of a minute: a bar that waited out its tick would hold
-        // this instant job for 60 s.
+        // this job of 0.3 s (by then the bar has drawn and is waiting)
+        // for 60 s.
         let o = crate::zwidth::search::Observer::default();
         let start = std::time::Instant::now();
-        assert_eq!(with_bar(&o, std::time::Duration::from_secs(60), || 7), 7);
+        let job = || {
+            std::thread::sleep(std::time::Duration::from_millis(300));
+            7
+        };
+        assert_eq!(with_bar(&o, std::time::Duration::from_secs(60), job), 7);
         assert!(
             start.elapsed() < std::time::Duration::from_secs(30),
             "{:?}",
