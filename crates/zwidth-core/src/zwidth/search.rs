@@ -701,5 +701,8 @@ fn grid(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>,
 }
 
 #[cfg(test)]
+#[path = "in_order_tests.rs"]
+mod in_order_tests;
+#[cfg(test)]
 #[path = "search_tests.rs"]
 mod tests;
