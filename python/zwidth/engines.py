@@ -53,7 +53,7 @@ class Scene:
     …`). Every engine takes a Scene where it takes a scene."""
 
     def __init__(self, source: "SceneLike"):
-        self.spec: Dict[str, Any] = _zwidth.loads(_zwidth.scene_json(_zwidth.dumps(_scene_dict(source), "scene")))
+        self.spec: Dict[str, Any] = _zwidth.loads(_zwidth.scene_json(_scene_text(source)))
 
     def to_dict(self) -> Dict[str, Any]:
         """The scene as the API stores it (defaults filled in)."""
@@ -98,6 +98,11 @@ def _scene_dict(scene: "SceneLike") -> Dict[str, Any]:
     if not isinstance(parsed, dict):
         raise ValueError(f"scene = {text.strip()[:60]} is not allowed: must be a JSON object (a scene)")
     return parsed
+
+
+def _scene_text(scene: "SceneLike") -> str:
+    """A scene as the JSON text the engines take (`_scene_dict`, written)."""
+    return _zwidth.dumps(_scene_dict(scene), "scene")
 
 
 def _is_json(text: str) -> bool:
@@ -340,7 +345,7 @@ def compare(
     """Every estimator of the 2018 paper on `scene` (None: the paper's
     simulated device), each mapped with the paper's parameters; or the
     `estimators` given (API estimator specs, `[{"kind": "fdm"}, …]`)."""
-    text = None if scene is None else _zwidth.dumps(_scene_dict(scene), "scene")
+    text = None if scene is None else _scene_text(scene)
     est = None if estimators is None else _zwidth.dumps(list(estimators), "estimators")
     raw = _zwidth.loads(_zwidth.compare_json(text, _accuracy(accuracy), _word("criterion", criterion), est))
     maps: Dict[str, MapResult] = {}
@@ -434,7 +439,7 @@ def tune(
 def trial(scene: SceneLike, k: float, b: float) -> Dict[str, Any]:
     """One wall hit (the 2011 paper's §2.4, time engine) at K (N/m) and
     B (N·s/m): whether it is stable, and its measures."""
-    return _zwidth.loads(_zwidth.trial_json(_zwidth.dumps(_scene_dict(scene), "scene"), _number("k", k), _number("b", b)))
+    return _zwidth.loads(_zwidth.trial_json(_scene_text(scene), _number("k", k), _number("b", b)))
 
 
 def impedance(
@@ -450,7 +455,7 @@ def impedance(
     probe (`method`: auto | analytic | frequency)."""
     raw = _zwidth.loads(
         _zwidth.impedance_json(
-            _zwidth.dumps(_scene_dict(scene), "scene"), _number("k", k), _number("b", b), _word("method", method),
+            _scene_text(scene), _number("k", k), _number("b", b), _word("method", method),
             _accuracy(accuracy)
         )
     )

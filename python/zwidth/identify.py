@@ -15,7 +15,7 @@ from __future__ import annotations
 import os
 
 from . import _zwidth
-from .engines import _scene_dict
+from .engines import _scene_text
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
@@ -50,7 +50,7 @@ def record(
                           "peak_force": peak_force, "duration_s": duration_s}
     if band is not None:
         ex["band"] = band
-    csv = _zwidth.record_csv(_zwidth.dumps(_scene_dict(scene), "scene"), _zwidth.dumps(ex, ""))
+    csv = _zwidth.record_csv(_scene_text(scene), _zwidth.dumps(ex, ""))
     # Python's float() reads each shortest round-trip number back exactly.
     rows = [tuple(map(float, line.split(","))) for line in csv.splitlines()[1:] if line]
     return {name: np.array([r[i] for r in rows]) for i, name in enumerate(COLUMNS)}
@@ -87,7 +87,7 @@ def identify(
     two_mass (with `mode_trace`, a second trace recorded with a band around
     the mode, fitted for the mode); `scene`: the scene to take everything but
     the device from (default: the default scene at the trace's rate)."""
-    base = None if scene is None else _zwidth.dumps(_scene_dict(scene), "scene")
+    base = None if scene is None else _scene_text(scene)
     mode = None if mode_trace is None else _csv("mode_trace", mode_trace)
     if not isinstance(model, str):
         raise ValueError(f"model = {model!r} is not allowed: mass_damper_coulomb, mass_damper or two_mass")
