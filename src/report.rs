@@ -31,6 +31,13 @@ pub struct MapSummary {
     pub max_fidelity_error: Option<f64>,
     /// ∫ K_max dB (N/m · N·s/m).
     pub area: f64,
+    /// Noisy scenes: the K-width's confidence interval (N/m) and the
+    /// B-width's (N·s/m), from the boundary's (docs/zwidth.md); absent where
+    /// the verdicts are exact.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub k_width_interval: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub b_width_interval: Option<[f64; 2]>,
     #[serde(skip)]
     pub boundary: Vec<BoundaryPoint>,
     #[serde(skip)]
@@ -67,9 +74,22 @@ fn summary(run: &str, label: String, scene: &SceneSpec, map: &Value) -> MapSumma
         max_fidelity_error: map["max_fidelity_error"].as_f64(),
         // Results stored before `area` existed: the same integral.
         area: map["area"].as_f64().unwrap_or_else(|| area(&boundary)),
+        k_width_interval: interval(&map["k_width_interval"]),
+        b_width_interval: interval(&map["b_width_interval"]),
         boundary,
         points: map["points"].as_array().cloned().unwrap_or_default(),
         scene: bare,
+    }
+}
+
+/// A stored `[low, high]`, finite and in order; anything else is none.
+fn interval(v: &Value) -> Option<[f64; 2]> {
+    match v.as_array()?.as_slice() {
+        [lo, hi] => {
+            let (lo, hi) = (lo.as_f64()?, hi.as_f64()?);
+            (lo.is_finite() && hi.is_finite() && lo <= hi).then_some([lo, hi])
+        }
+        _ => None,
     }
 }
 
@@ -135,6 +155,10 @@ pub struct Comparison {
     /// Index of the row with the largest K-width, B-width, area, and the
     /// smallest max fidelity error.
     pub best: Best,
+    /// Noisy scenes: each pair of rows' K-widths and B-widths in order,
+    /// resolved or not by their intervals.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub order: Vec<RowOrder>,
     /// Things to know before reading the table (e.g. different criteria).
     pub notes: Vec<String>,
 }
@@ -142,7 +166,13 @@ pub struct Comparison {
 #[derive(Debug, Clone, Serialize, utoipa::ToSchema)]
 pub struct Best {
     pub k_width: usize,
+    /// Whether the K-width's best is ranked above every other row by the
+    /// intervals (always, on exact verdicts without intervals); a page
+    /// marks it best only then.
+    pub k_width_resolved: bool,
     pub b_width: usize,
+    /// The same for the B-width.
+    pub b_width_resolved: bool,
     pub area: usize,
     pub max_fidelity_error: Option<usize>,
 }
@@ -153,6 +183,51 @@ pub fn short_id(id: &str) -> &str {
     let n = id.chars().count();
     let skip = n.saturating_sub(8);
     &id[id.char_indices().nth(skip).map_or(0, |(i, _)| i)..]
+}
+
+/// Two rows' widths in order (`wider` and `narrower` index `rows`).
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
+pub struct RowOrder {
+    /// `k_width` or `b_width`.
+    pub width: &'static str,
+    pub wider: usize,
+    pub narrower: usize,
+    /// The wider row's interval lies wholly above the other's.
+    pub resolved: bool,
+    /// A resolved order's error bound, 2α (α = 1 − the scene's confidence).
+    pub error_at_most: f64,
+}
+
+/// The orders of one width over `maps`, and whether `best` is ranked above
+/// every other row: every order with it resolved in its favour, and every
+/// row has an interval if any has (rows without intervals are exact; one
+/// beside rows with intervals cannot be ranked against them).
+fn width_orders(
+    maps: &[MapSummary],
+    width: &'static str,
+    of: impl Fn(&MapSummary) -> (f64, Option<[f64; 2]>),
+    best: usize,
+    confidence: f64,
+) -> (Vec<RowOrder>, bool) {
+    let widths: Vec<(f64, Option<[f64; 2]>)> = maps.iter().map(&of).collect();
+    let orders: Vec<RowOrder> = crate::zwidth::compare::orders(&widths)
+        .into_iter()
+        .map(|o| RowOrder {
+            width,
+            wider: o.wider,
+            narrower: o.narrower,
+            resolved: o.resolved,
+            error_at_most: 2.0 * (1.0 - confidence),
+        })
+        .collect();
+    let any = widths.iter().any(|w| w.1.is_some());
+    let all = widths.iter().all(|w| w.1.is_some());
+    let resolved = (!any || all)
+        && orders
+            .iter()
+            .filter(|o| o.wider == best || o.narrower == best)
+            .all(|o| o.wider == best && o.resolved);
+    (orders, resolved)
 }
 
 fn pct(d: f64, base: f64) -> Option<f64> {
@@ -201,9 +276,31 @@ pub fn compare(runs: Vec<String>, maps: Vec<MapSummary>) -> Result<Comparison, S
                 .join(", ")
         ));
     }
+    let (k_best, b_best) = (
+        argmax(maps.iter().map(|m| m.k_width)),
+        argmax(maps.iter().map(|m| m.b_width)),
+    );
+    let confidence = first.scene.probe.confidence;
+    let (mut order, k_width_resolved) = width_orders(
+        &maps,
+        "k_width",
+        |m| (m.k_width, m.k_width_interval),
+        k_best,
+        confidence,
+    );
+    let (b_order, b_width_resolved) = width_orders(
+        &maps,
+        "b_width",
+        |m| (m.b_width, m.b_width_interval),
+        b_best,
+        confidence,
+    );
+    order.extend(b_order);
     let best = Best {
-        k_width: argmax(maps.iter().map(|m| m.k_width)),
-        b_width: argmax(maps.iter().map(|m| m.b_width)),
+        k_width: k_best,
+        k_width_resolved,
+        b_width: b_best,
+        b_width_resolved,
         area: argmax(maps.iter().map(|m| m.area)),
         max_fidelity_error: maps
             .iter()
@@ -232,6 +329,7 @@ pub fn compare(runs: Vec<String>, maps: Vec<MapSummary>) -> Result<Comparison, S
         runs,
         rows,
         best,
+        order,
         notes,
     })
 }
@@ -251,18 +349,31 @@ fn scene_difference(a: &SceneSpec, b: &SceneSpec) -> String {
 }
 
 impl Comparison {
-    /// A plain-text table.
+    /// A plain-text table: each width with its interval (noisy scenes),
+    /// then every pair's order, resolved or not.
     pub fn table(&self) -> String {
+        let intervals = self
+            .rows
+            .iter()
+            .any(|r| r.map.k_width_interval.is_some() || r.map.b_width_interval.is_some());
+        let k_iv = |i: Option<[f64; 2]>| {
+            i.map_or("-".into(), |[lo, hi]| format!("[{lo:.3e}, {hi:.3e}]"))
+        };
+        let b_iv = |i: Option<[f64; 2]>| i.map_or("-".into(), |[lo, hi]| format!("[{lo:.1}, {hi:.1}]"));
         let mut s = format!(
-            "{:<38} {:>11} {:>9} {:>9} {:>11} {:>10} {:>9}\n",
+            "{:<38} {:>11} {:>9} {:>9} {:>11} {:>10} {:>9}",
             "run / map", "K-width", "ΔK %", "B-width", "max fid.", "area", "Δarea %"
         );
+        if intervals {
+            s.push_str(&format!(" {:>22} {:>22}", "K-width interval", "B-width interval"));
+        }
+        s.push('\n');
+        let name = |m: &MapSummary| format!("{} {}", short_id(&m.run), m.label);
         for r in &self.rows {
             let m = &r.map;
-            let name = format!("{} {}", short_id(&m.run), m.label);
             s.push_str(&format!(
-                "{:<38} {:>11.4e} {:>9} {:>9.1} {:>11} {:>10.3e} {:>9}\n",
-                name.chars().take(38).collect::<String>(),
+                "{:<38} {:>11.4e} {:>9} {:>9.1} {:>11} {:>10.3e} {:>9}",
+                name(m).chars().take(38).collect::<String>(),
                 m.k_width,
                 r.k_width_diff_pct
                     .map_or("-".into(), |p| format!("{p:+.1}")),
@@ -272,6 +383,35 @@ impl Comparison {
                 m.area,
                 r.area_diff_pct.map_or("-".into(), |p| format!("{p:+.1}")),
             ));
+            if intervals {
+                s.push_str(&format!(
+                    " {:>22} {:>22}",
+                    k_iv(m.k_width_interval),
+                    b_iv(m.b_width_interval)
+                ));
+            }
+            s.push('\n');
+        }
+        for width in ["k_width", "b_width"] {
+            let orders: Vec<&RowOrder> = self.order.iter().filter(|o| o.width == width).collect();
+            let Some(first) = orders.first() else { continue };
+            s.push_str(&format!(
+                "{} order (resolved: the intervals do not overlap, wrong with probability at most {:.0} %):\n",
+                if width == "k_width" { "K-width" } else { "B-width" },
+                100.0 * first.error_at_most
+            ));
+            for o in orders {
+                s.push_str(&format!(
+                    "  {} > {}: {}\n",
+                    name(&self.rows[o.wider].map),
+                    name(&self.rows[o.narrower].map),
+                    if o.resolved {
+                        "resolved"
+                    } else {
+                        "not resolved (the intervals overlap)"
+                    }
+                ));
+            }
         }
         s
     }
@@ -427,6 +567,8 @@ mod tests {
         assert_eq!(c.rows[0].k_width_diff, 0.0);
         assert!(c.svg().unwrap().contains("<svg"));
         assert!(c.table().contains("run-a"));
+        // Exact verdicts (no intervals): the best is ranked, no order listed.
+        assert!(c.best.k_width_resolved && c.order.is_empty());
         let csv = points_csv(&c.rows.iter().map(|r| r.map.clone()).collect::<Vec<_>>());
         assert_eq!(csv.lines().count(), 1 + 6);
 
@@ -440,5 +582,62 @@ mod tests {
         let e = compare(vec!["run-a".into(), "run-c".into()], all).unwrap_err();
         assert_eq!((e.field.as_str(), e.value.as_str()), ("runs", "run-c"));
         assert!(e.allowed.contains("device"), "{}", e.allowed);
+    }
+
+    /// A map summary with a K-width and B-width and their intervals (as a
+    /// noisy scene's stored result has them) on the default scene.
+    fn noisy(run: &str, k: f64, ki: Option<[f64; 2]>, b: f64, bi: Option<[f64; 2]>) -> MapSummary {
+        let result = serde_json::json!({
+            "method": "frequency", "criterion": "impedance",
+            "k_width": k, "b_width": b, "area": 1.0,
+            "k_width_interval": ki, "b_width_interval": bi,
+            "boundary": [], "points": []
+        });
+        summary(run, run.to_uppercase(), &SceneSpec::default(), &result)
+    }
+
+    #[test]
+    fn the_best_width_is_marked_only_where_its_intervals_rank_it_first() {
+        // The README compare's K-widths (docs/zwidth.md, output of
+        // 2026-12-06): AKF's 6.012e5 in [4.286e5, 6.132e5] overlaps
+        // FDM+filter's [4.316e5, 4.435e5]; FOAW's [3.572e5, 4.048e5] lies
+        // below both. B-widths: FDM+filter's [990, 997] above AKF's [800, 830].
+        let rows = vec![
+            noisy("fdm", 4.405e5, Some([4.316e5, 4.435e5]), 997.0, Some([990.0, 997.0])),
+            noisy("foaw", 3.988e5, Some([3.572e5, 4.048e5]), 997.0, Some([990.0, 997.0])),
+            noisy("akf", 6.012e5, Some([4.286e5, 6.132e5]), 818.4, Some([800.0, 830.0])),
+        ];
+        let c = compare(vec!["r".into()], rows.clone()).unwrap();
+        assert_eq!(c.best.k_width, 2);
+        assert!(!c.best.k_width_resolved, "AKF's interval overlaps FDM+filter's");
+        // B: FDM+filter and FOAW tie (the earlier is best) and overlap.
+        assert_eq!((c.best.b_width, c.best.b_width_resolved), (0, false));
+        let k: Vec<(usize, usize, bool)> = c
+            .order
+            .iter()
+            .filter(|o| o.width == "k_width")
+            .map(|o| (o.wider, o.narrower, o.resolved))
+            .collect();
+        assert_eq!(k, [(0, 1, true), (2, 0, false), (2, 1, true)]);
+        // 2α at the scene's confidence, 0.95.
+        assert!(c.order.iter().all(|o| (o.error_at_most - 0.1).abs() < 1e-12));
+        let t = c.table();
+        assert!(t.contains("[4.286e5, 6.132e5]"), "{t}");
+        assert!(t.contains("akf AKF > fdm FDM: not resolved (the intervals overlap)"), "{t}");
+        assert!(t.contains("fdm FDM > foaw FOAW: resolved"), "{t}");
+        assert!(t.contains("[800.0, 830.0]"), "{t}");
+        // Without AKF, FDM+filter's K-width is resolved best over FOAW.
+        let c = compare(vec!["r".into()], rows[..2].to_vec()).unwrap();
+        assert_eq!((c.best.k_width, c.best.k_width_resolved), (0, true));
+        // A row without an interval beside rows with one is not ranked:
+        // its best is not resolved.
+        let mut bare = rows[2].clone();
+        bare.k_width_interval = None;
+        let c = compare(vec!["r".into()], vec![rows[0].clone(), bare]).unwrap();
+        assert_eq!((c.best.k_width, c.best.k_width_resolved), (1, false));
+        // A stored interval that is not two finite numbers in order is none.
+        for bad in [serde_json::json!([2.0, 1.0]), serde_json::json!([1.0]), serde_json::json!("x")] {
+            assert_eq!(interval(&bad), None, "{bad}");
+        }
     }
 }

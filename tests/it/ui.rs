@@ -424,6 +424,38 @@ async fn compare_shows_differences_only_and_one_colour_scale() {
                 "{label} on both colour bars"
             );
         }
+        // Intervals: two more runs on that scene. Their K-width intervals
+        // overlap: the orders table says so and no K-width is marked best;
+        // made disjoint, the wider one is.
+        for (n, (a, b)) in [([3.8e5, 4.2e5], [4.1e5, 4.6e5]), ([3.8e5, 4.0e5], [4.1e5, 4.6e5])]
+            .into_iter()
+            .enumerate()
+        {
+            let ids = [format!("iv-a{n}"), format!("iv-b{n}")];
+            for (id, k, iv) in [(&ids[0], 4.0e5, a), (&ids[1], 4.5e5, b)] {
+                let mut r = row.clone();
+                r.id = id.clone();
+                let mut res = result.clone();
+                res["k_width"] = serde_json::json!(k);
+                res["k_width_interval"] = serde_json::json!(iv);
+                r.result = Some(res.to_string());
+                store.import_run(&r, &trials, &[]).await.unwrap();
+            }
+            let (code, _, html) = get(&app, &format!("/compare?runs={}", ids.join(","))).await;
+            assert_eq!(code, StatusCode::OK, "{html}");
+            assert!(html.contains("Which is wider"), "{html}");
+            let overlap = a[1] >= b[0];
+            assert_eq!(
+                html.contains("not resolved (the intervals overlap)"),
+                overlap
+            );
+            assert_eq!(
+                html.contains(r#">450000<span class="sr"> (best)</span>"#),
+                !overlap,
+                "{html}"
+            );
+            assert!(html.contains("[410000, 460000]"), "{html}");
+        }
     }
 }
 

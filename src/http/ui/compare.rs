@@ -92,6 +92,17 @@ pub async fn page(
         .map_err(no_plot)?;
     let pct = |p: Option<f64>| p.map_or("–".into(), |p| format!("{p:+.1} %"));
     let best = |i: usize, j: Option<usize>| if Some(i) == j { "best" } else { "" };
+    // K-width and B-width: best only where the intervals rank it above
+    // every other row (on exact verdicts, always).
+    let k_best = c.best.k_width_resolved.then_some(c.best.k_width);
+    let b_best = c.best.b_width_resolved.then_some(c.best.b_width);
+    let interval = |i: Option<[f64; 2]>, prec: usize| {
+        html! { @if let Some([lo, hi]) = i { br; span class="muted small" { "[" (format!("{lo:.prec$}")) ", " (format!("{hi:.prec$}")) "]" } } }
+    };
+    let name = |i: usize| {
+        let m = &c.rows[i].map;
+        format!("{} {}", letter(&m.run), m.label)
+    };
     // The best in words too (not by weight and colour alone).
     let mark =
         |i: usize, j: Option<usize>| html! { @if Some(i) == j { span class="sr" { " (best)" } } };
@@ -106,20 +117,40 @@ pub async fn page(
             }
             @for n in &c.notes { p class="warn" { (n) } }
             table class="figures" {
-                caption { "Differences from the first map (A " (c.rows.first().map_or("", |r| r.map.label.as_str())) "); best of each column marked" }
+                caption { "Differences from the first map (A " (c.rows.first().map_or("", |r| r.map.label.as_str())) "); best of each column marked, the K-width's and B-width's only where their intervals rank it above every other map" }
                 thead { tr { th { "run" } th { "map" } th { "K-width (N/m)" } th { "ΔK" } th { "B-width (N·s/m)" } th { "ΔB" } th { "max fidelity error (N·s/m)" } th { "area" } th { "Δarea" } } }
                 tbody {
                     @for (i, r) in c.rows.iter().enumerate() {
                         tr {
                             td { strong { (letter(&r.map.run)) } " " (run_link(&r.map.run)) }
                             td { (r.map.label) }
-                            td class={"num " (best(i, Some(c.best.k_width)))} { (format!("{:.0}", r.map.k_width)) (mark(i, Some(c.best.k_width))) }
+                            td class={"num " (best(i, k_best))} { (format!("{:.0}", r.map.k_width)) (mark(i, k_best)) (interval(r.map.k_width_interval, 0)) }
                             td class="num" { (pct(r.k_width_diff_pct)) }
-                            td class={"num " (best(i, Some(c.best.b_width)))} { (format!("{:.2}", r.map.b_width)) (mark(i, Some(c.best.b_width))) }
+                            td class={"num " (best(i, b_best))} { (format!("{:.2}", r.map.b_width)) (mark(i, b_best)) (interval(r.map.b_width_interval, 2)) }
                             td class="num" { (pct(r.b_width_diff_pct)) }
                             td class={"num " (best(i, c.best.max_fidelity_error))} { (r.map.max_fidelity_error.map_or("–".into(), |f| format!("{f:.3}"))) (mark(i, c.best.max_fidelity_error)) }
                             td class={"num " (best(i, Some(c.best.area)))} { (format!("{:.4e}", r.map.area)) (mark(i, Some(c.best.area))) }
                             td class="num" { (pct(r.area_diff_pct)) }
+                        }
+                    }
+                }
+            }
+            @if !c.order.is_empty() {
+                h2 { "Which is wider" }
+                p class="muted small" {
+                    "Each pair's order by its intervals: resolved when the wider map's interval lies wholly above the other's, wrong with probability at most "
+                    (format!("{:.0} %", 100.0 * c.order[0].error_at_most)) "."
+                }
+                table class="orders" {
+                    thead { tr { th { "width" } th { "wider" } th { "narrower" } th { "order" } } }
+                    tbody {
+                        @for o in &c.order {
+                            tr {
+                                td { (if o.width == "k_width" { "K-width" } else { "B-width" }) }
+                                td { (name(o.wider)) }
+                                td { (name(o.narrower)) }
+                                td { @if o.resolved { "resolved" } @else { span class="warn" { "not resolved (the intervals overlap)" } } }
+                            }
                         }
                     }
                 }

@@ -126,22 +126,52 @@ pub struct PairOrder {
 /// Every pair of rows whose maps have K-width intervals (noisy scenes), in
 /// the rows' order: which is wider and whether the intervals say so.
 pub fn pair_orders(rows: &[CompareRow], confidence: f64) -> Vec<PairOrder> {
+    let widths: Vec<(f64, Option<[f64; 2]>)> = rows
+        .iter()
+        .map(|r| (r.map.k_width, r.map.k_width_interval))
+        .collect();
+    orders(&widths)
+        .into_iter()
+        .map(|o| PairOrder {
+            wider: rows[o.wider].name.clone(),
+            narrower: rows[o.narrower].name.clone(),
+            resolved: o.resolved,
+            error_at_most: 2.0 * (1.0 - confidence),
+        })
+        .collect()
+}
+
+/// Two widths in order, by their places in the list given to [`orders`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct IndexOrder {
+    pub wider: usize,
+    pub narrower: usize,
+    /// The wider one's interval lies wholly above the other's.
+    pub resolved: bool,
+}
+
+/// Every pair of `widths` (estimate, interval) that both have intervals, in
+/// the list's order: the one with the larger estimate first (of equal
+/// ones, the earlier), resolved when its interval lies wholly above the
+/// other's. A resolved order is wrong only if the wider one's lower bound
+/// or the other's upper bound is: with probability at most 2α, α each
+/// bound's error rate (docs/zwidth.md, "Boundaries with intervals").
+pub fn orders(widths: &[(f64, Option<[f64; 2]>)]) -> Vec<IndexOrder> {
     let mut out = Vec::new();
-    for (i, a) in rows.iter().enumerate() {
-        for b in &rows[i + 1..] {
-            let (Some(ia), Some(ib)) = (a.map.k_width_interval, b.map.k_width_interval) else {
+    for (i, &(ea, ia)) in widths.iter().enumerate() {
+        for (j, &(eb, ib)) in widths.iter().enumerate().skip(i + 1) {
+            let (Some(ia), Some(ib)) = (ia, ib) else {
                 continue;
             };
-            let ((w, iw), (n, in_)) = if b.map.k_width > a.map.k_width {
-                ((b, ib), (a, ia))
+            let ((w, iw), (n, in_)) = if eb > ea {
+                ((j, ib), (i, ia))
             } else {
-                ((a, ia), (b, ib))
+                ((i, ia), (j, ib))
             };
-            out.push(PairOrder {
-                wider: w.name.clone(),
-                narrower: n.name.clone(),
+            out.push(IndexOrder {
+                wider: w,
+                narrower: n,
                 resolved: iw[0] > in_[1],
-                error_at_most: 2.0 * (1.0 - confidence),
             });
         }
     }
