@@ -4,7 +4,11 @@
 output bit for bit (tests/it/bit_identical.rs): a speed-up that keeps the
 arithmetic must leave it unchanged.
 
-Written once by the build of main at 2595a59 (before issue 34's changes):
+Written by the build of main at 2595a59 (before issue 34's changes), and
+re-recorded once for issue 44 (2026-12-06) after the BLA verdict began to
+call a wall that clips at the force limit not passive (bla.rs, `clipped`):
+only the two frequency-domain cases with a force limit changed (two_mass,
+mode_lag); the other ten are as 2595a59 wrote them.
     python3 crates/zwidth-core/golden/maps.py path/to/zwidth > crates/zwidth-core/golden/maps.json
 """
 import json

@@ -289,11 +289,18 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
     let max_m = knobs.realizations.max(1);
     let mut periods_run = 0u32;
     let mut verdict = None;
+    let mut clips = 0u32;
+    // Render updates in one realization's measured periods.
+    let renders = f64::from(knobs.periods) * (per_period / setup.nsub / scene.ratio.max(1)) as f64;
     for m in 0..max_m {
         let ms = bla::realization(&setup.design, p.seed, m);
         let (force, f_lines) = setup.excitation(&ms, per_period);
         let mut g = Vec::with_capacity(knobs.periods as usize);
+        let mut clipped_from = lp.ctl.saturated;
         for i in 0..(bla::TRANSIENT_PERIODS + knobs.periods) {
+            if i == bla::TRANSIENT_PERIODS {
+                clipped_from = lp.ctl.saturated;
+            }
             periods_run += 1;
             if !lp.period(&force, &mut vbuf) {
                 // Diverged: not passive, and no doubt about it.
@@ -321,10 +328,19 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
             );
         }
         stats.push(&g);
+        // Realizations that clipped at the force limit (`bla::clipping`).
+        clips += u32::from(bla::clipped(lp.ctl.saturated - clipped_from, renders));
+        let clip = bla::clipping(clips, stats.count(), bla::look_alpha(alpha, max_m));
+        if clip == bla::Clipping::Limit {
+            let mut v = stats.verdict(alpha, max_m);
+            (v.decided, v.passive) = (true, false);
+            verdict = Some(v);
+            break;
+        }
         // Look once there are enough realizations (with fewer in all, the
         // verdict is taken after the loop).
         if stats.count() >= bla::MIN_REALIZATIONS {
-            let v = stats.verdict(alpha, max_m);
+            let v = with_clipping(stats.verdict(alpha, max_m), clip, clips);
             let done = v.decided;
             verdict = Some(v);
             if done {
@@ -332,7 +348,8 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
             }
         }
     }
-    let v = verdict.unwrap_or_else(|| stats.verdict(alpha, max_m));
+    let clip = bla::clipping(clips, stats.count(), bla::look_alpha(alpha, max_m));
+    let v = verdict.unwrap_or_else(|| with_clipping(stats.verdict(alpha, max_m), clip, clips));
     let mut imp = ImpedanceCurve::from_z(&setup.omegas, &v.z, k, b);
     imp.passive = v.passive;
     ProbeOutcome {
@@ -352,6 +369,18 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
         }),
         saturated_renders: lp.ctl.saturated,
     }
+}
+
+/// Re Z's verdict `v` where `clips` of its realizations clipped at the
+/// force limit (`clip`, not `Limit`). While `Open` the point is not decided
+/// passive (Re Z's "not passive" stands), and undecided it renders only if
+/// fewer than half of them clipped: the estimate of p < ½.
+fn with_clipping(mut v: bla::BlaVerdict, clip: bla::Clipping, clips: u32) -> bla::BlaVerdict {
+    if clip == bla::Clipping::Open && v.passive {
+        v.decided = false;
+        v.passive = 2 * clips < v.realizations;
+    }
+    v
 }
 
 /// Periods in a `tfestimate` record (after one transient period): as many

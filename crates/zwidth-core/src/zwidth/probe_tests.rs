@@ -412,3 +412,61 @@ fn the_loop_stops_past_ten_metres_or_a_kilometre_per_second() {
     lp.st.v = 2000.0;
     assert!(!lp.period(&[0.0], &mut v));
 }
+
+#[test]
+fn a_wall_that_clips_at_the_force_limit_is_decided_not_passive() {
+    // The seed device at 1 kHz, B = 0: its loop goes unstable past about
+    // 48 000 N/m (the standard map's boundary there, docs/zwidth.md). With
+    // a 2 N force limit the unstable loop cannot diverge: it limit-cycles
+    // at the limit, every realization clipping far more than CLIP_SHARE of
+    // its renders. Decided not passive once P(X ≥ m | m, ½) = 2^−m is at
+    // most the per-look rate: α/looks = 0.05/(8 − 3 + 1) = 0.0083 with
+    // KNOBS' 8 realizations, so after m = 7 (2^−7 = 0.0078; 2^−6 = 0.016).
+    // Without the rule a loop that neither diverges nor decides runs all 8.
+    let limited = scene_1khz(r#"{"force_limit":2.0}"#, r#"{"amplitude":0.5}"#);
+    let o = probe(&limited, 80_000.0, 0.0, KNOBS);
+    let c = o.confidence.expect("a BLA verdict");
+    assert!(c.decided && !o.passive && !o.diverged, "{c:?}");
+    assert_eq!(c.realizations, 7);
+    assert_eq!(o.periods_run, 7 * (1 + KNOBS.periods));
+    // 7 × 2 measured periods of 1 000 renders: at least 1 % of each clipped.
+    assert!(o.saturated_renders >= 7 * 20, "{}", o.saturated_renders);
+    // Without the limit the same loop diverges.
+    let free = scene_1khz("{}", r#"{"amplitude":0.5}"#);
+    assert!(probe(&free, 80_000.0, 0.0, KNOBS).diverged);
+    // A wall that renders (20 000 N/m, inside 2b/T = 26 400) never reaches
+    // the limit: its verdict is the one without a limit, bit for bit.
+    let inside = probe(&limited, 20_000.0, 0.0, KNOBS);
+    assert_eq!(inside.saturated_renders, 0);
+    assert_eq!(inside.confidence, probe(&free, 20_000.0, 0.0, KNOBS).confidence);
+}
+
+#[test]
+fn clipped_realizations_decide_by_the_binomial_tails_at_one_half() {
+    use bla::Clipping::*;
+    // a = 0.05 / 22 looks (standard: 24 realizations) = 0.00227.
+    let a = bla::look_alpha(0.05, 24);
+    assert!((a - 0.05 / 22.0).abs() < 1e-15);
+    assert_eq!(bla::clipping(0, 24, a), Unseen);
+    // 9 of 9: 2^−9 = 0.00195 ≤ a; 8 of 8: 0.0039 > a.
+    assert_eq!(bla::clipping(9, 9, a), Limit);
+    assert_eq!(bla::clipping(8, 8, a), Open);
+    // 11 of 12: (1 + 12)/4096 = 0.00317 > a; 12 of 13 … 13 of 14: (1 + 14)/16384 = 0.00092.
+    assert_eq!(bla::clipping(11, 12, a), Open);
+    assert_eq!(bla::clipping(13, 14, a), Limit);
+    // 1 of 24: P(X ≤ 1) = 25/2^24 = 1.5e-6 ≤ a: rare, Re Z decides.
+    assert_eq!(bla::clipping(1, 24, a), Rare);
+    // 2 of 10: (1 + 10 + 45)/1024 = 0.055: open.
+    assert_eq!(bla::clipping(2, 10, a), Open);
+    // At 1000 realizations the tails stay finite: 500 of 1000 is open.
+    assert_eq!(bla::clipping(500, 1000, a), Open);
+    assert_eq!(bla::clipping(1000, 1000, a), Limit);
+}
+
+#[test]
+fn clipping_counts_from_one_percent_of_the_renders() {
+    // CLIP_SHARE = 1 %: of 4 000 renders, 40 clipped is the least that counts.
+    assert!(bla::clipped(40, 4000.0));
+    assert!(!bla::clipped(39, 4000.0));
+    assert!(!bla::clipped(0, 0.0));
+}

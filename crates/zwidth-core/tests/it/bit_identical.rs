@@ -1,7 +1,9 @@
 //! The engines' output pinned bit for bit (issue 34): small maps of every
 //! example scene on every engine it runs, each trial as the build of main
 //! at 2595a59 (before any of issue 34's speed-ups) printed it with `zwidth
-//! map --json` (`golden/maps.py` wrote `golden/maps.json`). A speed-up that
+//! map --json` (`golden/maps.py` wrote `golden/maps.json`; re-recorded once
+//! for issue 44, when a wall clipped at the force limit became "not
+//! passive": the two frequency-domain cases with a limit changed). A speed-up that
 //! keeps the arithmetic (cached FFT plans, a stopping time not computed
 //! where it surely lies past the step, fixed-size state matrices) leaves
 //! every verdict, margin, fidelity and realization count unchanged; one that
