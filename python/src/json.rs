@@ -32,6 +32,7 @@ pub fn dumps(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<String> {
     serde_json::to_string(&Walk {
         obj,
         path: name.to_string(),
+        depth: 0,
     })
     .map_err(|e| PyValueError::new_err(e.to_string()))
 }
@@ -96,9 +97,25 @@ impl<'de, 'py> Visitor<'de> for Build<'py> {
 struct Walk<'a, 'py> {
     obj: &'a Bound<'py, PyAny>,
     path: String,
+    /// Dicts and lists it sits in.
+    depth: usize,
 }
 
-impl Walk<'_, '_> {
+/// Deepest nesting `dumps` writes: every spec is a few levels deep, and a
+/// dict or list that contains itself would otherwise be walked until the
+/// stack overflows (the interpreter crashed: issue 45).
+pub const MAX_DEPTH: usize = 32;
+
+impl<'py> Walk<'_, 'py> {
+    /// The walk of `obj`, an entry of this one at `path`.
+    fn inner<'b>(&self, obj: &'b Bound<'py, PyAny>, path: String) -> Walk<'b, 'py> {
+        Walk {
+            obj,
+            path,
+            depth: self.depth + 1,
+        }
+    }
+
     /// The path of a dict's entry (the argument's own keys unprefixed when
     /// it has no name: a spec built here names `scene.device.mass`).
     fn child(&self, key: &str) -> String {
@@ -125,6 +142,13 @@ impl Serialize for Walk<'_, '_> {
         if o.is_none() {
             return s.serialize_unit();
         }
+        if self.depth > MAX_DEPTH {
+            // Not its repr: that would walk the same nesting.
+            return Err(ser::Error::custom(format!(
+                "{} is nested more than {MAX_DEPTH} dicts or lists deep: a spec is a few levels deep (does a dict or list contain itself?)",
+                self.path
+            )));
+        }
         if let Ok(b) = o.cast::<PyBool>() {
             return s.serialize_bool(b.is_true());
         }
@@ -132,20 +156,12 @@ impl Serialize for Walk<'_, '_> {
             let mut m = s.serialize_map(Some(d.len()))?;
             for (k, v) in d.iter() {
                 let Ok(key) = k.cast::<PyString>() else {
-                    return Err(Walk {
-                        obj: &k,
-                        path: format!("{} key", self.path).trim_start().to_string(),
-                    }
-                    .refuse("keys must be str"));
+                    return Err(self
+                        .inner(&k, format!("{} key", self.path).trim_start().to_string())
+                        .refuse("keys must be str"));
                 };
                 let key = key.to_cow().map_err(ser::Error::custom)?;
-                m.serialize_entry(
-                    key.as_ref(),
-                    &Walk {
-                        obj: &v,
-                        path: self.child(&key),
-                    },
-                )?;
+                m.serialize_entry(key.as_ref(), &self.inner(&v, self.child(&key)))?;
             }
             return m.end();
         }
@@ -156,10 +172,7 @@ impl Serialize for Walk<'_, '_> {
                 .map_err(ser::Error::custom)?;
             let mut q = s.serialize_seq(Some(items.len()))?;
             for (i, v) in items.iter().enumerate() {
-                q.serialize_element(&Walk {
-                    obj: v,
-                    path: format!("{}[{i}]", self.path),
-                })?;
+                q.serialize_element(&self.inner(v, format!("{}[{i}]", self.path)))?;
             }
             return q.end();
         }

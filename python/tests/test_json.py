@@ -89,3 +89,53 @@ def test_import_and_a_map_load_neither_json_nor_re():
     )
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
     assert out.stdout.split("\n")[0] == "[] [] True", out.stdout
+
+
+def test_a_dict_that_contains_itself_is_a_value_error_not_a_crash():
+    # Issue 45: the walk recursed without a limit, so a self-referential
+    # argument (or a nesting 20 000 deep) overflowed the stack and killed
+    # the interpreter. Now: a ValueError naming where, past MAX_DEPTH = 32.
+    import zwidth
+
+    d = {"kind": "fdm"}
+    d["s"] = d
+    with pytest.raises(ValueError, match=r"spec(\.s){32}.* nested more than 32"):
+        zwidth.Estimator(d, 1e4, 1e-6)
+    loop = []
+    loop.append(loop)
+    with pytest.raises(ValueError, match=r"nested more than 32"):
+        _zwidth.dumps({"a": loop}, "scene")
+    deep = {}
+    for _ in range(20_000):
+        deep = {"d": deep}
+    with pytest.raises(ValueError, match=r"nested more than 32"):
+        _zwidth.dumps(deep, "scene")
+    # 32 levels are written (every spec is a few deep).
+    ok = 0
+    for _ in range(31):
+        ok = [ok]
+    assert json.loads(_zwidth.dumps({"a": ok}, "x"))["a"] is not None
+
+
+def test_a_self_referential_dict_in_a_thread_with_a_small_stack():
+    # The crash reproduced at 1 000 deep in a thread with a 512 KiB stack.
+    import threading
+
+    out = {}
+
+    def run():
+        d = {}
+        d["d"] = d
+        try:
+            _zwidth.dumps(d, "scene")
+        except ValueError as e:
+            out["error"] = str(e)
+
+    threading.stack_size(512 * 1024)
+    try:
+        t = threading.Thread(target=run)
+        t.start()
+        t.join()
+    finally:
+        threading.stack_size(0)
+    assert "nested more than 32" in out["error"]
