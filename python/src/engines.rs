@@ -273,7 +273,9 @@ pub fn accuracy_json(py: Python<'_>, rates: Vec<f64>, quantization: f64) -> PyRe
         quantization,
         ..Default::default()
     };
-    let report = cancellable(py, |_| zwidth_core::accuracy::run(&cfg))?;
+    let report = cancellable(py, |o| {
+        zwidth_core::accuracy::run_cancellable(&cfg, &|| o.cancel.load(Ordering::Relaxed))
+    })?;
     to_json(&report)
 }
 

@@ -14,6 +14,9 @@ mod engines;
 mod identify;
 mod json;
 
+/// How long `Estimator.run` computes between looks for Ctrl-C.
+const POLL: std::time::Duration = std::time::Duration::from_millis(100);
+
 /// A velocity estimator: `Estimator(spec, rate_hz, quantization)`.
 ///
 /// `spec` is the API's JSON estimator spec, as a str or a dict
@@ -91,8 +94,29 @@ impl Estimator {
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let ys = positions.as_slice().map_err(value_error)?.to_vec();
         check_finite(&ys)?;
-        let built = &mut self.built;
-        let out = py.detach(move || ys.iter().map(|&y| built.update(y)).collect::<Vec<f64>>());
+        // In slices of about POLL, the GIL taken back between them to
+        // deliver Ctrl-C: one sample can cost milliseconds (FOAW's best
+        // fit over a long window), so a million took over an hour deaf to
+        // it (issue 45). Interrupted, the estimator keeps the samples it
+        // took.
+        let mut out = Vec::with_capacity(ys.len());
+        while out.len() < ys.len() {
+            let built = &mut self.built;
+            let rest = &ys[out.len()..];
+            let slice = py.detach(move || {
+                let start = std::time::Instant::now();
+                let mut v = Vec::new();
+                for chunk in rest.chunks(64) {
+                    v.extend(chunk.iter().map(|&y| built.update(y)));
+                    if start.elapsed() >= POLL {
+                        break;
+                    }
+                }
+                v
+            });
+            out.extend(slice);
+            py.check_signals()?;
+        }
         Ok(PyArray1::from_vec(py, out))
     }
 

@@ -294,3 +294,36 @@ def test_an_estimator_given_twice_keeps_both_rows():
     first, second = list(c.maps)
     assert second == f"{first} (2)"
     assert without_elapsed(c.maps[first].to_dict()) == without_elapsed(c.maps[second].to_dict())
+
+
+def _interrupted_after(seconds, call):
+    """Run `call` with Python's own Ctrl-C handler, SIGINT sent after
+    `seconds`; the time from the start until KeyboardInterrupt came out."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    timer = threading.Timer(seconds, lambda: os.kill(os.getpid(), signal.SIGINT))
+    timer.start()
+    start = time.monotonic()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            call()
+        return time.monotonic() - start
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
+
+
+def test_ctrl_c_stops_a_long_estimator_run_and_the_accuracy_study():
+    # Issue 45: FOAW's best fit with outlier tolerance over a 4 096-sample
+    # window costs milliseconds a sample, so run() on a million positions
+    # held the interpreter deaf to Ctrl-C for over an hour; now it looks
+    # every 100 ms. The accuracy study looks before each (estimator, rate).
+    slow = zwidth.Estimator({"kind": "foaw", "fit": "best_r", "max_window": 4096,
+                             "outlier_tolerance": True}, 1e4, 1e-6)
+    positions = np.cumsum(np.full(10**6, 1e-6))
+    elapsed = _interrupted_after(0.5, lambda: slow.run(positions))
+    assert elapsed < 1.5, elapsed  # 0.5 s before the signal, then < 1 s
+    # The estimator still answers (its history holds the samples it took).
+    assert np.isfinite(slow.step(1.0))
+    elapsed = _interrupted_after(0.5, lambda: zwidth.accuracy(list(range(1000, 41000, 1000)),
+                                                               quantization=1e-6))
+    assert elapsed < 3.0, elapsed

@@ -250,6 +250,16 @@ pub fn study_estimators(
 
 /// Run the whole study (rates and estimators in parallel).
 pub fn run(cfg: &AccuracyConfig) -> Result<AccuracyReport, SpecError> {
+    run_cancellable(cfg, &|| false)
+}
+
+/// [`run`], stopping before the next (estimator, rate) once `cancelled`
+/// says so (Ctrl-C in Python: each pair is one trace, so it stops within
+/// one), with an error naming the study as cancelled.
+pub fn run_cancellable(
+    cfg: &AccuracyConfig,
+    cancelled: &(dyn Fn() -> bool + Sync),
+) -> Result<AccuracyReport, SpecError> {
     cfg.validate()?;
     let c = cfg.signal.lipschitz(cfg.duration_s);
     let estimators = study_estimators(cfg, c)?;
@@ -266,6 +276,13 @@ pub fn run(cfg: &AccuracyConfig) -> Result<AccuracyReport, SpecError> {
                 .iter()
                 .zip(&traces)
                 .map(|(&r, (pos, vel))| {
+                    if cancelled() {
+                        return Err(SpecError::new(
+                            "accuracy",
+                            "cancelled",
+                            "the study was cancelled before it ended",
+                        ));
+                    }
                     let s = Sampling::new(r, cfg.quantization)?;
                     rms_error(spec, pos, vel, s, (cfg.transient_s * r).round() as usize)
                 })
