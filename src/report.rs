@@ -356,16 +356,19 @@ impl Comparison {
             .rows
             .iter()
             .any(|r| r.map.k_width_interval.is_some() || r.map.b_width_interval.is_some());
-        let k_iv = |i: Option<[f64; 2]>| {
-            i.map_or("-".into(), |[lo, hi]| format!("[{lo:.3e}, {hi:.3e}]"))
-        };
-        let b_iv = |i: Option<[f64; 2]>| i.map_or("-".into(), |[lo, hi]| format!("[{lo:.1}, {hi:.1}]"));
+        let k_iv =
+            |i: Option<[f64; 2]>| i.map_or("-".into(), |[lo, hi]| format!("[{lo:.3e}, {hi:.3e}]"));
+        let b_iv =
+            |i: Option<[f64; 2]>| i.map_or("-".into(), |[lo, hi]| format!("[{lo:.1}, {hi:.1}]"));
         let mut s = format!(
             "{:<38} {:>11} {:>9} {:>9} {:>11} {:>10} {:>9}",
             "run / map", "K-width", "ΔK %", "B-width", "max fid.", "area", "Δarea %"
         );
         if intervals {
-            s.push_str(&format!(" {:>22} {:>22}", "K-width interval", "B-width interval"));
+            s.push_str(&format!(
+                " {:>22} {:>22}",
+                "K-width interval", "B-width interval"
+            ));
         }
         s.push('\n');
         let name = |m: &MapSummary| format!("{} {}", short_id(&m.run), m.label);
@@ -394,7 +397,9 @@ impl Comparison {
         }
         for width in ["k_width", "b_width"] {
             let orders: Vec<&RowOrder> = self.order.iter().filter(|o| o.width == width).collect();
-            let Some(first) = orders.first() else { continue };
+            let Some(first) = orders.first() else {
+                continue;
+            };
             s.push_str(&format!(
                 "{} order (resolved: the intervals do not overlap, wrong with probability at most {:.0} %):\n",
                 if width == "k_width" { "K-width" } else { "B-width" },
@@ -603,13 +608,34 @@ mod tests {
         // FDM+filter's [4.316e5, 4.435e5]; FOAW's [3.572e5, 4.048e5] lies
         // below both. B-widths: FDM+filter's [990, 997] above AKF's [800, 830].
         let rows = vec![
-            noisy("fdm", 4.405e5, Some([4.316e5, 4.435e5]), 997.0, Some([990.0, 997.0])),
-            noisy("foaw", 3.988e5, Some([3.572e5, 4.048e5]), 997.0, Some([990.0, 997.0])),
-            noisy("akf", 6.012e5, Some([4.286e5, 6.132e5]), 818.4, Some([800.0, 830.0])),
+            noisy(
+                "fdm",
+                4.405e5,
+                Some([4.316e5, 4.435e5]),
+                997.0,
+                Some([990.0, 997.0]),
+            ),
+            noisy(
+                "foaw",
+                3.988e5,
+                Some([3.572e5, 4.048e5]),
+                997.0,
+                Some([990.0, 997.0]),
+            ),
+            noisy(
+                "akf",
+                6.012e5,
+                Some([4.286e5, 6.132e5]),
+                818.4,
+                Some([800.0, 830.0]),
+            ),
         ];
         let c = compare(vec!["r".into()], rows.clone()).unwrap();
         assert_eq!(c.best.k_width, 2);
-        assert!(!c.best.k_width_resolved, "AKF's interval overlaps FDM+filter's");
+        assert!(
+            !c.best.k_width_resolved,
+            "AKF's interval overlaps FDM+filter's"
+        );
         // B: FDM+filter and FOAW tie (the earlier is best) and overlap.
         assert_eq!((c.best.b_width, c.best.b_width_resolved), (0, false));
         let k: Vec<(usize, usize, bool)> = c
@@ -620,10 +646,16 @@ mod tests {
             .collect();
         assert_eq!(k, [(0, 1, true), (2, 0, false), (2, 1, true)]);
         // 2α at the scene's confidence, 0.95.
-        assert!(c.order.iter().all(|o| (o.error_at_most - 0.1).abs() < 1e-12));
+        assert!(c
+            .order
+            .iter()
+            .all(|o| (o.error_at_most - 0.1).abs() < 1e-12));
         let t = c.table();
         assert!(t.contains("[4.286e5, 6.132e5]"), "{t}");
-        assert!(t.contains("akf AKF > fdm FDM: not resolved (the intervals overlap)"), "{t}");
+        assert!(
+            t.contains("akf AKF > fdm FDM: not resolved (the intervals overlap)"),
+            "{t}"
+        );
         assert!(t.contains("fdm FDM > foaw FOAW: resolved"), "{t}");
         assert!(t.contains("[800.0, 830.0]"), "{t}");
         // Without AKF, FDM+filter's K-width is resolved best over FOAW.
@@ -636,7 +668,11 @@ mod tests {
         let c = compare(vec!["r".into()], vec![rows[0].clone(), bare]).unwrap();
         assert_eq!((c.best.k_width, c.best.k_width_resolved), (1, false));
         // A stored interval that is not two finite numbers in order is none.
-        for bad in [serde_json::json!([2.0, 1.0]), serde_json::json!([1.0]), serde_json::json!("x")] {
+        for bad in [
+            serde_json::json!([2.0, 1.0]),
+            serde_json::json!([1.0]),
+            serde_json::json!("x"),
+        ] {
             assert_eq!(interval(&bad), None, "{bad}");
         }
     }

@@ -427,9 +427,12 @@ async fn compare_shows_differences_only_and_one_colour_scale() {
         // Intervals: two more runs on that scene. Their K-width intervals
         // overlap: the orders table says so and no K-width is marked best;
         // made disjoint, the wider one is.
-        for (n, (a, b)) in [([3.8e5, 4.2e5], [4.1e5, 4.6e5]), ([3.8e5, 4.0e5], [4.1e5, 4.6e5])]
-            .into_iter()
-            .enumerate()
+        for (n, (a, b)) in [
+            ([3.8e5, 4.2e5], [4.1e5, 4.6e5]),
+            ([3.8e5, 4.0e5], [4.1e5, 4.6e5]),
+        ]
+        .into_iter()
+        .enumerate()
         {
             let ids = [format!("iv-a{n}"), format!("iv-b{n}")];
             for (id, k, iv) in [(&ids[0], 4.0e5, a), (&ids[1], 4.5e5, b)] {

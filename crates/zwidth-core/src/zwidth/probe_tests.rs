@@ -438,7 +438,10 @@ fn a_wall_that_clips_at_the_force_limit_is_decided_not_passive() {
     // the limit: its verdict is the one without a limit, bit for bit.
     let inside = probe(&limited, 20_000.0, 0.0, KNOBS);
     assert_eq!(inside.saturated_renders, 0);
-    assert_eq!(inside.confidence, probe(&free, 20_000.0, 0.0, KNOBS).confidence);
+    assert_eq!(
+        inside.confidence,
+        probe(&free, 20_000.0, 0.0, KNOBS).confidence
+    );
 }
 
 #[test]
