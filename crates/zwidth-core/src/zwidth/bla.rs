@@ -75,10 +75,11 @@ pub fn clipped(clipped: u64, renders: f64) -> bool {
 /// What the realizations that clipped (`clipped`) say about a point's
 /// verdict: a realization either drives the loop into a limit cycle at the
 /// force limit or not, a draw with some probability p at this (K, B). Near
-/// the boundary that draw depends on the realization's phases (measured:
-/// of 12 probe seeds of mode_lag_2011's standard map, a third each put the
-/// boundary at B = 89.28 N·s/m one bisection step lower or higher), so one
-/// clipped realization cannot decide at the stated error rate. The test is
+/// the boundary that draw depends on the realization's phases (measured
+/// with one clipped realization deciding: 12 probe seeds of mode_lag_2011's
+/// standard map put its K-width, at B = 89.28 N·s/m, at 156 265, 157 753 or
+/// 159 242 N/m, 3, 5 and 4 of them, each interval one bisection step wide),
+/// so one clipped realization cannot decide at the stated error rate. The test is
 /// on p against ½ (the boundary is where half the realizations clip), each
 /// way at level `a` (the verdict's per-look rate, `look_alpha`):
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
