@@ -158,6 +158,12 @@ impl ProbeSetup {
         (force, f_lines)
     }
 
+    /// Render updates in `periods` periods of the excitation: its encoder
+    /// samples per period over the scene's samples per render.
+    pub(super) fn renders(&self, scene: &Scene, periods: u32) -> f64 {
+        f64::from(periods) * (self.force.len() / self.nsub / scene.ratio.max(1)) as f64
+    }
+
     /// A force held over each step of h: its true Fourier coefficient at ω
     /// is the samples' × (1 − e^{−jωh})/(jωh).
     fn hold(&self, w: f64) -> C {
@@ -290,17 +296,14 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
     let mut periods_run = 0u32;
     let mut verdict = None;
     let mut clips = 0u32;
-    // Render updates in one realization's measured periods.
-    let renders = f64::from(knobs.periods) * (per_period / setup.nsub / scene.ratio.max(1)) as f64;
+    let renders = setup.renders(scene, knobs.periods);
     for m in 0..max_m {
         let ms = bla::realization(&setup.design, p.seed, m);
         let (force, f_lines) = setup.excitation(&ms, per_period);
         let mut g = Vec::with_capacity(knobs.periods as usize);
-        let mut clipped_from = lp.ctl.saturated;
+        let mut window = ClipWindow::default();
         for i in 0..(bla::TRANSIENT_PERIODS + knobs.periods) {
-            if i == bla::TRANSIENT_PERIODS {
-                clipped_from = lp.ctl.saturated;
-            }
+            window.at_period(i, lp.ctl.saturated);
             periods_run += 1;
             if !lp.period(&force, &mut vbuf) {
                 // Diverged: not passive, and no doubt about it.
@@ -329,7 +332,7 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
         }
         stats.push(&g);
         // Realizations that clipped at the force limit (`bla::clipping`).
-        clips += u32::from(bla::clipped(lp.ctl.saturated - clipped_from, renders));
+        clips += u32::from(bla::clipped(window.clipped(lp.ctl.saturated), renders));
         let clip = bla::clipping(clips, stats.count(), bla::look_alpha(alpha, max_m));
         if clip == bla::Clipping::Limit {
             let mut v = stats.verdict(alpha, max_m);
@@ -368,6 +371,28 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
             bands: v.bands,
         }),
         saturated_renders: lp.ctl.saturated,
+    }
+}
+
+/// A realization's renders clipped at the force limit in its measured
+/// periods, from the controller's running count (`Controller::saturated`).
+#[derive(Debug, Default)]
+struct ClipWindow {
+    from: u64,
+}
+
+impl ClipWindow {
+    /// At the start of period `i` of the realization, the count then: the
+    /// window opens with the first measured period (after the transient).
+    fn at_period(&mut self, i: u32, saturated: u64) {
+        if i == bla::TRANSIENT_PERIODS {
+            self.from = saturated;
+        }
+    }
+
+    /// Clipped since the window opened, the count now being `saturated`.
+    fn clipped(&self, saturated: u64) -> u64 {
+        saturated - self.from
     }
 }
 

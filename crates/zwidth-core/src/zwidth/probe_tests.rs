@@ -473,3 +473,63 @@ fn clipping_counts_from_one_percent_of_the_renders() {
     assert!(!bla::clipped(39, 4000.0));
     assert!(!bla::clipped(0, 0.0));
 }
+
+#[test]
+fn a_realization_counts_the_renders_its_measured_periods_clipped() {
+    // Renders per period: samples per period (sample_hz / f_min) over
+    // samples per render. The seed device: 1 kHz, 1 Hz lines: 1 000 a
+    // period, 4 000 in 4 periods. mode_lag_2011: sampled at 10 kHz, rendered
+    // at 1 kHz: 1 000 a period as well. At 2 Hz: 500.
+    let seed = scene_1khz("{}", r#"{"f_min_hz":1}"#);
+    assert_eq!(ProbeSetup::new(&seed).renders(&seed, 4), 4000.0);
+    let two = scene_1khz("{}", r#"{"f_min_hz":2}"#);
+    assert_eq!(ProbeSetup::new(&two).renders(&two, 3), 1500.0);
+    let ml = SceneSpec::from_json(
+        &std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../examples/mode_lag_2011.json"
+        ))
+        .unwrap(),
+    )
+    .unwrap()
+    .validate()
+    .unwrap();
+    assert_eq!(ProbeSetup::new(&ml).renders(&ml, 4), 4000.0);
+    // The window opens with the first measured period (TRANSIENT_PERIODS
+    // = 1): the count then was 100; 160 at the end: 60 clipped.
+    let mut w = ClipWindow::default();
+    for (i, count) in [(0, 30), (1, 100), (2, 150)] {
+        w.at_period(i, count);
+    }
+    assert_eq!(w.clipped(160), 60);
+}
+
+#[test]
+fn an_open_clipping_keeps_a_point_from_being_decided_passive() {
+    use bla::Clipping::*;
+    let v = |decided: bool, passive: bool| bla::BlaVerdict {
+        decided,
+        passive,
+        z: Vec::new(),
+        margin: if passive { 1.0 } else { -1.0 },
+        margin_se: 0.5,
+        noise_se: 0.1,
+        realizations: 10,
+        bands: 20,
+    };
+    // Open: decided passive becomes undecided, rendering only while fewer
+    // than half of the 10 realizations clipped (4 yes, 5 and 6 no).
+    for (clips, renders) in [(4, true), (5, false), (6, false)] {
+        let w = with_clipping(v(true, true), Open, clips);
+        assert_eq!((w.decided, w.passive), (false, renders), "{clips}");
+    }
+    // Re Z's "not passive" stands, decided or not.
+    for decided in [true, false] {
+        let w = with_clipping(v(decided, false), Open, 2);
+        assert_eq!((w.decided, w.passive), (decided, false));
+    }
+    // Unseen and Rare: Re Z's verdict, unchanged.
+    for c in [Unseen, Rare] {
+        assert_eq!(with_clipping(v(true, true), c, 1), v(true, true));
+    }
+}
