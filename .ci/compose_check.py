@@ -41,6 +41,8 @@ check("worker runs `zwidth worker`", services["worker"]["command"][:2] == ["zwid
 check("api runs `zwidth serve --api-only`", services["api"]["command"] == ["zwidth", "serve", "--api-only"])
 check("api has a health check", "test" in services["api"].get("healthcheck", {}))
 check("api takes the agents' tokens from ZWIDTH_AGENT_TOKENS", "ZWIDTH_AGENT_TOKENS" in services["api"]["environment"])
+check("the API is published on loopback only (reads need no token)",
+      all(p == "127.0.0.1:8080:8080" for name in ("api", "zwidth") for p in services[name]["ports"]))
 check("agent dials the API by its service name", services["agent"]["environment"]["ZWIDTH_SERVER"] == "http://api:8080")
 check("agent runs `zwidth agent`", services["agent"]["command"][:2] == ["zwidth", "agent"])
 for name, svc in services.items():
