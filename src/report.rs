@@ -667,6 +667,22 @@ mod tests {
         bare.k_width_interval = None;
         let c = compare(vec!["r".into()], vec![rows[0].clone(), bare]).unwrap();
         assert_eq!((c.best.k_width, c.best.k_width_resolved), (1, false));
+        // The table names each width's order block.
+        assert!(
+            t.contains("K-width order (resolved") && t.contains("B-width order (resolved"),
+            "{t}"
+        );
+        // Best ranked above every other row though another pair overlaps:
+        // A [10, 12] above B [5, 8] and C [6, 9], which overlap each other.
+        let three = vec![
+            noisy("a", 11.0, Some([10.0, 12.0]), 1.0, None),
+            noisy("b", 7.0, Some([5.0, 8.0]), 1.0, None),
+            noisy("c", 8.0, Some([6.0, 9.0]), 1.0, None),
+        ];
+        let c = compare(vec!["r".into()], three).unwrap();
+        assert_eq!((c.best.k_width, c.best.k_width_resolved), (0, true));
+        // K-width intervals alone (no B-width's) still get their column.
+        assert!(c.table().contains("[1.000e1, 1.200e1]"), "{}", c.table());
         // A stored interval that is not two finite numbers in order is none.
         for bad in [
             serde_json::json!([2.0, 1.0]),
