@@ -667,9 +667,13 @@ mod tests {
         bare.k_width_interval = None;
         let c = compare(vec!["r".into()], vec![rows[0].clone(), bare]).unwrap();
         assert_eq!((c.best.k_width, c.best.k_width_resolved), (1, false));
-        // The table names each width's order block.
+        // The K-widths' orders under their name, then the B-widths'.
+        let (k_at, b_at) = (
+            t.find("K-width order (resolved").unwrap(),
+            t.find("B-width order (resolved").unwrap(),
+        );
         assert!(
-            t.contains("K-width order (resolved") && t.contains("B-width order (resolved"),
+            k_at < b_at && t[k_at..b_at].contains("akf AKF > fdm FDM"),
             "{t}"
         );
         // Best ranked above every other row though another pair overlaps:
