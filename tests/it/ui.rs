@@ -447,6 +447,15 @@ async fn compare_shows_differences_only_and_one_colour_scale() {
             let (code, _, html) = get(&app, &format!("/compare?runs={}", ids.join(","))).await;
             assert_eq!(code, StatusCode::OK, "{html}");
             assert!(html.contains("Which is wider"), "{html}");
+            // The K-widths ranked: the second run first, then ≈ (overlap)
+            // or > (resolved) before the first.
+            let chain = html
+                .split("<strong>K-width: </strong>")
+                .nth(1)
+                .and_then(|t| t.split("</p>").next())
+                .unwrap_or_default();
+            assert_eq!(chain.contains('≈'), a[1] >= b[0], "{chain}");
+            assert_eq!(chain.contains("&gt;"), a[1] < b[0], "{chain}");
             let overlap = a[1] >= b[0];
             assert_eq!(
                 html.contains("not resolved (the intervals overlap)"),

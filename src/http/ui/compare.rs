@@ -141,15 +141,29 @@ pub async fn page(
                     "Each pair's order by its intervals: resolved when the wider map's interval lies wholly above the other's, wrong with probability at most "
                     (format!("{:.0} %", 100.0 * c.order[0].error_at_most)) "."
                 }
-                table class="orders" {
-                    thead { tr { th { "width" } th { "wider" } th { "narrower" } th { "order" } } }
-                    tbody {
-                        @for o in &c.order {
-                            tr {
-                                td { (if o.width == "k_width" { "K-width" } else { "B-width" }) }
-                                td { (name(o.wider)) }
-                                td { (name(o.narrower)) }
-                                td { @if o.resolved { "resolved" } @else { span class="warn" { "not resolved (the intervals overlap)" } } }
+                @for (label, width) in [("K-width", "k_width"), ("B-width", "b_width")] {
+                    @let chain = ranking(&c.order, width);
+                    @if !chain.is_empty() {
+                        p { strong { (label) ": " } @for (i, (row, next)) in chain.iter().enumerate() {
+                            @if i > 0 { " " }
+                            (name(*row))
+                            @match next { Some(true) => " >", Some(false) => " ≈", None => "" }
+                        } }
+                    }
+                }
+                p class="muted small" { "> resolved, ≈ the intervals overlap, each between neighbours in the order of the estimates." }
+                details {
+                    summary { "Every pair (" (c.order.len()) ")" }
+                    table class="orders" {
+                        thead { tr { th { "width" } th { "wider" } th { "narrower" } th { "order" } } }
+                        tbody {
+                            @for o in &c.order {
+                                tr {
+                                    td { (if o.width == "k_width" { "K-width" } else { "B-width" }) }
+                                    td { (name(o.wider)) }
+                                    td { (name(o.narrower)) }
+                                    td { @if o.resolved { "resolved" } @else { span class="warn" { "not resolved (the intervals overlap)" } } }
+                                }
                             }
                         }
                     }
@@ -168,6 +182,30 @@ pub async fn page(
             (spec_table(&ids, &specs, all))
         },
     ))
+}
+
+/// The rows that have `width`'s orders, widest estimate first (the orders
+/// name the wider of each pair: a row is above every row it is wider
+/// than), each with whether its order over the next is resolved (`None`
+/// for the last).
+fn ranking(orders: &[report::RowOrder], width: &str) -> Vec<(usize, Option<bool>)> {
+    let of: Vec<&report::RowOrder> = orders.iter().filter(|o| o.width == width).collect();
+    let mut rows: Vec<usize> = of.iter().flat_map(|o| [o.wider, o.narrower]).collect();
+    rows.sort_unstable();
+    rows.dedup();
+    // Wider than more rows: higher (the orders are by estimate, ties to the
+    // earlier row, so this is the estimates' order).
+    let wins = |r: usize| of.iter().filter(|o| o.wider == r).count();
+    rows.sort_by_key(|&r| (std::cmp::Reverse(wins(r)), r));
+    (0..rows.len())
+        .map(|i| {
+            let next = rows.get(i + 1).map(|&n| {
+                of.iter()
+                    .any(|o| o.wider == rows[i] && o.narrower == n && o.resolved)
+            });
+            (rows[i], next)
+        })
+        .collect()
 }
 
 /// Each spec flattened to `path = value`; with `all` false only the paths
@@ -288,4 +326,35 @@ async fn picker(st: &AppState) -> Result<Response, Problem> {
             }
         },
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_ranking_follows_the_estimates_and_marks_each_neighbour_s_order() {
+        // The README compare's K-widths (docs/zwidth.md): AKF (row 2) over
+        // FDM+filter (0) unresolved, FDM+filter over FOAW (1) resolved, AKF
+        // over FOAW resolved; the B-widths' orders are left out.
+        let o = |wider, narrower, resolved, width| report::RowOrder {
+            width,
+            wider,
+            narrower,
+            resolved,
+            error_at_most: 0.1,
+        };
+        let orders = [
+            o(0, 1, true, "k_width"),
+            o(2, 0, false, "k_width"),
+            o(2, 1, true, "k_width"),
+            o(1, 0, true, "b_width"),
+        ];
+        assert_eq!(
+            ranking(&orders, "k_width"),
+            [(2, Some(false)), (0, Some(true)), (1, None)]
+        );
+        assert_eq!(ranking(&orders, "b_width"), [(1, Some(true)), (0, None)]);
+        assert!(ranking(&[], "k_width").is_empty());
+    }
 }
