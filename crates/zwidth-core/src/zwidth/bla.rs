@@ -101,17 +101,19 @@ pub fn clipping(clipped: u32, m: u32, a: f64) -> Clipping {
     if clipped == 0 {
         return Clipping::Unseen;
     }
-    // P(X = i) for X ~ Bin(m, ½), summed in f64 (m ≤ 1000: no overflow of
-    // the binomial coefficients' ratio form).
-    let pmf = |i: u32| {
-        let mut c = 1.0f64;
-        for j in 0..i {
-            c *= f64::from(m - j) / f64::from(j + 1) / 2.0;
+    // P(X = i) for X ~ Bin(m, ½), from P(X = 0) = 2^−m by the ratio
+    // (m − i)/(i + 1), one pass (it runs after every realization; 2^−1000
+    // is still a normal f64).
+    let (mut p, mut upper, mut lower) = (0.5f64.powi(m as i32), 0.0, 0.0);
+    for i in 0..=m {
+        if i >= clipped {
+            upper += p;
         }
-        c / 2f64.powi((m - i) as i32)
-    };
-    let upper: f64 = (clipped..=m).map(pmf).sum();
-    let lower: f64 = (0..=clipped).map(pmf).sum();
+        if i <= clipped {
+            lower += p;
+        }
+        p *= f64::from(m - i) / f64::from(i + 1);
+    }
     if upper <= a {
         Clipping::Limit
     } else if lower <= a {

@@ -351,8 +351,10 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
             }
         }
     }
-    let clip = bla::clipping(clips, stats.count(), bla::look_alpha(alpha, max_m));
-    let v = verdict.unwrap_or_else(|| with_clipping(stats.verdict(alpha, max_m), clip, clips));
+    let v = verdict.unwrap_or_else(|| {
+        let clip = bla::clipping(clips, stats.count(), bla::look_alpha(alpha, max_m));
+        with_clipping(stats.verdict(alpha, max_m), clip, clips)
+    });
     let mut imp = ImpedanceCurve::from_z(&setup.omegas, &v.z, k, b);
     imp.passive = v.passive;
     ProbeOutcome {
