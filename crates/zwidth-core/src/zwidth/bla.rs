@@ -72,6 +72,17 @@ pub fn clipped(clipped: u64, renders: f64) -> bool {
     clipped > 0 && clipped as f64 >= CLIP_SHARE * renders
 }
 
+/// Whether clipping may decide (`clipped`, `clipping`) for a probe of peak
+/// force `amplitude` (N) against a force limit `limit` (N): only with the
+/// probe at most half the limit. A stable wall held against the probe
+/// returns about the probe's force, so at an amplitude near the limit it
+/// clips without any limit cycle (found: the seed device with a 0.5 N
+/// limit and a 0.5 N probe clipped from K = 2.9 N/m and mapped to a
+/// K-width of 7 441 N/m); half leaves the wall a gain of 2 over the probe.
+pub fn clipping_decides(amplitude: f64, limit: Option<f64>) -> bool {
+    limit.is_some_and(|l| amplitude <= 0.5 * l)
+}
+
 /// What the realizations that clipped (`clipped`) say about a point's
 /// verdict: a realization either drives the loop into a limit cycle at the
 /// force limit or not, a draw with some probability p at this (K, B). Near

@@ -297,6 +297,7 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
     let mut verdict = None;
     let mut clips = 0u32;
     let renders = setup.renders(scene, knobs.periods);
+    let decides = bla::clipping_decides(p.amplitude, scene.spec.device.force_limit);
     for m in 0..max_m {
         let ms = bla::realization(&setup.design, p.seed, m);
         let (force, f_lines) = setup.excitation(&ms, per_period);
@@ -332,7 +333,7 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
         }
         stats.push(&g);
         // Realizations that clipped at the force limit (`bla::clipping`).
-        clips += u32::from(bla::clipped(window.clipped(lp.ctl.saturated), renders));
+        clips += u32::from(decides && bla::clipped(window.clipped(lp.ctl.saturated), renders));
         let clip = bla::clipping(clips, stats.count(), bla::look_alpha(alpha, max_m));
         if clip == bla::Clipping::Limit {
             let mut v = stats.verdict(alpha, max_m);

@@ -533,3 +533,19 @@ fn an_open_clipping_keeps_a_point_from_being_decided_passive() {
         assert_eq!(with_clipping(v(true, true), c, 1), v(true, true));
     }
 }
+
+#[test]
+fn clipping_decides_only_with_the_probe_at_most_half_the_limit() {
+    // mode_lag_2011: 0.5 N against 4 N; the seed device with a 2 N limit.
+    assert!(bla::clipping_decides(0.5, Some(4.0)));
+    assert!(bla::clipping_decides(0.5, Some(1.0)));
+    assert!(!bla::clipping_decides(0.5, Some(0.99)));
+    assert!(!bla::clipping_decides(0.5, None));
+    // A 0.5 N probe against a 0.5 N limit: a stable wall (20 000 N/m, B = 0,
+    // inside 2b/T = 26 400) clips, but is not decided not passive by it.
+    let tight = scene_1khz(r#"{"force_limit":0.5}"#, r#"{"amplitude":0.5}"#);
+    let o = probe(&tight, 20_000.0, 0.0, KNOBS);
+    assert!(o.saturated_renders > 0);
+    let c = o.confidence.expect("a BLA verdict");
+    assert!(o.passive, "{c:?}");
+}
