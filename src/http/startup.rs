@@ -244,28 +244,101 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
 }
 
 /// The secret in `<db>.<name>`, made (random, owner-only) if missing.
-/// Its path is logged, never its content.
+/// Its path is logged, never its content. The file is only ever a
+/// regular file of its own: a symbolic link there refuses the start (a
+/// link could send the new secret anywhere, or read one from anywhere),
+/// and so does a file that group or others may read or write (the secret
+/// is no longer one), with how to fix it. A new file is created with
+/// `O_EXCL`, mode 0600, so no other file or mode is ever written through.
 pub fn secret_file(db: &std::path::Path, name: &str) -> Result<String, String> {
     let mut p = db.as_os_str().to_owned();
     p.push(format!(".{name}"));
     let path = std::path::PathBuf::from(p);
-    if let Ok(text) = std::fs::read_to_string(&path) {
-        let t = text.trim().to_string();
-        if !t.is_empty() {
-            tracing::info!(path = %path.display(), "{name} read");
-            return Ok(t);
+    match std::fs::symlink_metadata(&path) {
+        Ok(meta) => {
+            check_secret_file(&path, &meta)?;
+            let text = read_no_follow(&path)
+                .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+            let t = text.trim().to_string();
+            if !t.is_empty() {
+                tracing::info!(path = %path.display(), "{name} read");
+                return Ok(t);
+            }
+            // An empty owner-only file (e.g. made by `touch` and
+            // `chmod 600`): the secret goes into it.
+            write_secret(&path, false, name)
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => write_secret(&path, true, name),
+        Err(e) => Err(format!("cannot read {}: {e}", path.display())),
+    }
+}
+
+/// Refuse a secret file that is not a regular file, or that group or
+/// others may read or write.
+fn check_secret_file(path: &std::path::Path, meta: &std::fs::Metadata) -> Result<(), String> {
+    let shown = path.display();
+    if meta.file_type().is_symlink() {
+        return Err(format!(
+            "refusing: {shown} is a symbolic link; a secret file must be a regular file \
+             (replace the link by the file it points to, with mode 0600)"
+        ));
+    }
+    if !meta.is_file() {
+        return Err(format!("refusing: {shown} is not a regular file"));
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = meta.permissions().mode() & 0o777;
+        if mode & 0o077 != 0 {
+            return Err(format!(
+                "refusing: {shown} has mode {mode:04o}: group or others may read it, so its \
+                 secret is not one; run `chmod 600 {shown}` (and make a new secret if others \
+                 could have read it: remove the file and start again)"
+            ));
         }
     }
+    Ok(())
+}
+
+/// Open flags that never follow a symbolic link at the last component.
+#[cfg(unix)]
+fn no_follow(opts: &mut std::fs::OpenOptions) {
+    use std::os::unix::fs::OpenOptionsExt;
+    opts.custom_flags(libc::O_NOFOLLOW);
+}
+#[cfg(not(unix))]
+fn no_follow(_: &mut std::fs::OpenOptions) {}
+
+fn read_no_follow(path: &std::path::Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let mut opts = std::fs::OpenOptions::new();
+    opts.read(true);
+    no_follow(&mut opts);
+    let mut text = String::new();
+    opts.open(path)?.read_to_string(&mut text)?;
+    Ok(text)
+}
+
+/// Write a new random secret to `path`: a new file (`O_EXCL`, mode 0600),
+/// or the existing empty one, never through a link.
+fn write_secret(path: &std::path::Path, new: bool, name: &str) -> Result<String, String> {
     let token = random_secret();
     let mut opts = std::fs::OpenOptions::new();
-    opts.write(true).create(true).truncate(true);
+    opts.write(true);
+    if new {
+        opts.create_new(true);
+    } else {
+        opts.truncate(true);
+    }
     #[cfg(unix)]
     {
         use std::os::unix::fs::OpenOptionsExt;
         opts.mode(0o600);
     }
+    no_follow(&mut opts);
     use std::io::Write;
-    opts.open(&path)
+    opts.open(path)
         .and_then(|mut f| {
             f.write_all(format!("{token}\n").as_bytes())
                 .and_then(|_| f.sync_all())
@@ -295,5 +368,75 @@ fn lock_database(db: &std::path::Path) -> Result<std::fs::File, String> {
             path.display()
         )),
         Err(std::fs::TryLockError::Error(e)) => Err(format!("cannot lock {}: {e}", path.display())),
+    }
+}
+
+#[cfg(all(test, unix))]
+mod tests {
+    use super::secret_file;
+    use std::os::unix::fs::PermissionsExt;
+
+    fn dir(tag: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("zwidth-secret-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn mode(p: &std::path::Path) -> u32 {
+        std::fs::symlink_metadata(p).unwrap().permissions().mode() & 0o777
+    }
+
+    #[test]
+    fn a_new_secret_file_is_owner_only_and_read_back() {
+        let d = dir("new");
+        let db = d.join("z.db");
+        let made = secret_file(&db, "token").unwrap();
+        assert_eq!(made.len(), 48, "24 random bytes in hex");
+        assert_eq!(mode(&d.join("z.db.token")), 0o600);
+        assert_eq!(secret_file(&db, "token").unwrap(), made);
+        // Issue 45 item 7: `touch z.db.token` (mode 0644 under the usual
+        // umask) then serve wrote the token into it and said "owner-only".
+        let loose = d.join("y.db.token");
+        std::fs::write(&loose, "").unwrap();
+        std::fs::set_permissions(&loose, std::fs::Permissions::from_mode(0o644)).unwrap();
+        let e = secret_file(&d.join("y.db"), "token").unwrap_err();
+        assert!(e.contains("mode 0644") && e.contains("chmod 600"), "{e}");
+        assert_eq!(
+            std::fs::read_to_string(&loose).unwrap(),
+            "",
+            "nothing written"
+        );
+        // Fixed as the message says: the secret goes into the empty file.
+        std::fs::set_permissions(&loose, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let t = secret_file(&d.join("y.db"), "token").unwrap();
+        assert_eq!(std::fs::read_to_string(&loose).unwrap().trim(), t);
+        // A loose file with a secret in it is refused too (group-readable).
+        std::fs::set_permissions(&loose, std::fs::Permissions::from_mode(0o640)).unwrap();
+        assert!(secret_file(&d.join("y.db"), "token")
+            .unwrap_err()
+            .contains("0640"));
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_secret_file_is_never_a_symbolic_link() {
+        let d = dir("link");
+        let target = d.join("elsewhere");
+        // A dangling link: following it would create `elsewhere`.
+        std::os::unix::fs::symlink(&target, d.join("z.db.token")).unwrap();
+        let e = secret_file(&d.join("z.db"), "token").unwrap_err();
+        assert!(e.contains("symbolic link"), "{e}");
+        assert!(!target.exists(), "nothing created through the link");
+        // A link to an owner-only file with a secret: not read either.
+        std::fs::write(&target, "s3cret-from-elsewhere\n").unwrap();
+        std::fs::set_permissions(&target, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let e = secret_file(&d.join("z.db"), "token").unwrap_err();
+        assert!(e.contains("symbolic link") && !e.contains("s3cret"), "{e}");
+        // A directory in its place.
+        std::fs::create_dir(d.join("w.db.token")).unwrap();
+        let e = secret_file(&d.join("w.db"), "token").unwrap_err();
+        assert!(e.contains("not a regular file"), "{e}");
+        let _ = std::fs::remove_dir_all(&d);
     }
 }
