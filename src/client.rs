@@ -11,6 +11,9 @@ use crate::error::CliError;
 pub struct Client {
     pub server: String,
     pub token: Option<String>,
+    /// Whom an https:// server may be (`tls::client_config`).
+    tls: std::sync::Arc<rustls::ClientConfig>,
+    http: ureq::Agent,
 }
 
 fn failure(e: impl std::fmt::Display) -> CliError {
@@ -18,6 +21,25 @@ fn failure(e: impl std::fmt::Display) -> CliError {
 }
 
 impl Client {
+    /// A client of `server` (http:// or https://) trusting `tls`'s roots.
+    pub fn new(
+        server: &str,
+        token: Option<String>,
+        tls: std::sync::Arc<rustls::ClientConfig>,
+    ) -> Self {
+        Self {
+            server: server.trim_end_matches('/').to_string(),
+            token,
+            http: Self::agent(&tls),
+            tls,
+        }
+    }
+
+    /// A new connection pool of its own.
+    fn agent(tls: &std::sync::Arc<rustls::ClientConfig>) -> ureq::Agent {
+        ureq::AgentBuilder::new().tls_config(tls.clone()).build()
+    }
+
     fn call(&self, req: ureq::Request, body: Option<&str>) -> Result<Value, CliError> {
         let text = self.call_text(req, body)?;
         serde_json::from_str(&text).map_err(failure)
@@ -60,7 +82,9 @@ impl Client {
         key: Option<&str>,
         rig: Option<&str>,
     ) -> Result<Value, CliError> {
-        let mut req = ureq::post(&format!("{}/v1/experiments", self.server))
+        let mut req = self
+            .http
+            .post(&format!("{}/v1/experiments", self.server))
             .query("priority", &priority.to_string());
         if let Some(r) = rig {
             req = req.query("rig", r);
@@ -73,7 +97,8 @@ impl Client {
 
     pub fn status(&self, id: &str) -> Result<Value, CliError> {
         self.call(
-            ureq::get(&format!("{}/v1/experiments/{id}", self.server)),
+            self.http
+                .get(&format!("{}/v1/experiments/{id}", self.server)),
             None,
         )
     }
@@ -81,7 +106,8 @@ impl Client {
     /// A succeeded experiment's `plot.svg` or `points.csv`, made by the server.
     pub fn export(&self, id: &str, file: &str) -> Result<String, CliError> {
         self.call_text(
-            ureq::get(&format!("{}/v1/experiments/{id}/{file}", self.server)),
+            self.http
+                .get(&format!("{}/v1/experiments/{id}/{file}", self.server)),
             None,
         )
     }
@@ -183,8 +209,8 @@ impl Client {
             let hs: Vec<_> = (0..2)
                 .map(|_| {
                     let url = url.clone();
+                    let agent = Self::agent(&self.tls);
                     s.spawn(move || {
-                        let agent = ureq::AgentBuilder::new().build();
                         let start = Instant::now();
                         let mut v = Vec::with_capacity(total);
                         for i in 0..total {
@@ -212,7 +238,8 @@ impl Client {
         let busy_throughout = self.status(&busy)?["state"] == "running";
         let cancel_ms = crate::store::now_ms();
         let _ = self.call(
-            ureq::post(&format!("{}/v1/experiments/{busy}/cancel", self.server)),
+            self.http
+                .post(&format!("{}/v1/experiments/{busy}/cancel", self.server)),
             None,
         );
         // The runner rewrites finished_ms when the simulation has stopped.

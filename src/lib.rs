@@ -14,6 +14,7 @@ pub mod jobs;
 pub mod report;
 pub mod rig;
 pub mod store;
+pub mod tls;
 
 // The numerics live in `zwidth-core` (crates/zwidth-core); they keep their
 // paths here (`zwidth::estimators`, `crate::zwidth::search`, …).

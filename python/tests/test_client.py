@@ -126,3 +126,47 @@ def test_every_call_of_the_client_is_a_route_of_the_openapi_document(monkeypatch
         assert op is not None, f"{method} {route} is not in api/openapi.json"
         names = {p["name"] for p in op.get("parameters", []) if p["in"] == "query"}
         assert set(query) <= names, f"{method} {route}: {set(query) - names} not documented"
+
+
+def _certificates(d):
+    """A CA and a server certificate for 127.0.0.1 and localhost signed by
+    it (openssl, as the CI installs it): (ca.pem, server.pem, server.key)."""
+    run = lambda *a: subprocess.run(["openssl", *a], check=True, capture_output=True, cwd=d)
+    ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
+    run("req", "-x509", *ec, "-keyout", "ca.key", "-out", "ca.pem", "-days", "1",
+        "-subj", "/CN=zwidth test CA")
+    run("req", *ec, "-keyout", "server.key", "-out", "server.csr", "-subj", "/CN=127.0.0.1")
+    (d / "san.ext").write_text("subjectAltName=IP:127.0.0.1,DNS:localhost\n"
+                               "extendedKeyUsage=serverAuth\n")
+    run("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+        "-CAcreateserial", "-out", "server.pem", "-days", "1", "-extfile", "san.ext")
+    return d / "ca.pem", d / "server.pem", d / "server.key"
+
+
+def test_https_with_the_ca_given_by_argument_or_environment(tmp_path, monkeypatch):
+    ca, cert, key = _certificates(tmp_path)
+    db = tmp_path / "zwidth.db"
+    p = subprocess.Popen([cli(), "serve", "--db", str(db), "--bind", "127.0.0.1:0",
+                          "--tls-cert", str(cert), "--tls-key", str(key)],
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        m, deadline = None, time.monotonic() + 60
+        while m is None and time.monotonic() < deadline:
+            m = re.search(r"serving on (https://\S+)", p.stdout.readline())
+        assert m, "the service did not start on https://"
+        url = m.group(1)
+        monkeypatch.delenv("ZWIDTH_CA_FILE", raising=False)
+        assert zwidth.Client(url, ca_file=str(ca), timeout=10).rigs()[0]["id"]
+        # The system's roots alone do not know this CA: refused by TLS.
+        with pytest.raises(ConnectionError, match="cannot reach"):
+            zwidth.Client(url, timeout=10).rigs()
+        monkeypatch.setenv("ZWIDTH_CA_FILE", str(ca))
+        assert zwidth.Client(url, timeout=10).rigs()[0]["id"]
+        # A CA file that is not one: a ValueError naming it.
+        with pytest.raises(ValueError, match="ca_file"):
+            zwidth.Client(url, ca_file=str(db.parent / "zwidth.db.token"))
+        with pytest.raises(ValueError, match="ca_file"):
+            zwidth.Client(url, ca_file=3)
+    finally:
+        p.terminate()
+        p.wait(timeout=30)

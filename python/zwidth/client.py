@@ -42,10 +42,13 @@ class ApiError(ValueError):
 
 class Client:
     """A client of one zwidth service at `url`; `token` (the user token the
-    service made next to its database) is needed for writes."""
+    service made next to its database) is needed for writes. An https://
+    service is trusted by the system's roots, plus the PEM CA certificates
+    in `ca_file` (default: the file named by ZWIDTH_CA_FILE, as for the CLI
+    and the agent)."""
 
     def __init__(self, url: str = "http://127.0.0.1:8080", token: Optional[str] = None,
-                 timeout: float = 30.0):
+                 timeout: float = 30.0, ca_file: Optional[str] = None):
         if not isinstance(url, str) or not url.startswith(("http://", "https://")) or any(
                 c.isspace() for c in url):
             raise ValueError(f"url = {url!r} is not allowed: must start with http:// or https://, "
@@ -59,6 +62,20 @@ class Client:
         self.url = url.rstrip("/")
         self.token = token
         self.timeout = timeout
+        self._tls = None
+        if ca_file is None:
+            import os
+            ca_file = os.environ.get("ZWIDTH_CA_FILE") or None
+        if ca_file is not None:
+            import ssl
+            if not isinstance(ca_file, (str, bytes)) and not hasattr(ca_file, "__fspath__"):
+                raise ValueError(f"ca_file = {ca_file!r} is not allowed: must be a path to a PEM "
+                                 "file of CA certificates")
+            try:
+                self._tls = ssl.create_default_context(cafile=ca_file)
+            except (OSError, ssl.SSLError) as e:
+                raise ValueError(f"ca_file = {ca_file!r} is not allowed: not a readable PEM file of "
+                                 f"CA certificates ({e})") from None
 
     def _request(self, method: str, path: str, body: Any = None,
                  query: Optional[Dict[str, Any]] = None, raw: bool = False) -> Any:
@@ -76,7 +93,7 @@ class Client:
         if self.token:
             req.add_header("authorization", f"Bearer {self.token}")
         try:
-            with urllib.request.urlopen(req, timeout=self.timeout) as r:
+            with urllib.request.urlopen(req, timeout=self.timeout, context=self._tls) as r:
                 payload = r.read()
         except urllib.error.HTTPError as e:
             payload = e.read()

@@ -67,6 +67,8 @@ pub struct AgentConfig {
     pub rig: String,
     pub agent: String,
     pub token: String,
+    /// Whom a `wss://` server may be (`tls::client_config`).
+    pub tls: Arc<rustls::ClientConfig>,
     pub outbox: std::path::PathBuf,
     pub limits: LocalLimits,
     pub faults: Faults,
@@ -209,7 +211,12 @@ impl Agent {
         let (mut ws, _) = tokio::time::timeout(
             Duration::from_secs(10),
             // No Nagle delay on small messages (docs/rigs.md, figures).
-            tokio_tungstenite::connect_async_with_config(req, None, true),
+            tokio_tungstenite::connect_async_tls_with_config(
+                req,
+                None,
+                true,
+                Some(tokio_tungstenite::Connector::Rustls(self.cfg.tls.clone())),
+            ),
         )
         .await
         .map_err(|_| format!("no answer from {} within 10 s", self.url()))?

@@ -18,6 +18,7 @@ pub(super) fn run(command: Command) -> Result<(), CliError> {
         sim,
         driver,
         server,
+        ca_file,
         rig,
         name,
         token_file,
@@ -36,6 +37,9 @@ pub(super) fn run(command: Command) -> Result<(), CliError> {
         unreachable!("called for the agent command")
     };
     crate::rig::check_id("--rig", &rig).map_err(|e| CliError::Input(e.to_string()))?;
+    super::common::check_server(&server)?;
+    let tls = crate::tls::client_config(crate::tls::ca_file(ca_file).as_deref())
+        .map_err(CliError::Input)?;
     for (flag, v) in [
         ("--max-force-n", max_force_n),
         ("--max-k", max_k),
@@ -98,6 +102,7 @@ pub(super) fn run(command: Command) -> Result<(), CliError> {
         server,
         rig,
         token,
+        tls,
         limits: LocalLimits {
             max_force_n,
             max_k,

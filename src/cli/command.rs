@@ -339,6 +339,13 @@ pub enum Command {
         /// (ms): a process silent this long loses the run to another.
         #[arg(long, env = "ZWIDTH_LEASE_MS", default_value_t = crate::jobs::LEASE_MS)]
         lease_ms: i64,
+        /// Serve HTTPS (and WSS to agents) with this PEM certificate chain,
+        /// leaf first; needs --tls-key.
+        #[arg(long, env = "ZWIDTH_TLS_CERT", requires = "tls_key")]
+        tls_cert: Option<PathBuf>,
+        /// The PEM private key of --tls-cert (PKCS#8, PKCS#1 or SEC1).
+        #[arg(long, env = "ZWIDTH_TLS_KEY", requires = "tls_cert")]
+        tls_key: Option<PathBuf>,
     },
     /// Run experiments from a shared PostgreSQL database, next to any
     /// number of other workers and `serve --api-only` processes.
@@ -365,8 +372,14 @@ pub enum Command {
         /// line-oriented JSON driver protocol (docs/rigs.md).
         #[arg(long)]
         driver: Option<String>,
+        /// The server: http://HOST:PORT, or https:// for one serving TLS.
         #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
         server: String,
+        /// A PEM file of CA certificates to trust for an https:// server,
+        /// besides the system's (a lab's own CA, or a self-signed server's
+        /// certificate); or ZWIDTH_CA_FILE.
+        #[arg(long)]
+        ca_file: Option<PathBuf>,
         /// The rig's id on the server (`serve --rigs NAME:attached`).
         #[arg(long)]
         rig: String,

@@ -38,7 +38,10 @@ pub fn read_samples(input: impl BufRead) -> Result<Vec<f64>, CliError> {
 /// A client of `server` with the user token from `ZWIDTH_TOKEN`, else the
 /// file `ZWIDTH_TOKEN_FILE`, else the one `serve` made next to its
 /// database (`$ZWIDTH_DB.token`, default `zwidth.db.token`).
-pub(super) fn client(server: String) -> crate::client::Client {
+pub(super) fn client(server: String) -> Result<crate::client::Client, CliError> {
+    check_server(&server)?;
+    let tls =
+        crate::tls::client_config(crate::tls::ca_file(None).as_deref()).map_err(CliError::Input)?;
     let env = |k: &str| std::env::var(k).ok().filter(|t| !t.is_empty());
     let file = env("ZWIDTH_TOKEN_FILE").unwrap_or_else(|| {
         format!(
@@ -52,9 +55,21 @@ pub(super) fn client(server: String) -> crate::client::Client {
             .and_then(|t| t.lines().next().map(|l| l.trim().to_string()))
             .filter(|t| !t.is_empty())
     });
-    crate::client::Client {
-        server: server.trim_end_matches('/').to_string(),
-        token,
+    Ok(crate::client::Client::new(&server, token, tls))
+}
+
+/// `--server` (or ZWIDTH_SERVER) must be an http:// or https:// URL.
+pub(super) fn check_server(server: &str) -> Result<(), CliError> {
+    let lower = server.to_ascii_lowercase();
+    if ["http://", "https://"]
+        .iter()
+        .any(|s| lower.starts_with(s) && lower.len() > s.len())
+    {
+        Ok(())
+    } else {
+        Err(CliError::Input(format!(
+            "--server = {server:?}: must be an http:// or https:// URL (e.g. https://zwidth.lab.example:8443)"
+        )))
     }
 }
 

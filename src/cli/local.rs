@@ -338,7 +338,7 @@ pub(super) fn run(
                         .into(),
                 ));
             }
-            let r = client(server).bench(submissions, rate, seconds)?;
+            let r = client(server)?.bench(submissions, rate, seconds)?;
             write_json(stdout, &r)
         }
         Command::Bench {

@@ -24,6 +24,8 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             max_connections_per_client,
             api_only,
             lease_ms,
+            tls_cert,
+            tls_key,
         } => {
             let agent_tokens = secrets(
                 agent_token,
@@ -59,9 +61,18 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
                     "--api-only with --db {db}: a SQLite database is served by one process, which runs its experiments itself; give a postgres:// URL to run workers apart"
                 )));
             }
+            // Read before anything starts: a bad file is bad input (exit 2).
+            let tls = match (tls_cert, tls_key) {
+                (Some(cert), Some(key)) => Some(
+                    crate::tls::server_config(&crate::tls::ServerFiles { cert, key })
+                        .map_err(CliError::Input)?,
+                ),
+                _ => None,
+            };
             init_logs();
             let rt = runtime()?;
             rt.block_on(crate::http::serve(crate::http::ServeConfig {
+                tls,
                 db,
                 bind,
                 tokens,
@@ -121,7 +132,7 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
         } => {
             let body = std::fs::read_to_string(&file)
                 .map_err(|e| CliError::Input(format!("{} cannot be read: {e}", file.display())))?;
-            let v = client(server).submit(
+            let v = client(server)?.submit(
                 &body,
                 priority,
                 idempotency_key.as_deref(),
@@ -184,9 +195,9 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             })?;
             writeln!(stdout, "{} -> {}", db.display(), out.display()).map_err(io)
         }
-        Command::Status { id, server } => write_json(stdout, &client(server).status(&id)?),
+        Command::Status { id, server } => write_json(stdout, &client(server)?.status(&id)?),
         Command::Watch { id, server } => {
-            let v = client(server).watch(&id)?;
+            let v = client(server)?.watch(&id)?;
             let state = v["state"].as_str().unwrap_or("?").to_string();
             writeln!(stdout, "{id} {state}").map_err(io)?;
             if state == "succeeded" {
@@ -204,7 +215,7 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             csv,
             svg,
         } => {
-            let c = client(server);
+            let c = client(server)?;
             let v = c.status(&id)?;
             if v["state"] != "succeeded" {
                 return Err(CliError::Input(format!(

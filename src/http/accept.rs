@@ -80,11 +80,14 @@ fn over_cap_response(cap: usize) -> String {
 }
 
 /// Serve `app` on `listener` until `shutdown` resolves, then let open
-/// connections finish their requests and return.
+/// connections finish their requests and return. With `tls`, every
+/// connection is a TLS one (HTTPS, and WSS for the agents): its handshake
+/// must end within [`HEADER_READ_TIMEOUT`] too.
 pub async fn serve(
     listener: TcpListener,
     app: Router,
     per_client: usize,
+    tls: Option<tokio_rustls::TlsAcceptor>,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) {
     let clients = Clients::default();
@@ -114,28 +117,22 @@ pub async fn serve(
         // No Nagle delay: an agent's small messages (a trial, a result, an
         // ack) would otherwise wait for the peer's delayed ACK, ~40 ms each.
         let _ = tcp.set_nodelay(true);
-        let io = TokioIo::new(StallLimit::new(tcp, WRITE_STALL));
+        let stream = StallLimit::new(tcp, WRITE_STALL);
         let service = TowerToHyperService::new(app.clone());
-        let mut stop = stop_rx.clone();
+        let stop = stop_rx.clone();
+        let tls = tls.clone();
         tasks.spawn(async move {
             let _slot = slot;
-            let mut builder = hyper::server::conn::http1::Builder::new();
-            builder
-                .timer(TokioTimer::new())
-                .header_read_timeout(HEADER_READ_TIMEOUT);
-            let conn = builder.serve_connection(io, service).with_upgrades();
-            let mut conn = std::pin::pin!(conn);
-            loop {
-                tokio::select! {
-                    r = conn.as_mut() => {
-                        if let Err(e) = r {
-                            tracing::debug!(error = %e, "connection ended");
+            match tls {
+                None => connection(TokioIo::new(stream), service, stop).await,
+                Some(acceptor) => {
+                    match tokio::time::timeout(HEADER_READ_TIMEOUT, acceptor.accept(stream)).await {
+                        Ok(Ok(s)) => connection(TokioIo::new(s), service, stop).await,
+                        Ok(Err(e)) => {
+                            tracing::debug!(client = %peer.ip(), error = %e, "TLS handshake failed")
                         }
-                        break;
-                    }
-                    changed = stop.changed(), if !*stop.borrow() => {
-                        if changed.is_ok() {
-                            conn.as_mut().graceful_shutdown();
+                        Err(_) => {
+                            tracing::debug!(client = %peer.ip(), "TLS handshake timed out")
                         }
                     }
                 }
@@ -145,6 +142,38 @@ pub async fn serve(
     drop(listener);
     let _ = stop_tx.send(true);
     while tasks.join_next().await.is_some() {}
+}
+
+/// Serve one connection's requests until it ends, or until `stop` says so
+/// (then gracefully: the open request finishes).
+async fn connection<IO>(
+    io: TokioIo<IO>,
+    service: TowerToHyperService<Router>,
+    mut stop: tokio::sync::watch::Receiver<bool>,
+) where
+    IO: AsyncRead + AsyncWrite + Unpin + Send + 'static,
+{
+    let mut builder = hyper::server::conn::http1::Builder::new();
+    builder
+        .timer(TokioTimer::new())
+        .header_read_timeout(HEADER_READ_TIMEOUT);
+    let conn = builder.serve_connection(io, service).with_upgrades();
+    let mut conn = std::pin::pin!(conn);
+    loop {
+        tokio::select! {
+            r = conn.as_mut() => {
+                if let Err(e) = r {
+                    tracing::debug!(error = %e, "connection ended");
+                }
+                break;
+            }
+            changed = stop.changed(), if !*stop.borrow() => {
+                if changed.is_ok() {
+                    conn.as_mut().graceful_shutdown();
+                }
+            }
+        }
+    }
 }
 
 /// A stream whose writes fail once one has waited `limit` for the peer to

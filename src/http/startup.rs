@@ -33,6 +33,8 @@ pub struct ServeConfig {
     pub api_only: bool,
     /// This process as a worker (its id on the leases it holds).
     pub worker: crate::jobs::Worker,
+    /// Serve HTTPS and WSS with this config (`tls::server_config`).
+    pub tls: Option<Arc<rustls::ServerConfig>>,
 }
 
 /// Open the store, requeue interrupted work, bind, start one runner per
@@ -53,6 +55,7 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         max_connections_per_client,
         api_only,
         worker,
+        tls,
     } = cfg;
     let me = Arc::new(worker);
     if rigs.is_empty() {
@@ -155,7 +158,8 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
     if agent_tokens.iter().any(|a| token_accepted(&tokens, a)) {
         return Err("refusing: an agent token is also a user token; they must differ".into());
     }
-    println!("zwidth serving on http://{addr}");
+    let scheme = if tls.is_some() { "https" } else { "http" };
+    println!("zwidth serving on {scheme}://{addr}");
     use std::io::Write;
     let _ = std::io::stdout().flush();
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
@@ -219,6 +223,7 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         listener,
         router(state, Duration::from_secs_f64(request_timeout_s)),
         max_connections_per_client,
+        tls.map(tokio_rustls::TlsAcceptor::from),
         async move {
             crate::jobs::worker::shutdown_signal().await;
             tracing::info!("shutting down: stopping the runners, draining requests");

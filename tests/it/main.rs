@@ -11,5 +11,6 @@ mod limits;
 mod reliability;
 mod service;
 mod store;
+mod tls;
 mod tune;
 mod ui;

@@ -61,7 +61,10 @@ pub fn start_on(dir: std::path::PathBuf, bind: &str, extra: &[&str]) -> Server {
         .read_line(&mut line)
         .unwrap();
     let base = line.trim().rsplit(' ').next().unwrap().to_string();
-    assert!(base.starts_with("http://127.0.0.1:"), "{line}");
+    assert!(
+        base.starts_with("http://127.0.0.1:") || base.starts_with("https://127.0.0.1:"),
+        "{line}"
+    );
     // The token the server made on first start (none when given one).
     if let Ok(t) = std::fs::read_to_string(dir.join("test.db.token")) {
         TOKENS
