@@ -1225,3 +1225,39 @@ async fn planned_and_ended_units_wake_the_waiting_workers() {
         .unwrap();
     assert_eq!(who, "e1");
 }
+
+/// PostgreSQL over TLS (issue 45 item 3): a store URL with
+/// `sslmode=verify-full&sslrootcert=CA` connects, migrates and works, on a
+/// session the server itself reports as TLS (`pg_stat_ssl`); without the
+/// CA the server's certificate is refused, and without TLS the server's
+/// `hostssl`-only rules refuse the session.
+#[tokio::test]
+async fn postgres_over_tls_verifies_the_server() {
+    use sqlx::Connection;
+    let Some(tls) = crate::common::pg::tls_url() else {
+        return;
+    };
+    let fresh = crate::common::pg::fresh_database("tls").await.unwrap();
+    let db = fresh.split('?').next().unwrap().rsplit('/').next().unwrap();
+    let url = crate::common::pg::with_database(&tls, db);
+    let st = Store::connect(&Location::Postgres(url.clone())).await.unwrap();
+    queue(&st, "e1").await;
+    assert_eq!(st.claim("sim", "w1", 60_000).await.unwrap().unwrap().id, "e1");
+    let mut c = sqlx::PgConnection::connect(&url).await.unwrap();
+    let (ssl, version): (bool, Option<String>) =
+        sqlx::query_as("SELECT ssl, version FROM pg_stat_ssl WHERE pid = pg_backend_pid()")
+            .fetch_one(&mut c)
+            .await
+            .unwrap();
+    assert!(ssl, "the server says the session is not TLS");
+    assert!(version.is_some_and(|v| v.starts_with("TLSv1.")));
+    // The CA left out: the certificate is not trusted (the system's roots
+    // do not hold the throwaway CA).
+    let no_ca = url.split("&sslrootcert=").next().unwrap().to_string();
+    let e = sqlx::PgConnection::connect(&no_ca).await.unwrap_err();
+    assert!(e.to_string().to_lowercase().contains("certificate"), "{e}");
+    // No TLS: refused by the server (no `host` rule for plain TCP).
+    let plain = url.replace("sslmode=verify-full", "sslmode=disable");
+    let e = sqlx::PgConnection::connect(&plain).await.unwrap_err();
+    assert!(e.to_string().contains("pg_hba.conf"), "{e}");
+}

@@ -67,3 +67,20 @@ pub fn fresh_database_blocking(name: &str) -> Option<String> {
         .unwrap()
         .block_on(fresh_database(name))
 }
+
+/// `ZWIDTH_TEST_PG_TLS`: the same server over TLS on loopback
+/// (`sslmode=verify-full` with the throwaway CA `.ci/postgres` made), or
+/// None (skip) unless required, as [`admin_url`].
+pub fn tls_url() -> Option<String> {
+    match std::env::var("ZWIDTH_TEST_PG_TLS") {
+        Ok(u) if !u.is_empty() => Some(u),
+        _ => {
+            assert!(
+                std::env::var("ZWIDTH_REQUIRE_PG").as_deref() != Ok("1"),
+                "ZWIDTH_REQUIRE_PG=1 but ZWIDTH_TEST_PG_TLS is not set: start one with `eval \"$(.ci/postgres start)\"`"
+            );
+            eprintln!("ZWIDTH_TEST_PG_TLS not set: the PostgreSQL TLS test is skipped");
+            None
+        }
+    }
+}
