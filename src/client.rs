@@ -95,6 +95,15 @@ impl Client {
         self.call(req, Some(body))
     }
 
+    /// Issue attached rig `rig` a new agent credential of its own.
+    pub fn agent_token(&self, rig: &str) -> Result<Value, CliError> {
+        self.call(
+            self.http
+                .post(&format!("{}/v1/rigs/{rig}/agent-token", self.server)),
+            None,
+        )
+    }
+
     pub fn status(&self, id: &str) -> Result<Value, CliError> {
         self.call(
             self.http

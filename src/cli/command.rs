@@ -422,6 +422,11 @@ pub enum Command {
         #[arg(long, default_value_t = f64::INFINITY)]
         max_penetration_m: f64,
     },
+    /// Attached rigs on a running service.
+    Rig {
+        #[command(subcommand)]
+        action: RigCommand,
+    },
     /// Submit an experiment JSON file to a running service; prints its id.
     Submit {
         file: PathBuf,
@@ -489,6 +494,23 @@ pub enum Command {
         estimator: String,
         #[arg(long)]
         json: bool,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+pub enum RigCommand {
+    /// Issue rig ID a new agent credential of its own: it alone opens the
+    /// rig's agent sessions from now on (the rig's earlier one and the
+    /// server's shared agent tokens no longer do). Written owner-only to
+    /// --out, never printed unless --out is `-`.
+    Token {
+        id: String,
+        #[arg(long, env = "ZWIDTH_SERVER", default_value = "http://127.0.0.1:8080")]
+        server: String,
+        /// The file to write it to (default `ID.agent-token`; created, never
+        /// overwritten); `-`: stdout.
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
 }
 
@@ -590,6 +612,7 @@ impl Command {
             Command::Serve { .. }
                 | Command::Worker { .. }
                 | Command::Agent { .. }
+                | Command::Rig { .. }
                 | Command::Submit { .. }
                 | Command::Openapi { .. }
                 | Command::Backup { .. }

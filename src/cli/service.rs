@@ -195,6 +195,38 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             })?;
             writeln!(stdout, "{} -> {}", db.display(), out.display()).map_err(io)
         }
+        Command::Rig {
+            action: super::command::RigCommand::Token { id, server, out },
+        } => {
+            crate::rig::check_id("ID", &id).map_err(|e| CliError::Input(e.to_string()))?;
+            let out = out.unwrap_or_else(|| format!("{id}.agent-token").into());
+            let to_stdout = out.as_os_str() == "-";
+            // Refused before the server is asked (a credential issued and
+            // not written would lock the rig's agent out).
+            if !to_stdout && std::fs::symlink_metadata(&out).is_ok() {
+                return Err(CliError::Input(format!(
+                    "--out {}: exists; remove it or name another file (a credential file is never overwritten)",
+                    out.display()
+                )));
+            }
+            let v = client(server)?.agent_token(&id)?;
+            let secret = v["agent_token"].as_str().unwrap_or_default();
+            if to_stdout {
+                return writeln!(stdout, "{secret}").map_err(io);
+            }
+            crate::http::put_secret(&out, true, secret).map_err(|e| {
+                CliError::Failure(format!(
+                    "the credential was issued but {} cannot be written ({e}): run `zwidth rig token {id}` again",
+                    out.display()
+                ))
+            })?;
+            writeln!(
+                stdout,
+                "rig {id}: a new agent credential in {} (owner-only); give it to the rig's agent (--token-file)",
+                out.display()
+            )
+            .map_err(io)
+        }
         Command::Status { id, server } => write_json(stdout, &client(server)?.status(&id)?),
         Command::Watch { id, server } => {
             let v = client(server)?.watch(&id)?;

@@ -13,7 +13,7 @@ use axum::response::{IntoResponse, Response};
 use std::sync::Arc;
 use std::time::Duration;
 
-use super::guard::token_accepted;
+use super::guard::{credential_digest, credential_fits, token_accepted};
 use super::problem::Problem;
 use super::AppState;
 use crate::rig::attached::{AttachedRig, Verdict};
@@ -64,7 +64,7 @@ pub async fn agent(
             .with_field("Authorization")
             .into_response()
         }
-        Some(t) if !token_accepted(&st.agent_tokens, t) => {
+        Some(t) if !token_accepted(&st.agent_tokens, t) && !own_credential(&st, t).await => {
             return Problem::new(
                 StatusCode::FORBIDDEN,
                 "Forbidden",
@@ -75,6 +75,8 @@ pub async fn agent(
         }
         Some(_) => {}
     }
+    // Which rig it may open is checked at hello, where the rig is named.
+    let token = given.unwrap_or_default().to_string();
     let ws = match ws {
         Ok(ws) => ws,
         Err(e) => {
@@ -88,7 +90,18 @@ pub async fn agent(
     };
     ws.max_message_size(protocol::MAX_MESSAGE)
         .max_write_buffer_size(SEND_QUEUE)
-        .on_upgrade(move |socket| session(st, socket))
+        .on_upgrade(move |socket| session(st, socket, token))
+}
+
+/// Whether `token` is some rig's own credential.
+async fn own_credential(st: &AppState, token: &str) -> bool {
+    match st.store.rig_of_credential(&credential_digest(token)).await {
+        Ok(rig) => rig.is_some(),
+        Err(e) => {
+            st.store.observe(&e);
+            false
+        }
+    }
 }
 
 /// One connection: writes go through `send` (numbered, each within
@@ -194,7 +207,7 @@ fn shown(m: &Message) -> String {
     }
 }
 
-async fn session(st: AppState, socket: WebSocket) {
+async fn session(st: AppState, socket: WebSocket, token: String) {
     let mut conn = Conn {
         socket,
         seq: 0,
@@ -265,6 +278,18 @@ async fn session(st: AppState, socket: WebSocket) {
         let why = format!("rig {rig:?} is not an attached rig");
         return conn.refuse_audited(&st, None, why, &first).await;
     };
+    // Its own credential, or (without one) the shared agent tokens.
+    let own = match st.store.rig_credential(&rig).await {
+        Ok(own) => own,
+        Err(e) => {
+            return conn
+                .refuse(format!("cannot check the credential: {e}"))
+                .await
+        }
+    };
+    if let Err(why) = credential_fits(&rig, own.as_deref(), &st.agent_tokens, &token) {
+        return conn.refuse_audited(&st, None, why, &first).await;
+    }
     if let Err(e) = capabilities.validate() {
         return conn
             .refuse_audited(&st, None, format!("hello: {e}"), &first)

@@ -28,6 +28,36 @@ pub fn token_accepted(tokens: &[String], given: &str) -> bool {
     })
 }
 
+/// The SHA-256 of an agent credential, in hex: what the store keeps of
+/// it (`rig_credentials`), never the credential itself.
+pub fn credential_digest(secret: &str) -> String {
+    let d = ring::digest::digest(&ring::digest::SHA256, secret.as_bytes());
+    d.as_ref().iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Whether agent token `given` may open a session of `rig` (issue 45 item
+/// 4): a rig with its own credential (`own`, its digest) takes that alone;
+/// a rig without one takes the server's shared agent tokens (`shared`), as
+/// before credentials per rig (the migration, docs/rigs.md "Tokens").
+/// Err: why not, naming the rig.
+pub fn credential_fits(
+    rig: &str,
+    own: Option<&str>,
+    shared: &[String],
+    given: &str,
+) -> Result<(), String> {
+    match own {
+        Some(h) if same_secret(h.as_bytes(), credential_digest(given).as_bytes()) => Ok(()),
+        Some(_) => Err(format!(
+            "rig {rig:?} has an agent credential of its own and this token is not it (a new one: `zwidth rig token {rig}`)"
+        )),
+        None if token_accepted(shared, given) => Ok(()),
+        None => Err(format!(
+            "this token is another rig's own credential: rig {rig:?} takes the server's agent tokens (or one of its own: `zwidth rig token {rig}`)"
+        )),
+    }
+}
+
 /// Mutating endpoints need `Authorization: Bearer <token>` when tokens are
 /// configured: 401 without one, 403 with a wrong one.
 pub fn authorize(st: &AppState, headers: &HeaderMap) -> Result<(), Problem> {
@@ -172,6 +202,31 @@ mod tests {
         // Differences that cancel under xor still differ.
         assert!(!same_secret(b"ab", b"ba"));
         assert!(!same_secret(b"aabb", b"bbaa"));
+    }
+
+    #[test]
+    fn a_rig_with_a_credential_of_its_own_takes_that_alone() {
+        // SHA-256("abc"), FIPS 180-2 appendix B.1.
+        assert_eq!(
+            credential_digest("abc"),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+        let shared = vec!["shared-agent-token".to_string()];
+        let own = credential_digest("bench-own");
+        // Its own credential, and nothing else: not the shared token, not
+        // another rig's credential.
+        assert!(credential_fits("bench", Some(&own), &shared, "bench-own").is_ok());
+        let e = credential_fits("bench", Some(&own), &shared, "shared-agent-token").unwrap_err();
+        assert!(
+            e.contains("\"bench\"") && e.contains("zwidth rig token bench"),
+            "{e}"
+        );
+        assert!(credential_fits("bench", Some(&own), &shared, "other-own").is_err());
+        // Without one: the shared tokens (the migration), not a credential
+        // of another rig.
+        assert!(credential_fits("old", None, &shared, "shared-agent-token").is_ok());
+        let e = credential_fits("old", None, &shared, "bench-own").unwrap_err();
+        assert!(e.contains("another rig"), "{e}");
     }
 
     #[test]

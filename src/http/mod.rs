@@ -23,5 +23,5 @@ pub use limits::{BODY_LIMIT, URI_LIMIT};
 pub use openapi::openapi_json;
 pub use problem::{Problem, ProblemBody};
 pub use routes::router;
-pub use startup::{secret_file, serve, ServeConfig};
+pub use startup::{put_secret, secret_file, serve, ServeConfig};
 pub use state::{refresh_served, AppState, WORKER_LIVE_MS};

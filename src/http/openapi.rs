@@ -18,8 +18,8 @@ use crate::zwidth::search::StoredTrial;
 #[derive(utoipa::OpenApi)]
 #[openapi(
     info(title = "zwidth", description = "Z-width experiments: queue, run and store maps and estimator comparisons"),
-    paths(healthz, rigs, register, set_window, clear_window, release, audit, agent_audit, stop, submit, list, show, cancel, trials, units, evaluations, plot, points, compare_runs, queue, pause, resume, metrics),
-    components(schemas(ProblemBody, crate::rig::protocol::StopMode, ExperimentView, ExperimentPage, ExperimentSpec, RigView, Window, Comparison, StoredTrial, crate::store::UnitRow, HealthView, crate::tune::TuneResult)),
+    paths(healthz, rigs, register, set_window, clear_window, release, audit, agent_audit, stop, agent_token, submit, list, show, cancel, trials, units, evaluations, plot, points, compare_runs, queue, pause, resume, metrics),
+    components(schemas(ProblemBody, crate::rig::protocol::StopMode, ExperimentView, ExperimentPage, ExperimentSpec, RigView, AgentCredential, Window, Comparison, StoredTrial, crate::store::UnitRow, HealthView, crate::tune::TuneResult)),
     modifiers(&BearerAuth)
 )]
 pub struct ApiDoc;

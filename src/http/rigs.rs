@@ -38,6 +38,62 @@ pub struct RigView {
     /// An attached rig: its agent's session, state and capabilities.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub attached: Option<crate::rig::attached::AttachedView>,
+    /// Only in the answer to `POST /v1/rigs`: the new rig's own agent
+    /// credential, shown this once (the server keeps its SHA-256). It
+    /// opens this rig's agent sessions, and no other rig's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub agent_token: Option<String>,
+}
+
+/// A rig's new agent credential (`POST /v1/rigs/{id}/agent-token`).
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct AgentCredential {
+    pub rig: String,
+    /// Shown this once; the server keeps its SHA-256. Give it to the rig's
+    /// agent (`zwidth agent --token-file`, or ZWIDTH_AGENT_TOKEN).
+    pub agent_token: String,
+}
+
+/// Give attached rig `id` a new credential of its own (replacing any it
+/// had): the secret, shown once.
+async fn issue_credential(st: &AppState, id: &str) -> Result<String, Problem> {
+    let secret = super::state::random_secret();
+    st.store
+        .set_rig_credential(id, &super::guard::credential_digest(&secret))
+        .await
+        .map_err(|e| st.fail(e))?;
+    tracing::info!(rig = %id, "a new agent credential was issued: the rig's earlier one and the shared agent tokens no longer open it");
+    Ok(secret)
+}
+
+#[utoipa::path(post, path = "/v1/rigs/{id}/agent-token", params(("id" = String, Path, description = "rig id")),
+    description = "Issue attached rig `id` a new agent credential of its own, shown this once (`zwidth rig token ID`). From now on it alone opens the rig's agent sessions: the rig's earlier credential and the server's shared agent tokens no longer do (a session open now goes on until it ends). Other rigs' credentials are untouched.",
+    responses((status = 200, body = AgentCredential),
+              (status = 401, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 403, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 404, body = ProblemBody, content_type = "application/problem+json"),
+              (status = 409, description = "not an attached rig (a simulator has no agent)", body = ProblemBody, content_type = "application/problem+json")),
+    security((), ("bearer" = [])))]
+pub async fn agent_token(
+    State(st): State<AppState>,
+    headers: HeaderMap,
+    Path(id): Path<String>,
+) -> Result<Json<AgentCredential>, Problem> {
+    authorize(&st, &headers)?;
+    let rig = st.rig(&id).ok_or_else(|| Problem::not_found("rig", &id))?;
+    if rig.attached().is_none() {
+        return Err(Problem::new(
+            axum::http::StatusCode::CONFLICT,
+            "Conflict",
+            format!("rig {id:?} is simulated: it has no agent, so no agent credential"),
+        )
+        .with_field("id"));
+    }
+    let agent_token = issue_credential(&st, &id).await?;
+    Ok(Json(AgentCredential {
+        rig: id,
+        agent_token,
+    }))
 }
 
 /// An experiment running, and where.
@@ -72,6 +128,7 @@ pub async fn rig_view(st: &AppState, rig: &Arc<dyn Rig>) -> Result<RigView, Prob
             .map(|(id, worker)| RunningOn { id, worker })
             .collect(),
         units,
+        agent_token: None,
     })
 }
 
@@ -280,7 +337,7 @@ pub struct NewRig {
 }
 
 #[utoipa::path(post, path = "/v1/rigs", request_body = NewRig,
-    description = "Register an attached rig (hardware behind a `zwidth agent`, docs/rigs.md). It is stored, and experiments may be submitted for it at once: they wait until its agent connects.",
+    description = "Register an attached rig (hardware behind a `zwidth agent`, docs/rigs.md). It is stored, and experiments may be submitted for it at once: they wait until its agent connects. The answer carries the rig's own agent credential (`agent_token`), shown this once: it alone opens this rig's agent sessions.",
     responses((status = 201, body = RigView),
               (status = 401, body = ProblemBody, content_type = "application/problem+json"),
               (status = 403, body = ProblemBody, content_type = "application/problem+json"),
@@ -342,9 +399,9 @@ pub async fn register(
         }
         list.push(rig.clone());
     }
+    let agent_token = issue_credential(&st, &new.id).await?;
     (st.start_runner)(rig.clone());
-    Ok((
-        axum::http::StatusCode::CREATED,
-        Json(rig_view(&st, &rig).await?),
-    ))
+    let mut view = rig_view(&st, &rig).await?;
+    view.agent_token = Some(agent_token);
+    Ok((axum::http::StatusCode::CREATED, Json(view)))
 }

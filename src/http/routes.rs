@@ -126,6 +126,7 @@ pub fn router(state: AppState, timeout: Duration) -> Router {
         )
         .route("/v1/rigs/{id}/audit", get(rigs::audit))
         .route("/v1/rigs/{id}/stop", post(rigs::stop))
+        .route("/v1/rigs/{id}/agent-token", post(rigs::agent_token))
         .route(
             "/v1/rigs/{id}/window",
             put(rigs::set_window).delete(rigs::clear_window),

@@ -329,6 +329,15 @@ fn read_no_follow(path: &std::path::Path) -> std::io::Result<String> {
 /// or the existing empty one, never through a link.
 fn write_secret(path: &std::path::Path, new: bool, name: &str) -> Result<String, String> {
     let token = random_secret();
+    put_secret(path, new, &token).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+    tracing::info!(path = %path.display(), "{name} made (owner-only): pass it to the clients that need it");
+    Ok(token)
+}
+
+/// Write `secret` and a newline to `path`, owner-only (mode 0600), never
+/// through a symbolic link: a new file (`O_EXCL`: an existing one is an
+/// error) when `new`, else the existing one, truncated.
+pub fn put_secret(path: &std::path::Path, new: bool, secret: &str) -> std::io::Result<()> {
     let mut opts = std::fs::OpenOptions::new();
     opts.write(true);
     if new {
@@ -343,14 +352,9 @@ fn write_secret(path: &std::path::Path, new: bool, name: &str) -> Result<String,
     }
     no_follow(&mut opts);
     use std::io::Write;
-    opts.open(path)
-        .and_then(|mut f| {
-            f.write_all(format!("{token}\n").as_bytes())
-                .and_then(|_| f.sync_all())
-        })
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
-    tracing::info!(path = %path.display(), "{name} made (owner-only): pass it to the clients that need it");
-    Ok(token)
+    let mut f = opts.open(path)?;
+    f.write_all(format!("{secret}\n").as_bytes())?;
+    f.sync_all()
 }
 
 /// Hold an exclusive lock on `<db>.lock` while serving: a second server

@@ -179,6 +179,35 @@ impl Store {
             .await)
     }
 
+    /// Give `rig` its own agent credential (its SHA-256 in hex), replacing
+    /// any it had: from now on that credential alone opens its sessions.
+    pub async fn set_rig_credential(&self, rig: &str, sha256: &str) -> Result<(), sqlx::Error> {
+        self.writable()?;
+        on_pool!(self, p => sqlx::query("INSERT INTO rig_credentials (rig, sha256, created_ms) VALUES ($1, $2, $3) ON CONFLICT (rig) DO UPDATE SET sha256 = excluded.sha256, created_ms = excluded.created_ms")
+            .bind(rig)
+            .bind(sha256)
+            .bind(now_ms())
+            .execute(p)
+            .await
+            .map(|_| ()))
+    }
+
+    /// The SHA-256 of `rig`'s own credential, if it has one.
+    pub async fn rig_credential(&self, rig: &str) -> Result<Option<String>, sqlx::Error> {
+        on_pool!(self, p => sqlx::query_scalar("SELECT sha256 FROM rig_credentials WHERE rig = $1")
+            .bind(rig)
+            .fetch_optional(p)
+            .await)
+    }
+
+    /// The rig whose own credential has this SHA-256, if any.
+    pub async fn rig_of_credential(&self, sha256: &str) -> Result<Option<String>, sqlx::Error> {
+        on_pool!(self, p => sqlx::query_scalar("SELECT rig FROM rig_credentials WHERE sha256 = $1")
+            .bind(sha256)
+            .fetch_optional(p)
+            .await)
+    }
+
     /// Quarantine `rig` (Some(why)) or lift it (None).
     pub async fn set_quarantine(&self, rig: &str, why: Option<&str>) -> Result<(), sqlx::Error> {
         self.writable()?;

@@ -1464,3 +1464,117 @@ fn a_session_that_never_reads_or_falls_silent_is_closed_and_fenced() {
     assert!(!connected(&s));
     drop(ws);
 }
+
+/// Run `zwidth agent --sim` for `rig` with agent token `token` until it
+/// says it connected or was refused, at hello or at the upgrade (then
+/// stopped): its log.
+fn session_of(s: &Server, rig: &str, token: &str) -> String {
+    let log = s._dir.join(format!("{rig}-{}.err", uuid_like()));
+    let mut child = Command::new(bin())
+        .args(["agent", "--sim", "--rig", rig, "--server", &s.base])
+        .arg("--outbox")
+        .arg(s._dir.join(format!("{rig}.outbox")))
+        .env("ZWIDTH_AGENT_TOKEN", token)
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    let read = || std::fs::read_to_string(&log).unwrap_or_default();
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    let ended = |t: String| {
+        ["connected to", "refused", "403 Forbidden"]
+            .iter()
+            .any(|w| t.contains(w))
+    };
+    while !ended(read()) {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no session: {}",
+            read()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    read()
+}
+
+/// Issue 45 item 4: an agent credential per rig. `POST /v1/rigs` answers
+/// with the new rig's own credential; it opens that rig and no other, is
+/// refused (and audited) for another, and rotating one rig's credential
+/// leaves the others' alone. The shared agent token keeps opening rigs
+/// without a credential of their own (the migration), not those with one.
+#[test]
+fn each_rig_is_opened_by_its_own_credential_alone() {
+    let s = serve();
+    let shared = std::fs::read_to_string(s._dir.join("test.db.agent-token")).unwrap();
+    let shared = shared.trim();
+    let register = |id: &str| {
+        let (code, v, _) = post(
+            &format!("{}/v1/rigs", s.base),
+            &format!(r#"{{"id":"{id}"}}"#),
+        );
+        assert_eq!(code, 201, "{v}");
+        v["agent_token"].as_str().unwrap().to_string()
+    };
+    let (one, two) = (register("lab-one"), register("lab-two"));
+    assert_eq!(one.len(), 48, "24 random bytes in hex");
+    assert_ne!(one, two);
+    // Shown once: GET /v1/rigs never carries it.
+    let listed = get(&format!("{}/v1/rigs", s.base)).to_string();
+    assert!(!listed.contains(&one) && !listed.contains("agent_token"));
+    // lab-two's credential for lab-one: refused, the reason audited.
+    let log = session_of(&s, "lab-one", &two);
+    assert!(
+        log.contains("refused") && !log.contains("connected to"),
+        "{log}"
+    );
+    let audited = get(&format!("{}/v1/rigs/lab-one/audit", s.base));
+    assert!(audited.to_string().contains("not it"), "{audited}");
+    // Its own: connected.
+    assert!(session_of(&s, "lab-one", &one).contains("connected to"));
+    // The shared token: not for a rig with its own credential; still for
+    // `bench`, which has none (registered by --rigs, as before).
+    assert!(session_of(&s, "lab-one", shared).contains("has an agent credential of its own"));
+    assert!(session_of(&s, "bench", shared).contains("connected to"));
+    // A rig's credential opens no rig without one either.
+    assert!(session_of(&s, "bench", &one).contains("another rig"));
+    // Rotation by the CLI: written owner-only; lab-two's old credential no
+    // longer opens it, the new one does, lab-one's is untouched.
+    let out = s._dir.join("lab-two.agent-token");
+    let token_file = s._dir.join("test.db.token");
+    let run = |out: &std::path::Path| {
+        Command::new(bin())
+            .args(["rig", "token", "lab-two", "--server", &s.base, "--out"])
+            .arg(out)
+            .env("ZWIDTH_TOKEN_FILE", &token_file)
+            .env_remove("ZWIDTH_TOKEN")
+            .output()
+            .unwrap()
+    };
+    let o = run(&out);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let new = std::fs::read_to_string(&out).unwrap().trim().to_string();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(&out).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o600);
+    }
+    // (no rig's credential any more: refused at the upgrade, as any token
+    // that is not an agent token)
+    assert!(session_of(&s, "lab-two", &two).contains("403 Forbidden"));
+    assert!(session_of(&s, "lab-two", &new).contains("connected to"));
+    assert!(session_of(&s, "lab-one", &one).contains("connected to"));
+    // The file is never overwritten: exit 2, and nothing issued.
+    let o = run(&out);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("exists"));
+    assert!(session_of(&s, "lab-two", &new).contains("connected to"));
+    // A simulated rig has no agent, so no credential (409); writes need
+    // the user token (401).
+    let r = authed::post(&format!("{}/v1/rigs/sim/agent-token", s.base)).call();
+    assert!(matches!(r, Err(ureq::Error::Status(409, _))), "{r:?}");
+    let r = ureq::post(&format!("{}/v1/rigs/lab-one/agent-token", s.base)).call();
+    assert!(matches!(r, Err(ureq::Error::Status(401, _))), "{r:?}");
+}

@@ -1240,9 +1240,14 @@ async fn postgres_over_tls_verifies_the_server() {
     let fresh = crate::common::pg::fresh_database("tls").await.unwrap();
     let db = fresh.split('?').next().unwrap().rsplit('/').next().unwrap();
     let url = crate::common::pg::with_database(&tls, db);
-    let st = Store::connect(&Location::Postgres(url.clone())).await.unwrap();
+    let st = Store::connect(&Location::Postgres(url.clone()))
+        .await
+        .unwrap();
     queue(&st, "e1").await;
-    assert_eq!(st.claim("sim", "w1", 60_000).await.unwrap().unwrap().id, "e1");
+    assert_eq!(
+        st.claim("sim", "w1", 60_000).await.unwrap().unwrap().id,
+        "e1"
+    );
     let mut c = sqlx::PgConnection::connect(&url).await.unwrap();
     let (ssl, version): (bool, Option<String>) =
         sqlx::query_as("SELECT ssl, version FROM pg_stat_ssl WHERE pid = pg_backend_pid()")
