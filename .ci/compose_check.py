@@ -8,7 +8,9 @@ the API's health check; the agent dialling the API by its service name.
 usage: python3 .ci/compose_check.py SCHEMA.json docker-compose.yml
 """
 import json
+import os
 import sys
+import tempfile
 
 import jsonschema
 import yaml
@@ -45,6 +47,34 @@ check("the API is published on loopback only (reads need no token)",
       all(p == "127.0.0.1:8080:8080" for name in ("api", "zwidth") for p in services[name]["ports"]))
 check("agent dials the API by its service name", services["agent"]["environment"]["ZWIDTH_SERVER"] == "http://api:8080")
 check("agent runs `zwidth agent`", services["agent"]["command"][:2] == ["zwidth", "agent"])
+# Secrets never enter the build context (COPY . . in the build stage).
+ignored = [l.strip() for l in open(os.path.join(os.path.dirname(compose_path) or ".", ".dockerignore"))]
+for secret in (".env", "*.pem", "*.key", "secrets/"):
+    check(f".dockerignore leaves out {secret}", secret in ignored)
+check("postgres restarts", services["postgres"].get("restart") == "unless-stopped")
+
+# The image script's Debian mirror is this machine's apt's (issue 45 item 13).
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "images"))
+import apt_mirror  # noqa: E402
+
+with tempfile.TemporaryDirectory() as apt:
+    check("no apt sources: Debian's own mirror", apt_mirror.mirror("bookworm", apt) == apt_mirror.DEFAULT)
+    os.makedirs(os.path.join(apt, "sources.list.d"))
+    with open(os.path.join(apt, "sources.list"), "w") as f:
+        f.write("# deb http://commented.example/debian bookworm main\n"
+                "deb [arch=amd64 signed-by=/k.gpg] http://lab-mirror.example/debian-security bookworm-security main\n"
+                "deb-src http://src.example/debian bookworm main\n")
+    with open(os.path.join(apt, "sources.list.d", "debian.sources"), "w") as f:
+        f.write("Types: deb\nURIs: http://off.example/debian\nSuites: bookworm\nEnabled: no\n\n"
+                "Types: deb deb-src\nURIs: http://lab-mirror.example/debian/\n"
+                "Suites: bookworm bookworm-updates\nComponents: main\n")
+    check("the mirror of the machine's deb822 sources, not the security, source-only or disabled ones",
+          apt_mirror.mirror("bookworm", apt) == "http://lab-mirror.example/debian")
+    with open(os.path.join(apt, "sources.list.d", "proxy.list"), "w") as f:
+        f.write("deb http://apt-proxy.lab:3142/debian bookworm main contrib\n")
+    check("a one-line .list source comes first", apt_mirror.mirror("bookworm", apt) == "http://apt-proxy.lab:3142/debian")
+    check("another suite: Debian's own", apt_mirror.mirror("trixie", apt) == apt_mirror.DEFAULT)
+
 for name, svc in services.items():
     for dep in svc.get("depends_on", {}):
         check(f"{name} depends on a service that exists ({dep})", dep in services)
