@@ -46,6 +46,7 @@ check("api takes the agents' tokens from ZWIDTH_AGENT_TOKENS", "ZWIDTH_AGENT_TOK
 check("the API is published on loopback only (reads need no token)",
       all(p == "127.0.0.1:8080:8080" for name in ("api", "zwidth") for p in services[name]["ports"]))
 check("agent dials the API by its service name", services["agent"]["environment"]["ZWIDTH_SERVER"] == "http://api:8080")
+check("the API answers to that name (its Host check)", "api" in services["api"]["environment"].get("ZWIDTH_HOSTS", "").split(","))
 check("agent runs `zwidth agent`", services["agent"]["command"][:2] == ["zwidth", "agent"])
 # Secrets never enter the build context (COPY . . in the build stage).
 ignored = [l.strip() for l in open(os.path.join(os.path.dirname(compose_path) or ".", ".dockerignore"))]

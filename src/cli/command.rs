@@ -346,6 +346,16 @@ pub enum Command {
         /// The PEM private key of --tls-cert (PKCS#8, PKCS#1 or SEC1).
         #[arg(long, env = "ZWIDTH_TLS_KEY", requires = "tls_cert")]
         tls_key: Option<PathBuf>,
+        /// `private`: every read (API and dashboard) needs the token too;
+        /// `public`: reads are open. Default: private unless bound to
+        /// loopback only.
+        #[arg(long, env = "ZWIDTH_READS", value_parser = ["private", "public"])]
+        reads: Option<String>,
+        /// Host names the server is reached by (comma-separated), besides
+        /// localhost and IP addresses: a request naming another host is
+        /// refused (421), so a DNS-rebinding page reads nothing.
+        #[arg(long = "host", env = "ZWIDTH_HOSTS", value_delimiter = ',')]
+        hosts: Vec<String>,
     },
     /// Run experiments from a shared PostgreSQL database, next to any
     /// number of other workers and `serve --api-only` processes.

@@ -26,6 +26,8 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             lease_ms,
             tls_cert,
             tls_key,
+            reads,
+            hosts,
         } => {
             let agent_tokens = secrets(
                 agent_token,
@@ -71,8 +73,23 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             };
             init_logs();
             let rt = runtime()?;
+            let hosts: Vec<String> = hosts
+                .iter()
+                .map(|h| h.trim().to_string())
+                .filter(|h| !h.is_empty())
+                .collect();
+            if let Some(bad) = hosts.iter().find(|h| {
+                !h.chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '.')
+            }) {
+                return Err(CliError::Input(format!(
+                    "--host {bad:?}: a host name (letters, digits, '-' and '.'), without a scheme or port"
+                )));
+            }
             rt.block_on(crate::http::serve(crate::http::ServeConfig {
                 tls,
+                private_reads: reads.map(|r| r == "private"),
+                hosts,
                 db,
                 bind,
                 tokens,

@@ -133,6 +133,91 @@ fn loopback_host(host: &str) -> bool {
             .is_ok_and(|ip| ip.is_loopback())
 }
 
+/// The host name of a `Host` header (no port, no brackets).
+fn host_name(host: &str) -> &str {
+    match host.strip_prefix('[') {
+        Some(v6) => v6.split(']').next().unwrap_or(""),
+        None => host.rsplit_once(':').map_or(host, |(h, _)| h),
+    }
+}
+
+/// Whether a request's `Host` names this server: a loopback name, an IP
+/// address (a DNS-rebinding page can only name its own host, never an
+/// address), or one of `hosts` (`--host`), case-insensitively.
+pub fn host_allowed(hosts: &[String], host: &str) -> bool {
+    let name = host_name(host);
+    loopback_host(host)
+        || name.parse::<std::net::IpAddr>().is_ok()
+        || hosts.iter().any(|h| h.eq_ignore_ascii_case(name))
+}
+
+/// The dashboard's cookie holding the token (`POST /login`).
+pub const COOKIE: &str = "zwidth_token";
+
+/// Whether the request carries an accepted user token: `Authorization:
+/// Bearer` or the dashboard's cookie.
+pub fn read_authorized(st: &AppState, h: &HeaderMap) -> bool {
+    let bearer = h
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "));
+    let cookie = h
+        .get_all(header::COOKIE)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(';'))
+        .filter_map(|c| c.trim().strip_prefix(COOKIE)?.strip_prefix('='))
+        .next();
+    [bearer, cookie]
+        .into_iter()
+        .flatten()
+        .any(|t| token_accepted(&st.tokens, t))
+}
+
+/// Reads that stay open with `--reads private`: the health check, the
+/// agents' upgrade (it takes an agent token), the sign-in page and the
+/// dashboard's static files.
+fn open_read(path: &str) -> bool {
+    matches!(path, "/healthz" | "/v1/agent" | "/login") || path.starts_with("/assets/")
+}
+
+/// Every request: its `Host` must name this server (421 otherwise: a
+/// DNS-rebinding page in a lab member's browser reads nothing); with
+/// private reads, a read needs the token (401; a dashboard page answers
+/// with the sign-in page instead).
+pub async fn host_and_reads(State(st): State<AppState>, req: Request, next: Next) -> Response {
+    if let Some(host) = req.headers().get(header::HOST) {
+        let host = String::from_utf8_lossy(host.as_bytes()).into_owned();
+        if !host_allowed(&st.hosts, &host) {
+            return Problem::new(
+                StatusCode::MISDIRECTED_REQUEST,
+                "Misdirected request",
+                format!(
+                    "Host = {host:?} is not allowed: this server answers to localhost, IP addresses and the names given with --host (ZWIDTH_HOSTS)"
+                ),
+            )
+            .with_field("Host")
+            .into_response();
+        }
+    }
+    let read = matches!(*req.method(), Method::GET | Method::HEAD);
+    let path = req.uri().path();
+    if st.private_reads && read && !open_read(path) && !read_authorized(&st, req.headers()) {
+        let api = path.starts_with("/v1/") || path == "/metrics";
+        if !api {
+            return super::ui::login::page(path, None, StatusCode::UNAUTHORIZED);
+        }
+        return Problem::new(
+            StatusCode::UNAUTHORIZED,
+            "Unauthorized",
+            "reads need the token on this server (private reads: --reads private, the default beyond loopback): Authorization: Bearer <token>",
+        )
+        .with_field("Authorization")
+        .into_response();
+    }
+    next.run(req).await
+}
+
 /// Where writes may come from: no cross-site browser request, an `Origin`
 /// that is this server's (or one of `--allow-origin`), and without tokens
 /// a loopback `Host` (a DNS-rebinding page names its own host).
@@ -176,7 +261,8 @@ fn check_origin(st: &AppState, h: &HeaderMap) -> Result<(), Problem> {
     }
     if let Some(origin) = origin {
         let own = format!("http://{host}");
-        if origin != own {
+        // Served over TLS (`serve --tls-cert`), the page's origin is https.
+        if origin != own && origin != format!("https://{host}") {
             return refuse(
                 "Origin",
                 format!(

@@ -152,6 +152,7 @@ pub fn router(state: AppState, timeout: Duration) -> Router {
         .route("/metrics", get(queue::metrics))
         .merge(ui::routes())
         .layer(from_fn_with_state(state.clone(), guard::same_origin_writes))
+        .layer(from_fn_with_state(state.clone(), guard::host_and_reads))
         .layer(DefaultBodyLimit::max(BODY_LIMIT))
         .layer(tower_http::timeout::TimeoutLayer::with_status_code(
             StatusCode::SERVICE_UNAVAILABLE,

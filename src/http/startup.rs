@@ -35,6 +35,12 @@ pub struct ServeConfig {
     pub worker: crate::jobs::Worker,
     /// Serve HTTPS and WSS with this config (`tls::server_config`).
     pub tls: Option<Arc<rustls::ServerConfig>>,
+    /// Reads need the token too: Some(true) private, Some(false) public,
+    /// None: private unless every bound address is loopback.
+    pub private_reads: Option<bool>,
+    /// Host names the server answers to besides loopback names and IP
+    /// addresses (`--host`).
+    pub hosts: Vec<String>,
 }
 
 /// Open the store, requeue interrupted work, bind, start one runner per
@@ -56,6 +62,8 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         api_only,
         worker,
         tls,
+        private_reads,
+        hosts,
     } = cfg;
     let me = Arc::new(worker);
     if rigs.is_empty() {
@@ -87,6 +95,8 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         .await
         .map_err(|e| format!("cannot bind {bind}: {e}"))?;
     let addr = listener.local_addr().map_err(|e| e.to_string())?;
+    // Beyond loopback, reads are private unless the lab says otherwise.
+    let private_reads = private_reads.unwrap_or(!addrs.iter().all(|a| a.ip().is_loopback()));
     // One server per SQLite file; PostgreSQL takes many.
     let _serving = db.sqlite_path().map(lock_database).transpose()?;
     let store = Store::connect(&db).await.map_err(|e| match e {
@@ -213,7 +223,15 @@ pub async fn serve(cfg: ServeConfig) -> Result<(), String> {
         running,
         api_only,
         served: Default::default(),
+        private_reads,
+        hosts: Arc::new(hosts),
+        tls: tls.is_some(),
     };
+    if private_reads {
+        tracing::info!(
+            "private reads: every read needs the token (the dashboard asks for it once)"
+        );
+    }
     let served = tokio::spawn(refresh_served(state.clone(), stop_rx.clone()));
     // On the signal the runners stop at once (the running experiment is
     // interrupted within a trial) while open requests drain.

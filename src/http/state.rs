@@ -31,6 +31,14 @@ pub struct AppState {
     /// The rigs live workers run, as the `workers` table last said
     /// ([`refresh_served`]): a queued run on another rig says it waits.
     pub served: Arc<std::sync::RwLock<Option<std::collections::HashSet<String>>>>,
+    /// Every read needs a token too (`--reads private`, the default beyond
+    /// loopback): `guard::host_and_reads`.
+    pub private_reads: bool,
+    /// Host names this server answers to besides loopback names and IP
+    /// addresses (`--host`): `guard::host_allowed`.
+    pub hosts: Arc<Vec<String>>,
+    /// Served over TLS: the dashboard's cookie is `Secure`.
+    pub tls: bool,
 }
 
 /// Within how long a worker's last report counts it as live (ms).
@@ -92,6 +100,9 @@ impl AppState {
             running: Default::default(),
             api_only: false,
             served: Default::default(),
+            private_reads: false,
+            hosts: Arc::new(Vec::new()),
+            tls: false,
         })
     }
 

@@ -911,3 +911,136 @@ fn an_automatic_map_stores_the_same_trials_on_any_thread_count() {
     }
     assert_eq!(seen[0], seen[1]);
 }
+
+/// One raw HTTP/1.1 GET of `path` with `Host: host`: (status, body).
+fn raw_get(base: &str, host: &str, path: &str) -> (u16, String) {
+    use std::io::{Read, Write};
+    let addr = base.trim_start_matches("http://");
+    let mut c = std::net::TcpStream::connect(addr).unwrap();
+    write!(
+        c,
+        "GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut text = String::new();
+    c.read_to_string(&mut text).unwrap();
+    let status = text[9..12].parse().unwrap();
+    (status, text)
+}
+
+/// Issue 45 item 5: bound beyond loopback, every read needs the token (the
+/// dashboard asks once and keeps it in an HttpOnly, SameSite=Strict
+/// cookie); `--reads public` opens them again; every request's Host must
+/// name this server (a DNS-rebinding page's own name gets 421).
+#[test]
+fn reads_are_private_beyond_loopback_and_the_host_is_checked() {
+    let dir = std::env::temp_dir().join(format!(
+        "zwidth-reads-{}-{}",
+        std::process::id(),
+        uuid_like()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let s = start_on(dir.clone(), "0.0.0.0:0", &["--host", "zwidth.lab.example"]);
+    let token = token_for(&s.base).unwrap();
+    let list = format!("{}/v1/experiments", s.base);
+    let status = |r: Result<ureq::Response, ureq::Error>| match r {
+        Ok(r) => r.status(),
+        Err(ureq::Error::Status(c, _)) => c,
+        Err(e) => panic!("{e}"),
+    };
+    // The API: 401 problem+json without the token, 200 with it.
+    match ureq::get(&list).call() {
+        Err(ureq::Error::Status(401, r)) => {
+            assert_eq!(r.content_type(), "application/problem+json");
+            let v: serde_json::Value = r.into_json().unwrap();
+            assert_eq!(v["field"], "Authorization", "{v}");
+        }
+        other => panic!("{other:?}"),
+    }
+    let bearer = format!("Bearer {token}");
+    assert_eq!(
+        status(ureq::get(&list).set("authorization", &bearer).call()),
+        200
+    );
+    // Open: the health check.
+    assert_eq!(
+        status(ureq::get(&format!("{}/healthz", s.base)).call()),
+        200
+    );
+    // The dashboard: the sign-in page, then the cookie.
+    match ureq::get(&format!("{}/runs", s.base)).call() {
+        Err(ureq::Error::Status(401, r)) => {
+            let html = r.into_string().unwrap();
+            assert!(
+                html.contains("action=\"/login\"") && html.contains("value=\"/runs\""),
+                "{html}"
+            );
+        }
+        other => panic!("{other:?}"),
+    }
+    let no_redirects = ureq::AgentBuilder::new().redirects(0).build();
+    let login = |t: &str| {
+        no_redirects
+            .post(&format!("{}/login", s.base))
+            .set("origin", &s.base)
+            .set("content-type", "application/x-www-form-urlencoded")
+            .send_string(&format!("token={t}&next=%2Fruns"))
+    };
+    assert_eq!(status(login("wrong")), 403);
+    let r = login(&token).unwrap();
+    assert_eq!((r.status(), r.header("location")), (303, Some("/runs")));
+    let cookie = r.header("set-cookie").unwrap().to_string();
+    for attr in ["HttpOnly", "SameSite=Strict", "Path=/"] {
+        assert!(cookie.contains(attr), "{cookie}");
+    }
+    let pair = cookie.split(';').next().unwrap().to_string();
+    assert_eq!(
+        status(
+            ureq::get(&format!("{}/runs", s.base))
+                .set("cookie", &pair)
+                .call()
+        ),
+        200
+    );
+    assert_eq!(status(ureq::get(&list).set("cookie", &pair).call()), 200);
+    // The cookie opens reads, never writes.
+    let w = ureq::post(&format!("{}/v1/queue/pause", s.base))
+        .set("cookie", &pair)
+        .call();
+    assert_eq!(status(w), 401);
+    // The Host: this server's names and any IP address; not another name.
+    assert_eq!(
+        raw_get(&s.base, "zwidth.lab.example:8080", "/healthz").0,
+        200
+    );
+    assert_eq!(raw_get(&s.base, "ZWIDTH.LAB.EXAMPLE", "/healthz").0, 200);
+    assert_eq!(raw_get(&s.base, "10.1.2.3:8080", "/healthz").0, 200);
+    assert_eq!(raw_get(&s.base, "[::1]:8080", "/healthz").0, 200);
+    let (code, text) = raw_get(&s.base, "rebind.evil.example:8080", "/v1/experiments");
+    assert_eq!(code, 421, "{text}");
+    assert!(text.contains("\"field\":\"Host\""), "{text}");
+    drop(s);
+    // `--reads public` beyond loopback: reads are open again.
+    let dir = std::env::temp_dir().join(format!(
+        "zwidth-reads-{}-{}",
+        std::process::id(),
+        uuid_like()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let s = start_on(dir, "0.0.0.0:0", &["--reads", "public"]);
+    assert_eq!(
+        status(ureq::get(&format!("{}/v1/experiments", s.base)).call()),
+        200
+    );
+    // On loopback (every other test's server) reads are open by default,
+    // and the Host is checked there too.
+    let s = start();
+    assert_eq!(
+        status(ureq::get(&format!("{}/v1/experiments", s.base)).call()),
+        200
+    );
+    assert_eq!(
+        raw_get(&s.base, "rebind.evil.example", "/v1/experiments").0,
+        421
+    );
+}

@@ -2,13 +2,15 @@
 //! string escaped), the map plots from `zwidth::plot` inline, and one
 //! vendored script (htmx 2.0.11, served from the binary) that polls a
 //! page's live part every 2 s with a change token: an unchanged part
-//! answers 204 after one cheap query. Reads need no token; the actions
+//! answers 204 after one cheap query. Reads need no token on loopback
+//! (beyond it, private reads: the sign-in page, `login.rs`); the actions
 //! (cancel, pause, resume, a rig's window) call the JSON API with the
 //! token the user entered once (kept in the browser's local storage).
 //! No CDN, no build step: it works offline.
 
 pub mod bench;
 mod compare;
+pub mod login;
 mod page;
 mod queue;
 mod run;
@@ -44,6 +46,7 @@ pub fn routes() -> Router<AppState> {
         .route("/runs/{id}", get(run::page))
         .route("/ui/runs/{id}/live", get(run::live))
         .route("/compare", get(compare::page))
+        .route("/login", get(login::show).post(login::sign_in))
         .route("/assets/{name}", get(asset))
         .layer(axum::middleware::map_response(error_page))
 }

@@ -60,7 +60,13 @@ pub fn start_on(dir: std::path::PathBuf, bind: &str, extra: &[&str]) -> Server {
     BufReader::new(child.stdout.take().unwrap())
         .read_line(&mut line)
         .unwrap();
-    let base = line.trim().rsplit(' ').next().unwrap().to_string();
+    // Bound to every interface: reached here on loopback.
+    let base = line
+        .trim()
+        .rsplit(' ')
+        .next()
+        .unwrap()
+        .replace("//0.0.0.0:", "//127.0.0.1:");
     assert!(
         base.starts_with("http://127.0.0.1:") || base.starts_with("https://127.0.0.1:"),
         "{line}"
