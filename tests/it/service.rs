@@ -933,6 +933,7 @@ fn raw_get(base: &str, host: &str, path: &str) -> (u16, String) {
 /// cookie); `--reads public` opens them again; every request's Host must
 /// name this server (a DNS-rebinding page's own name gets 421).
 #[test]
+#[allow(clippy::result_large_err)] // ureq's error, as every ureq call returns
 fn reads_are_private_beyond_loopback_and_the_host_is_checked() {
     let dir = std::env::temp_dir().join(format!(
         "zwidth-reads-{}-{}",
