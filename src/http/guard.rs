@@ -205,7 +205,17 @@ pub async fn host_and_reads(State(st): State<AppState>, req: Request, next: Next
     if st.private_reads && read && !open_read(path) && !read_authorized(&st, req.headers()) {
         let api = path.starts_with("/v1/") || path == "/metrics";
         if !api {
-            return super::ui::login::page(path, None, StatusCode::UNAUTHORIZED);
+            // A dashboard page: sign in first, then back here.
+            let back = req
+                .uri()
+                .path_and_query()
+                .map_or(path, |p| p.as_str())
+                .to_string();
+            let to = format!(
+                "/login?{}",
+                serde_urlencoded::to_string([("next", back)]).unwrap_or_default()
+            );
+            return (StatusCode::SEE_OTHER, [(header::LOCATION, to)]).into_response();
         }
         return Problem::new(
             StatusCode::UNAUTHORIZED,

@@ -170,6 +170,11 @@ impl IntoResponse for Problem {
 /// Parse a JSON body into `T`, naming the field a parse error is in
 /// (`scene.device.mass`), or `body` when it is the whole document.
 pub fn json_body<T: serde::de::DeserializeOwned>(bytes: &[u8], what: &str) -> Result<T, Problem> {
+    // A key written twice: refused (serde would keep the last silently:
+    // `{"kind":"map","kind":"compare"}` ran as a compare).
+    if let Some(d) = crate::error::duplicate_key(bytes) {
+        return Err(d.error("").into());
+    }
     let mut de = serde_json::Deserializer::from_slice(bytes);
     let v = serde_path_to_error::deserialize(&mut de).map_err(|e| parse_problem(e, what, ""))?;
     // Nothing but white space may follow the document.

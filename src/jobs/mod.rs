@@ -144,6 +144,16 @@ impl Worker {
     pub fn heartbeat(&self) -> Duration {
         Duration::from_millis((self.lease_ms / 3).clamp(100, 1000) as u64)
     }
+
+    /// Longest one store call of a running experiment may take (a quarter
+    /// lease): a cut-off database connection (no reset, nothing answered)
+    /// cannot hold the supervision loop, so its "no heartbeat for a whole
+    /// lease" check still runs, within 1.5 leases of the cut (issue 45 item
+    /// 8). A call that times out is dropped: what it was storing is kept
+    /// for the next try.
+    pub fn store_call(&self) -> Duration {
+        Duration::from_millis((self.lease_ms / 4).max(100) as u64)
+    }
 }
 
 /// The default lease: a worker silent this long loses its run.
@@ -626,11 +636,19 @@ impl Run<'_> {
             tokio::select! {
                 r = &mut task => break r,
                 _ = tokio::time::sleep(Duration::from_millis(100)) => {
-                    let _ = unstored.flush(store, lease, observer).await;
+                    let bound = me.store_call();
+                    if tokio::time::timeout(bound, unstored.flush(store, lease, observer)).await.is_err() {
+                        tracing::warn!(timeout_ms = bound.as_millis() as u64, "storing the finished trials took too long: kept for the next try");
+                    }
                     let trials = observer.trials_done() as i64;
                     if beat.elapsed() >= me.heartbeat() && !unstored.lost {
                         beat = std::time::Instant::now();
-                        match store.heartbeat(lease, trials, observer.fraction(), me.lease_ms).await {
+                        let beat_call = store.heartbeat(lease, trials, observer.fraction(), me.lease_ms);
+                        let answer = match tokio::time::timeout(bound, beat_call).await {
+                            Ok(r) => r,
+                            Err(_) => Err(sqlx::Error::PoolTimedOut),
+                        };
+                        match answer {
                             Ok(Held::Held) => held_at = std::time::Instant::now(),
                             Ok(Held::Cancelled) => {
                                 held_at = std::time::Instant::now();
@@ -658,7 +676,7 @@ impl Run<'_> {
                     // Hardware moves only inside its window: an attached rig
                     // takes no new trial once it closes (the experiment waits).
                     if let Some(a) = rig.attached() {
-                        if let Ok(w) = store.rig_window(&rig_id).await {
+                        if let Ok(Ok(w)) = tokio::time::timeout(bound, store.rig_window(&rig_id)).await {
                             a.set_window_closed(window_closed(w.as_ref(), jiff::Timestamp::now()));
                         }
                     }

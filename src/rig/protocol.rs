@@ -369,6 +369,9 @@ pub fn decode<B: serde::de::DeserializeOwned>(text: &str) -> Result<Envelope<B>,
         ));
     }
     let v: serde_json::Value = serde_json::from_str(text).map_err(|e| format!("not JSON: {e}"))?;
+    if let Some(d) = crate::error::duplicate_key(text.as_bytes()) {
+        return Err(d.error("").to_string());
+    }
     match v.get("v").and_then(|v| v.as_u64()) {
         Some(n) if n == u64::from(VERSION) => {}
         Some(n) => {

@@ -139,9 +139,17 @@ impl Store {
                 // or cut-off worker is ended by the server, not held (with
                 // its row locks) until TCP notices; a statement waits at
                 // most 5 s for a lock.
+                // No statement runs for more than 30 s, and the server
+                // probes an idle connection after 30 s (issue 45 item 8);
+                // the client side is bounded by the timeouts around each
+                // store call of a running experiment (`jobs::Worker::store_call`).
                 let opts = opts.options([
                     ("idle_in_transaction_session_timeout", "10s"),
                     ("lock_timeout", "5s"),
+                    ("statement_timeout", "30s"),
+                    ("tcp_keepalives_idle", "30"),
+                    ("tcp_keepalives_interval", "10"),
+                    ("tcp_keepalives_count", "3"),
                 ]);
                 // One connection first: its error says why (refused,
                 // password, no such database), where a pool only times out.

@@ -68,12 +68,17 @@ fn agent(s: &Server, name: &str, extra: &[&str]) -> Agent {
         true => vec![],
         false => vec!["--sim"],
     };
+    // … or another token (a rig's own credential).
+    let shared = dir.join("test.db.agent-token");
+    let token = match extra.contains(&"--token-file") {
+        true => vec![],
+        false => vec!["--token-file".as_ref(), shared.as_os_str()],
+    };
     let child = Command::new(bin())
         .args(["agent", "--rig", "bench", "--name", name])
         .args(sim)
         .args(server)
-        .arg("--token-file")
-        .arg(dir.join("test.db.agent-token"))
+        .args(token)
         .arg("--outbox")
         .arg(dir.join(format!("{name}.outbox")))
         .args(extra)
@@ -1067,6 +1072,9 @@ fn a_rig_registered_through_the_api_is_data() {
     assert_eq!(code, 201, "{v}");
     assert_eq!(v["kind"], "attached");
     assert_eq!(v["attached"]["connected"], false);
+    // Its own agent credential, which alone opens it (issue 45 item 4).
+    let credential = dir.join("bench.agent-token");
+    std::fs::write(&credential, v["agent_token"].as_str().unwrap()).unwrap();
     let (code, _, _) = post(&format!("{}/v1/rigs", s.base), r#"{"id":"bench"}"#);
     assert_eq!(code, 409);
     let (code, v, _) = post(&format!("{}/v1/rigs", s.base), r#"{"id":"no spaces"}"#);
@@ -1085,7 +1093,7 @@ fn a_rig_registered_through_the_api_is_data() {
     std::mem::forget(s);
     let s = start_with(dir, &args);
     assert_eq!(rig(&s, "bench")["description"], "the lab's device");
-    let _a = agent(&s, "a", &[]);
+    let _a = agent(&s, "a", &["--token-file", credential.to_str().unwrap()]);
     let there = outcome(&s, &id);
     assert_eq!(there, reference(&s));
 }

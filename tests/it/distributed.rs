@@ -494,6 +494,16 @@ const SEED_COLUMNS: &str = r#"{"kind":"map","scene":{"device":{"mass":0.52,"damp
   "loop":{"sample_hz":1000,"render_hz":1000},"estimator":{"kind":"butterworth","cutoff_hz":499,"order":2}},
   "accuracy":"reference","b":[0,25,50,75,100,125]}"#;
 
+/// SEED_COLUMNS over 240 B values: 240 column units of ~0.6 s, ≥ 60 s on
+/// two workers.
+fn long_columns() -> String {
+    let bs: Vec<String> = (0..240).map(|i| (2.5 * i as f64).to_string()).collect();
+    SEED_COLUMNS.replace(
+        r#""b":[0,25,50,75,100,125]"#,
+        &format!(r#""b":[{}]"#, bs.join(",")),
+    )
+}
+
 /// SIGTERM (`docker stop`) the worker driving a run while units are out:
 /// it stops within a trial, its run interrupted and its unit queued again;
 /// the other worker takes the run over (attempt 2), its units go on, and
@@ -574,7 +584,10 @@ fn a_cancel_reaches_units_on_other_workers() {
     for i in 0..2 {
         worker(&mut p, &url, "15000", &format!("w{i}.err"));
     }
-    let id = submit(&base, SEED_COLUMNS);
+    // A map that would take ≥ 60 s uncancelled (issue 45 item 14): so only
+    // a cancel that reaches the driver stops it within the bound (SEED_COLUMNS
+    // ends by itself in a few seconds, cancelled or not).
+    let id = submit(&base, &long_columns());
     wait_for("units computing on both workers", 60, || {
         let rigs = get(&format!("{base}/v1/rigs"));
         rigs[0]["units"].as_array().unwrap().len() >= 2
@@ -695,4 +708,110 @@ fn a_run_on_a_rig_no_worker_runs_says_why_it_waits() {
     );
     p.children.push(child);
     assert_eq!(wait_end(&base, &id, 120)["state"], "succeeded");
+}
+
+/// A TCP proxy to `target` that forwards both ways until `frozen` is set,
+/// then forwards nothing and closes nothing: a network cut off (no reset),
+/// as a pulled cable or a dropped VPN leaves a connection.
+struct Freezer {
+    port: u16,
+    frozen: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}
+
+fn freezer(target: std::net::SocketAddr) -> Freezer {
+    use std::io::{Read, Write};
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = l.local_addr().unwrap().port();
+    let frozen = std::sync::Arc::new(AtomicBool::new(false));
+    let f = frozen.clone();
+    std::thread::spawn(move || {
+        for client in l.incoming().flatten() {
+            let Ok(server) = std::net::TcpStream::connect(target) else {
+                continue;
+            };
+            for (mut from, mut to) in [
+                (client.try_clone().unwrap(), server.try_clone().unwrap()),
+                (server, client),
+            ] {
+                let f = f.clone();
+                std::thread::spawn(move || {
+                    let mut buf = [0u8; 16 * 1024];
+                    while let Ok(n) = from.read(&mut buf) {
+                        while f.load(Ordering::Relaxed) {
+                            std::thread::sleep(Duration::from_millis(50));
+                        }
+                        if n == 0 || to.write_all(&buf[..n]).is_err() {
+                            break;
+                        }
+                    }
+                });
+            }
+        }
+    });
+    Freezer { port, frozen }
+}
+
+/// Issue 45 item 8: a worker whose database connection is cut off mid-run
+/// (the proxy stops forwarding; nothing is reset) hung: its store calls
+/// were awaited without a bound, so the "no heartbeat for a whole lease"
+/// check never ran (measured once: 85 s, unbounded in principle). Now every
+/// store call of the supervision loop is bounded: the worker abandons the
+/// run and its units within 1.5 leases of the cut (3 s lease: ≤ 4.5 s;
+/// asserted ≤ 8 s).
+#[test]
+fn a_worker_cut_off_from_its_database_abandons_the_run_within_its_lease() {
+    let Some(url) = pg::fresh_database_blocking("cut") else {
+        return;
+    };
+    let tls = pg::tls_url().expect("the TCP listener of .ci/postgres (ZWIDTH_TEST_PG_TLS)");
+    let db = url.split('?').next().unwrap().rsplit('/').next().unwrap();
+    let tcp = pg::with_database(&tls, db);
+    // localhost:PORT of the server, and the same through the proxy.
+    let port: u16 = tcp
+        .split("@localhost:")
+        .nth(1)
+        .unwrap()
+        .split('/')
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap();
+    let proxy = freezer(std::net::SocketAddr::from(([127, 0, 0, 1], port)));
+    let through = tcp.replace(
+        &format!("@localhost:{port}/"),
+        &format!("@localhost:{}/", proxy.port),
+    );
+    let mut p = Procs {
+        children: vec![],
+        dir: fresh_dir("cut"),
+    };
+    let base = api(&mut p, &url, true, "api.err");
+    worker(&mut p, &through, "3000", "w.err");
+    let id = submit(&base, &long_columns());
+    wait_for("units computing on the worker", 60, || {
+        !get(&format!("{base}/v1/rigs"))[0]["units"]
+            .as_array()
+            .unwrap()
+            .is_empty()
+    });
+    proxy
+        .frozen
+        .store(true, std::sync::atomic::Ordering::Relaxed);
+    let cut = Instant::now();
+    let log = || std::fs::read_to_string(p.dir.join("w.err")).unwrap_or_default();
+    wait_for("the cut-off worker to abandon its run", 8, || {
+        log().contains("no heartbeat went through for a whole lease: abandoning")
+    });
+    eprintln!(
+        "abandoned {:.1} s after the cut",
+        cut.elapsed().as_secs_f64()
+    );
+    // The run is not lost: its lease runs out and it waits to be claimed
+    // again (no other worker here), nothing ended.
+    let v = get(&format!("{base}/v1/experiments/{id}"));
+    assert!(
+        ["running", "queued", "interrupted"].contains(&v["state"].as_str().unwrap()),
+        "{v}"
+    );
 }

@@ -482,14 +482,16 @@ fn writes_from_other_sites_are_refused() {
         let (code, ct, v) = call(authed::post(&pause).set(header, value).call());
         assert_problem(code, &ct, &v, 403, Some(field));
     }
-    // A foreign Host without the token (a DNS-rebinding page): 401.
-    let (code, ct, v) = call(
-        ureq::post(&url)
-            .set("content-type", "application/json")
-            .set("host", "evil.example")
-            .send_string(body),
-    );
-    assert_problem(code, &ct, &v, 401, Some("Authorization"));
+    // A foreign Host (a DNS-rebinding page), token or not: 421 naming the
+    // Host (before issue 45: 401 without the token, accepted with it).
+    for r in [ureq::post(&url), authed::post(&url)] {
+        let (code, ct, v) = call(
+            r.set("content-type", "application/json")
+                .set("host", "evil.example")
+                .send_string(body),
+        );
+        assert_problem(code, &ct, &v, 421, Some("Host"));
+    }
     assert_eq!(get(&format!("{}/v1/queue", s.base))["paused"], false);
     assert_eq!(get(&url)["experiments"].as_array().unwrap().len(), 0);
     // The server's own origin may write.
@@ -1177,4 +1179,47 @@ fn slow_and_idle_clients_are_cut_off_and_capped() {
     );
     // The server serves as before.
     assert_eq!(get(&format!("{}/healthz", s.base))["status"], "ok");
+}
+
+/// Issue 45 item 11: a key written twice was taken silently, the last one
+/// winning (`{"kind":"map","kind":"compare"}` → 202, run as a compare). Now
+/// refused everywhere a document is read, naming the key: the API (422),
+/// the CLI's files (exit 2), and nothing is stored.
+#[test]
+fn a_key_written_twice_is_refused_naming_it() {
+    let s = start();
+    let url = format!("{}/v1/experiments", s.base);
+    let (code, ct, v) = call(post_json(&url).send_string(r#"{"kind":"map","kind":"compare"}"#));
+    assert_problem(code, &ct, &v, 422, Some("kind"));
+    assert!(v["detail"].as_str().unwrap().contains("twice"), "{v}");
+    let nested = SMALL.replace(r#""coulomb":0,"#, r#""coulomb":0,"coulomb":1,"#);
+    let (code, ct, v) = call(post_json(&url).send_string(&nested));
+    assert_problem(code, &ct, &v, 422, Some("scene.device.coulomb"));
+    // Nothing was stored.
+    assert_eq!(
+        get(&url)["experiments"].as_array().map(Vec::len),
+        Some(0),
+        "{}",
+        get(&url)
+    );
+    // A rig registration too.
+    let (code, ct, v) =
+        call(post_json(&format!("{}/v1/rigs", s.base)).send_string(r#"{"id":"a","id":"b"}"#));
+    assert_problem(code, &ct, &v, 422, Some("id"));
+    // The CLI: a scene file with a key written twice, exit 2 naming it.
+    let dir = temp_dir("dup");
+    let scene = dir.join("scene.json");
+    std::fs::write(&scene, r#"{"device":{"mass":0.5,"mass":5}}"#).unwrap();
+    let out = Command::new(bin())
+        .args(["map", "--accuracy", "draft", "--scene"])
+        .arg(&scene)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("device.mass") && err.contains("twice"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

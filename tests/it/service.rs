@@ -968,18 +968,26 @@ fn reads_are_private_beyond_loopback_and_the_host_is_checked() {
         status(ureq::get(&format!("{}/healthz", s.base)).call()),
         200
     );
-    // The dashboard: the sign-in page, then the cookie.
-    match ureq::get(&format!("{}/runs", s.base)).call() {
-        Err(ureq::Error::Status(401, r)) => {
-            let html = r.into_string().unwrap();
-            assert!(
-                html.contains("action=\"/login\"") && html.contains("value=\"/runs\""),
-                "{html}"
-            );
-        }
-        other => panic!("{other:?}"),
-    }
+    // The dashboard: to the sign-in page, which returns here, then the
+    // cookie.
     let no_redirects = ureq::AgentBuilder::new().redirects(0).build();
+    let r = no_redirects
+        .get(&format!("{}/runs", s.base))
+        .call()
+        .unwrap();
+    assert_eq!(
+        (r.status(), r.header("location")),
+        (303, Some("/login?next=%2Fruns"))
+    );
+    let html = ureq::get(&format!("{}/login?next=%2Fruns", s.base))
+        .call()
+        .unwrap()
+        .into_string()
+        .unwrap();
+    assert!(
+        html.contains("action=\"/login\"") && html.contains("value=\"/runs\""),
+        "{html}"
+    );
     let login = |t: &str| {
         no_redirects
             .post(&format!("{}/login", s.base))

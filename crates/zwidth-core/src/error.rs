@@ -41,6 +41,9 @@ pub fn parse_json<T: serde::de::DeserializeOwned>(
     what: &str,
     noun: &str,
 ) -> Result<T, SpecError> {
+    if let Some(dup) = duplicate_key(text.as_bytes()) {
+        return Err(dup.error(what));
+    }
     let mut de = serde_json::Deserializer::from_str(text);
     let parsed: T = serde_path_to_error::deserialize(&mut de).map_err(|e| {
         let path = e.path().to_string();
@@ -57,6 +60,120 @@ pub fn parse_json<T: serde::de::DeserializeOwned>(
     de.end()
         .map_err(|e| SpecError::new(what, "(document)", format!("is not a valid {noun}: {e}")))?;
     Ok(parsed)
+}
+
+/// A key written twice in one JSON object: the object's path (`""` the
+/// document, `scene.device`, `b[2]`) and the key.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DuplicateKey {
+    pub object: String,
+    pub key: String,
+}
+
+impl DuplicateKey {
+    /// The refusal, naming the key's field below `what` (a document
+    /// parsed as `what`: "scene", "estimator"; `""`: none).
+    pub fn error(&self, what: &str) -> SpecError {
+        let field = [what, &self.object, &self.key]
+            .iter()
+            .filter(|p| !p.is_empty())
+            .copied()
+            .collect::<Vec<_>>()
+            .join(".")
+            .replace(".[", "[");
+        SpecError::new(
+            field,
+            format!("{:?} (written twice)", clip(&self.key, 128)),
+            "each key once in an object: parsers differ on which of two counts",
+        )
+    }
+}
+
+/// The first key some object of JSON `text` repeats, if any (duplicate
+/// keys are refused everywhere a document is read: serde would keep the
+/// last silently). None too when `text` is not JSON: its parse says why.
+pub fn duplicate_key(text: &[u8]) -> Option<DuplicateKey> {
+    use serde::de::{DeserializeSeed, Deserializer, MapAccess, SeqAccess, Visitor};
+    use std::cell::RefCell;
+
+    struct Walk<'a> {
+        path: String,
+        found: &'a RefCell<Option<DuplicateKey>>,
+    }
+    impl<'de> DeserializeSeed<'de> for Walk<'_> {
+        type Value = ();
+        fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<(), D::Error> {
+            d.deserialize_any(self)
+        }
+    }
+    impl<'de> Visitor<'de> for Walk<'_> {
+        type Value = ();
+        fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+            f.write_str("any JSON value")
+        }
+        fn visit_bool<E>(self, _: bool) -> Result<(), E> {
+            Ok(())
+        }
+        fn visit_i64<E>(self, _: i64) -> Result<(), E> {
+            Ok(())
+        }
+        fn visit_u64<E>(self, _: u64) -> Result<(), E> {
+            Ok(())
+        }
+        fn visit_f64<E>(self, _: f64) -> Result<(), E> {
+            Ok(())
+        }
+        fn visit_str<E>(self, _: &str) -> Result<(), E> {
+            Ok(())
+        }
+        fn visit_unit<E>(self) -> Result<(), E> {
+            Ok(())
+        }
+        fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<(), A::Error> {
+            let mut i = 0usize;
+            loop {
+                let path = format!("{}[{i}]", self.path);
+                let walk = Walk {
+                    path,
+                    found: self.found,
+                };
+                if seq.next_element_seed(walk)?.is_none() {
+                    return Ok(());
+                }
+                i += 1;
+            }
+        }
+        fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<(), A::Error> {
+            let mut seen = std::collections::HashSet::new();
+            while let Some(key) = map.next_key::<String>()? {
+                if seen.contains(&key) {
+                    *self.found.borrow_mut() = Some(DuplicateKey {
+                        object: self.path,
+                        key,
+                    });
+                    return Err(serde::de::Error::custom("duplicate key"));
+                }
+                let path = match self.path.as_str() {
+                    "" => key.clone(),
+                    p => format!("{p}.{key}"),
+                };
+                seen.insert(key);
+                map.next_value_seed(Walk {
+                    path,
+                    found: self.found,
+                })?;
+            }
+            Ok(())
+        }
+    }
+    let found = RefCell::new(None);
+    let mut de = serde_json::Deserializer::from_slice(text);
+    let _ = Walk {
+        path: String::new(),
+        found: &found,
+    }
+    .deserialize(&mut de);
+    found.into_inner()
 }
 
 impl fmt::Display for SpecError {
@@ -176,5 +293,39 @@ impl std::fmt::Display for CliError {
 impl From<SpecError> for CliError {
     fn from(e: SpecError) -> Self {
         CliError::Input(e.to_string())
+    }
+}
+
+#[cfg(test)]
+mod duplicate_tests {
+    use super::*;
+
+    #[test]
+    fn a_key_written_twice_is_found_with_its_object() {
+        // Issue 45 item 11: `{"kind":"map","kind":"compare"}` was run as a
+        // compare (serde keeps the last).
+        let d = duplicate_key(br#"{"kind":"map","kind":"compare"}"#).unwrap();
+        assert_eq!((d.object.as_str(), d.key.as_str()), ("", "kind"));
+        assert_eq!(d.error("").field, "kind");
+        let d = duplicate_key(br#"{"scene":{"device":{"mass":1,"mass":2}}}"#).unwrap();
+        assert_eq!(d.error("").field, "scene.device.mass");
+        assert_eq!(d.error("experiment").field, "experiment.scene.device.mass");
+        // Inside an array, and a key spelled with an escape is the same key.
+        let d = duplicate_key(br#"{"estimators":[{},{"kind":"fdm","k\u0069nd":"x"}]}"#).unwrap();
+        assert_eq!(d.error("").field, "estimators[1].kind");
+        assert!(d.error("").value.contains("written twice"));
+        // The same key in different objects, and no object at all: none.
+        for ok in [
+            &br#"{"a":{"k":1},"b":{"k":1},"c":[{"k":1},{"k":2}]}"#[..],
+            b"[1, 2.5, -3, true, null, \"s\"]",
+            b"not json",
+            b"{\"a\":1,",
+        ] {
+            assert_eq!(duplicate_key(ok), None, "{}", String::from_utf8_lossy(ok));
+        }
+        // Through parse_json, before any field is read.
+        let e =
+            parse_json::<serde_json::Value>(r#"{"q":1,"q":2}"#, "estimator", "spec").unwrap_err();
+        assert_eq!(e.field, "estimator.q");
     }
 }

@@ -325,7 +325,16 @@ pub unsafe extern "C" fn zw_init_json(
             // SAFETY: as the contract.
             Ok(spec) => unsafe { fill(e, &spec, rate_hz, quantization_m, err) },
             // SAFETY: `err` as the contract.
-            Err(x) => unsafe { explain(err, zw_status::ZwBadParameter, &x.field, &x.to_string()) },
+            // The parameter as the spec names it (`q`, not `estimator.q`),
+            // as the build's own checks name it.
+            Err(x) => unsafe {
+                explain(
+                    err,
+                    zw_status::ZwBadParameter,
+                    x.field.strip_prefix("estimator.").unwrap_or(&x.field),
+                    &x.to_string(),
+                )
+            },
         }
     })
 }

@@ -26,7 +26,7 @@ fn local_path(next: Option<&str>) -> &str {
 }
 
 /// The sign-in page, answered with `status`, returning to `next`.
-pub fn page(next: &str, error: Option<&str>, status: StatusCode) -> Response {
+fn page(next: &str, error: Option<&str>, status: StatusCode) -> Response {
     let next = local_path(Some(next));
     let body = html! {
         h1 { "Sign in" }

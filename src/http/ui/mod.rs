@@ -10,7 +10,7 @@
 
 pub mod bench;
 mod compare;
-pub mod login;
+mod login;
 mod page;
 mod queue;
 mod run;

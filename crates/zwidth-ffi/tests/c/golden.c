@@ -162,6 +162,11 @@ static int refusals(void) {
     REFUSE(zw_init_json(&est, "{\"kind\":\"fdm\",\"median_velocity\":200}", 1e3, 1e-6, &err), ZW_CAPACITY);
     REFUSE(zw_init_json(&est, "{\"kind\":\"kalman\",\"q\":-1}", 1e3, 1e-6, &err), ZW_BAD_PARAMETER);
     CHECK(strcmp(err.parameter, "q") == 0, "q names %s", err.parameter);
+    /* A key written twice is refused, not read as the last one (issue 45). */
+    REFUSE(zw_init_json(&est, "{\"kind\":\"kalman\",\"q\":1e4,\"q\":-1}", 1e3, 1e-6, &err),
+           ZW_BAD_PARAMETER);
+    CHECK(strcmp(err.parameter, "q") == 0 && strstr(err.message, "twice") != NULL,
+          "a duplicate key names %s: %s", err.parameter, err.message);
     REFUSE(zw_init_json(&est, "{\"kind\":\"nope\"}", 1e3, 1e-6, NULL), ZW_BAD_PARAMETER);
     REFUSE(zw_init_fdm(&est, 0.0, &err), ZW_BAD_PARAMETER);
     REFUSE(zw_init_fdm(&est, INFINITY, &err), ZW_BAD_PARAMETER);
