@@ -326,6 +326,34 @@ mod tests {
     }
 
     #[test]
+    fn the_host_must_name_this_server() {
+        let names = vec!["zwidth.lab.example".to_string()];
+        for ok in [
+            "localhost:8080",
+            "127.0.0.1",
+            "10.1.2.3:8443",
+            "[::1]:80",
+            "[2001:db8::7]:8080",
+            "zwidth.lab.example",
+            "ZWIDTH.Lab.Example:8443",
+        ] {
+            assert!(host_allowed(&names, ok), "{ok}");
+        }
+        // A DNS-rebinding page names its own host; a name not given; a
+        // name that only ends like one given.
+        for bad in [
+            "rebind.evil.example:8080",
+            "lab.example",
+            "evil-zwidth.lab.example",
+            "zwidth.lab.example.evil",
+            "",
+        ] {
+            assert!(!host_allowed(&names, bad), "{bad}");
+        }
+        assert!(!host_allowed(&[], "zwidth.lab.example"));
+    }
+
+    #[test]
     fn any_configured_token_is_accepted() {
         let t = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         assert!(token_accepted(&t(&["x", "y"]), "y"));
