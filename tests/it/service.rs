@@ -999,7 +999,8 @@ fn reads_are_private_beyond_loopback_and_the_host_is_checked() {
     let r = login(&token).unwrap();
     assert_eq!((r.status(), r.header("location")), (303, Some("/runs")));
     let cookie = r.header("set-cookie").unwrap().to_string();
-    for attr in ["HttpOnly", "SameSite=Strict", "Path=/"] {
+    // A week, as docs/service.md says: 7 × 24 × 3600 s.
+    for attr in ["HttpOnly", "SameSite=Strict", "Path=/", "Max-Age=604800"] {
         assert!(cookie.contains(attr), "{cookie}");
     }
     let pair = cookie.split(';').next().unwrap().to_string();
