@@ -58,17 +58,21 @@ pub fn credential_fits(
     }
 }
 
+/// The token of `Authorization: Bearer <token>`, if the request has one.
+pub fn bearer(headers: &HeaderMap) -> Option<&str> {
+    headers
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+}
+
 /// Mutating endpoints need `Authorization: Bearer <token>` when tokens are
 /// configured: 401 without one, 403 with a wrong one.
 pub fn authorize(st: &AppState, headers: &HeaderMap) -> Result<(), Problem> {
     if st.tokens.is_empty() {
         return Ok(());
     }
-    let given = headers
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "));
-    match given {
+    match bearer(headers) {
         None => Err(Problem::new(
             StatusCode::UNAUTHORIZED,
             "Unauthorized",
@@ -76,11 +80,7 @@ pub fn authorize(st: &AppState, headers: &HeaderMap) -> Result<(), Problem> {
         )
         .with_field("Authorization")),
         Some(t) => {
-            // Every configured token is compared (no early exit).
-            let ok = st.tokens.iter().fold(false, |acc, k| {
-                acc | same_secret(k.as_bytes(), t.as_bytes())
-            });
-            if ok {
+            if token_accepted(&st.tokens, t) {
                 Ok(())
             } else {
                 Err(Problem::new(
@@ -123,10 +123,7 @@ pub fn require_json(headers: &HeaderMap) -> Result<(), Problem> {
 
 /// Host names that are this machine.
 fn loopback_host(host: &str) -> bool {
-    let name = match host.strip_prefix('[') {
-        Some(v6) => v6.split(']').next().unwrap_or(""),
-        None => host.rsplit_once(':').map_or(host, |(h, _)| h),
-    };
+    let name = host_name(host);
     name.eq_ignore_ascii_case("localhost")
         || name
             .parse::<std::net::IpAddr>()
@@ -157,10 +154,6 @@ pub const COOKIE: &str = "zwidth_token";
 /// Whether the request carries an accepted user token: `Authorization:
 /// Bearer` or the dashboard's cookie.
 pub fn read_authorized(st: &AppState, h: &HeaderMap) -> bool {
-    let bearer = h
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "));
     let cookie = h
         .get_all(header::COOKIE)
         .iter()
@@ -168,7 +161,7 @@ pub fn read_authorized(st: &AppState, h: &HeaderMap) -> bool {
         .flat_map(|v| v.split(';'))
         .filter_map(|c| c.trim().strip_prefix(COOKIE)?.strip_prefix('='))
         .next();
-    [bearer, cookie]
+    [bearer(h), cookie]
         .into_iter()
         .flatten()
         .any(|t| token_accepted(&st.tokens, t))
@@ -187,7 +180,7 @@ fn open_read(path: &str) -> bool {
 /// with the sign-in page instead).
 pub async fn host_and_reads(State(st): State<AppState>, req: Request, next: Next) -> Response {
     if let Some(host) = req.headers().get(header::HOST) {
-        let host = String::from_utf8_lossy(host.as_bytes()).into_owned();
+        let host = String::from_utf8_lossy(host.as_bytes());
         if !host_allowed(&st.hosts, &host) {
             return Problem::new(
                 StatusCode::MISDIRECTED_REQUEST,

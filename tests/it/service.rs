@@ -944,11 +944,7 @@ fn reads_are_private_beyond_loopback_and_the_host_is_checked() {
     let s = start_on(dir.clone(), "0.0.0.0:0", &["--host", "zwidth.lab.example"]);
     let token = token_for(&s.base).unwrap();
     let list = format!("{}/v1/experiments", s.base);
-    let status = |r: Result<ureq::Response, ureq::Error>| match r {
-        Ok(r) => r.status(),
-        Err(ureq::Error::Status(c, _)) => c,
-        Err(e) => panic!("{e}"),
-    };
+    let status = |r: Result<ureq::Response, ureq::Error>| fetch(r).0;
     // The API: 401 problem+json without the token, 200 with it.
     match ureq::get(&list).call() {
         Err(ureq::Error::Status(401, r)) => {

@@ -10,14 +10,20 @@ static NEXT: AtomicUsize = AtomicUsize::new(0);
 /// The admin URL, or None (skip) when Postgres is not configured and not
 /// required. Panics when required and missing.
 pub fn admin_url() -> Option<String> {
-    match std::env::var("ZWIDTH_TEST_PG") {
+    required("ZWIDTH_TEST_PG", "the PostgreSQL half of this test")
+}
+
+/// Environment variable `name` set by `.ci/postgres start`, or None (skip,
+/// saying `what` is skipped) unless `ZWIDTH_REQUIRE_PG=1`, where it panics.
+fn required(name: &str, what: &str) -> Option<String> {
+    match std::env::var(name) {
         Ok(u) if !u.is_empty() => Some(u),
         _ => {
             assert!(
                 std::env::var("ZWIDTH_REQUIRE_PG").as_deref() != Ok("1"),
-                "ZWIDTH_REQUIRE_PG=1 but ZWIDTH_TEST_PG is not set: start one with `eval \"$(.ci/postgres start)\"`"
+                "ZWIDTH_REQUIRE_PG=1 but {name} is not set: start one with `eval \"$(.ci/postgres start)\"`"
             );
-            eprintln!("ZWIDTH_TEST_PG not set: the PostgreSQL half of this test is skipped");
+            eprintln!("{name} not set: {what} is skipped");
             None
         }
     }
@@ -72,15 +78,5 @@ pub fn fresh_database_blocking(name: &str) -> Option<String> {
 /// (`sslmode=verify-full` with the throwaway CA `.ci/postgres` made), or
 /// None (skip) unless required, as [`admin_url`].
 pub fn tls_url() -> Option<String> {
-    match std::env::var("ZWIDTH_TEST_PG_TLS") {
-        Ok(u) if !u.is_empty() => Some(u),
-        _ => {
-            assert!(
-                std::env::var("ZWIDTH_REQUIRE_PG").as_deref() != Ok("1"),
-                "ZWIDTH_REQUIRE_PG=1 but ZWIDTH_TEST_PG_TLS is not set: start one with `eval \"$(.ci/postgres start)\"`"
-            );
-            eprintln!("ZWIDTH_TEST_PG_TLS not set: the PostgreSQL TLS test is skipped");
-            None
-        }
-    }
+    required("ZWIDTH_TEST_PG_TLS", "the PostgreSQL TLS test")
 }
