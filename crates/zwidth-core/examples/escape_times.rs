@@ -18,7 +18,9 @@ use zwidth_core::zwidth::probe::{probe, ProbeKnobs};
 use zwidth_core::zwidth::SceneSpec;
 
 fn usage(why: &str) -> ! {
-    eprintln!("escape_times: {why}\nusage: escape_times SCENE.json B MAX_REALIZATIONS SEEDS K1,K2,…");
+    eprintln!(
+        "escape_times: {why}\nusage: escape_times SCENE.json B MAX_REALIZATIONS SEEDS K1,K2,…"
+    );
     std::process::exit(2)
 }
 
@@ -37,7 +39,8 @@ fn main() {
     let seeds: u64 = number("SEEDS", seeds);
     let ks: Vec<f64> = ks.split(',').map(|s| number("K", s)).collect();
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| usage(&format!("{path}: {e}")));
-    let spec: SceneSpec = serde_json::from_str(&text).unwrap_or_else(|e| usage(&format!("{path}: {e}")));
+    let spec: SceneSpec =
+        serde_json::from_str(&text).unwrap_or_else(|e| usage(&format!("{path}: {e}")));
     // The standard preset's probe knobs, with the realization cap given.
     let knobs = ProbeKnobs {
         periods: spec.probe.periods,

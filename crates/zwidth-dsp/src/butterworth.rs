@@ -66,7 +66,14 @@ pub fn design_lowpass(
     cutoff_hz: f64,
     fs: f64,
 ) -> Result<([Sos; MAX_SECTIONS], usize), Error> {
-    if !(1..=MAX_ORDER).contains(&order) {
+    if order == 0 {
+        return Err(Error::Parameter {
+            name: "order",
+            value: 0.0,
+            allowed: "must be at least 1",
+        });
+    }
+    if order > MAX_ORDER {
         return Err(Error::Capacity {
             name: "order",
             value: order as usize,

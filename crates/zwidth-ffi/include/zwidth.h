@@ -46,8 +46,12 @@ typedef enum {
    */
   ZW_NULL = 1,
   /*
-   A parameter is out of its range (named in `zw_error`), or a
-   position is not a finite number (the state is unchanged).
+   A parameter is out of its range (named in `zw_error`); or a
+   position is not a finite number (the state is unchanged); or a
+   position so far out that the estimate would not be a finite number
+   (±1e308 m into a difference): the state is then reset, as by
+   `zw_reset`, and the estimate not written. No call returns `ZW_OK`
+   with a non-finite estimate.
    */
   ZW_BAD_PARAMETER = 2,
   /*
@@ -103,7 +107,17 @@ typedef enum {
 /*
  An estimator's state and coefficients, owned by the caller. Fill it with
  one of the `zw_init_*` functions before any other call; a zeroed struct
- is refused with `ZW_NOT_INITIALIZED`.
+ is refused with `ZW_NOT_INITIALIZED`, and so is one whose last init
+ refused (a failed re-init never leaves the old estimator stepping).
+
+ Threads: every function is reentrant and keeps nothing between calls
+ but the caller's struct (the one global is a panic hook installed on
+ first use, silent for the library's own panics only), so different
+ estimators may be used from different threads at once. One estimator
+ is used by one thread at a time: calls on the same struct from two
+ threads at once must be serialized by the caller (a mutex), as for any
+ C struct written in place. The library never prints:
+ a panic inside it (a bug) returns `ZW_INTERNAL` silently.
  */
 typedef struct {
   uint64_t words[ZW_ESTIMATOR_WORDS];
@@ -229,7 +243,11 @@ zw_status zw_step(zw_estimator *e, double y, double *v);
 
 /*
  `zw_step` over `n` positions: `v[i]` from `y[i]`. A non-finite position
- refuses the whole block before any step (`ZW_BAD_PARAMETER`).
+ refuses the whole block before any step (`ZW_BAD_PARAMETER`); a step
+ whose estimate would not be finite resets the state and returns
+ `ZW_BAD_PARAMETER`, the estimates before it written. `e` is checked
+ first (`ZW_NULL`, `ZW_NOT_INITIALIZED`), even when `n` is 0; with `n`
+ 0, `y` and `v` may be null.
 
  # Safety
  `e` null or a `zw_estimator`; `y` and `v` null or arrays of `n` doubles

@@ -9,8 +9,13 @@
 //! - **Status codes**, never a panic across the boundary (each call runs
 //!   under `catch_unwind`): null pointers, a bad parameter (named in the
 //!   optional `zw_error`), a window or order beyond this build's capacity,
-//!   malformed JSON, a struct no `init` has filled, a non-finite position
-//!   (refused, the state unchanged).
+//!   malformed JSON, a struct no `init` has filled (or whose last init
+//!   refused), a non-finite position (refused, the state unchanged), an
+//!   estimate that would overflow (the state reset). One limit, one code:
+//!   a window or order beyond this build's capacity is `ZW_CAPACITY`
+//!   through the JSON init and the per-kind inits alike. Nothing printed.
+//! - **Threads**: reentrant, no global state; one estimator per thread at
+//!   a time (`zw_estimator`'s comment, in the header).
 //! - The same estimators, bit for bit, as the simulator: `zw_init_json`
 //!   takes the JSON estimator spec the API takes (`{"kind":"butterworth",
 //!   "cutoff_hz":100,"order":2}`), checked with the service's messages.
@@ -50,7 +55,17 @@ const _: () = assert!(
 
 /// An estimator's state and coefficients, owned by the caller. Fill it with
 /// one of the `zw_init_*` functions before any other call; a zeroed struct
-/// is refused with `ZW_NOT_INITIALIZED`.
+/// is refused with `ZW_NOT_INITIALIZED`, and so is one whose last init
+/// refused (a failed re-init never leaves the old estimator stepping).
+///
+/// Threads: every function is reentrant and keeps nothing between calls
+/// but the caller's struct (the one global is a panic hook installed on
+/// first use, silent for the library's own panics only), so different
+/// estimators may be used from different threads at once. One estimator
+/// is used by one thread at a time: calls on the same struct from two
+/// threads at once must be serialized by the caller (a mutex), as for any
+/// C struct written in place. The library never prints:
+/// a panic inside it (a bug) returns `ZW_INTERNAL` silently.
 #[repr(C)]
 pub struct zw_estimator {
     pub words: [u64; ZW_ESTIMATOR_WORDS],
@@ -63,8 +78,12 @@ pub enum zw_status {
     ZwOk = 0,
     /// A pointer argument was null.
     ZwNull = 1,
-    /// A parameter is out of its range (named in `zw_error`), or a
-    /// position is not a finite number (the state is unchanged).
+    /// A parameter is out of its range (named in `zw_error`); or a
+    /// position is not a finite number (the state is unchanged); or a
+    /// position so far out that the estimate would not be a finite number
+    /// (±1e308 m into a difference): the state is then reset, as by
+    /// `zw_reset`, and the estimate not written. No call returns `ZW_OK`
+    /// with a non-finite estimate.
     ZwBadParameter = 2,
     /// A window or order beyond this build's capacity (named, with the cap).
     ZwCapacity = 3,
@@ -126,9 +145,45 @@ const _: () = assert!(
         && std::mem::align_of::<Slot>() <= std::mem::align_of::<zw_estimator>()
 );
 
-/// Run `f`, turning a panic into `ZW_INTERNAL`.
+thread_local! {
+    /// True while this thread runs inside `guarded`.
+    static GUARDED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Installs, once, a panic hook that stays silent for panics inside
+/// `guarded` (they become `ZW_INTERNAL`; the library prints nothing) and
+/// passes every other panic to the hook that was there before.
+static QUIET_HOOK: std::sync::Once = std::sync::Once::new();
+
+/// Run `f`, turning a panic into `ZW_INTERNAL`, silently.
 fn guarded(f: impl FnOnce() -> zw_status) -> zw_status {
-    catch_unwind(AssertUnwindSafe(f)).unwrap_or(zw_status::ZwInternal)
+    QUIET_HOOK.call_once(|| {
+        let before = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !GUARDED.with(std::cell::Cell::get) {
+                before(info);
+            }
+        }));
+    });
+    let outer = GUARDED.with(|g| g.replace(true));
+    let status = catch_unwind(AssertUnwindSafe(f)).unwrap_or(zw_status::ZwInternal);
+    GUARDED.with(|g| g.set(outer));
+    status
+}
+
+/// An init: `f` under `guarded`; when it refuses, the struct behind `e`
+/// (if any) is marked unfilled, so a failed re-init never leaves the old
+/// estimator stepping: every later call answers `ZW_NOT_INITIALIZED`
+/// until an init succeeds.
+fn init_guarded(e: *mut zw_estimator, f: impl FnOnce() -> zw_status) -> zw_status {
+    let status = guarded(f);
+    if status != zw_status::ZwOk && !e.is_null() {
+        // SAFETY: a non-null `e` is a caller-owned zw_estimator (every
+        // init's contract), large and aligned enough for a Slot (asserted
+        // above); the magic is plain data, written where the Slot has it.
+        unsafe { std::ptr::addr_of_mut!((*e.cast::<Slot>()).magic).write(0) };
+    }
+    status
 }
 
 /// The filled estimator behind `e`.
@@ -279,7 +334,7 @@ pub unsafe extern "C" fn zw_init_json(
     quantization_m: f64,
     err: *mut zw_error,
 ) -> zw_status {
-    guarded(|| {
+    init_guarded(e, || {
         if spec_json.is_null() {
             // SAFETY: `err` as the contract.
             return unsafe {
@@ -314,9 +369,10 @@ pub unsafe extern "C" fn zw_init_json(
                 )
             };
         }
+        let mut parsed = None;
         let checked =
             zwidth_core::estimators::Sampling::new(rate_hz, quantization_m).and_then(|s| {
-                let spec = zwidth_core::estimators::EstimatorSpec::from_json(text)?;
+                let spec = parsed.insert(zwidth_core::estimators::EstimatorSpec::from_json(text)?);
                 // The service's checks and messages first.
                 spec.build(s)?;
                 spec.to_dsp()
@@ -324,17 +380,33 @@ pub unsafe extern "C" fn zw_init_json(
         match checked {
             // SAFETY: as the contract.
             Ok(spec) => unsafe { fill(e, &spec, rate_hz, quantization_m, err) },
-            // SAFETY: `err` as the contract.
-            // The parameter as the spec names it (`q`, not `estimator.q`),
-            // as the build's own checks name it.
-            Err(x) => unsafe {
-                explain(
-                    err,
-                    zw_status::ZwBadParameter,
-                    x.field.strip_prefix("estimator.").unwrap_or(&x.field),
-                    &x.to_string(),
-                )
-            },
+            Err(x) => {
+                // One limit, one code through every entry point: a window
+                // or order beyond this build's capacity is ZW_CAPACITY
+                // even where the service's own (wider) limit refused it
+                // first, as `zw_init_foaw` and `zw_init_butterworth` say.
+                let capacity = parsed
+                    .and_then(|spec| spec.to_dsp().ok())
+                    .and_then(|d| RigEstimator::new(&d, rate_hz, quantization_m).err())
+                    .filter(|c| matches!(c, Error::Capacity { .. }));
+                if let Some(c) = capacity {
+                    // SAFETY: `err` as the contract.
+                    return unsafe {
+                        explain(err, zw_status::ZwCapacity, c.parameter(), &c.to_string())
+                    };
+                }
+                // SAFETY: `err` as the contract.
+                // The parameter as the spec names it (`q`, not `estimator.q`),
+                // as the build's own checks name it.
+                unsafe {
+                    explain(
+                        err,
+                        zw_status::ZwBadParameter,
+                        x.field.strip_prefix("estimator.").unwrap_or(&x.field),
+                        &x.to_string(),
+                    )
+                }
+            }
         }
     })
 }
@@ -350,7 +422,9 @@ pub unsafe extern "C" fn zw_init_fdm(
     err: *mut zw_error,
 ) -> zw_status {
     // SAFETY: as the contract (the quantization is unused by FDM).
-    guarded(|| unsafe { fill(e, &KindSpec::Fdm.into(), rate_hz, 1.0, err) })
+    init_guarded(e, || unsafe {
+        fill(e, &KindSpec::Fdm.into(), rate_hz, 1.0, err)
+    })
 }
 
 /// Fill `e` with FDM and a Butterworth low-pass of `order` (1 to
@@ -368,7 +442,7 @@ pub unsafe extern "C" fn zw_init_butterworth(
 ) -> zw_status {
     let spec = KindSpec::Butterworth { cutoff_hz, order }.into();
     // SAFETY: as the contract.
-    guarded(|| unsafe { fill(e, &spec, rate_hz, 1.0, err) })
+    init_guarded(e, || unsafe { fill(e, &spec, rate_hz, 1.0, err) })
 }
 
 /// Fill `e` with the Kalman filter: `model` a `zw_q_model`; `rho` ≤ 0: the
@@ -387,25 +461,27 @@ pub unsafe extern "C" fn zw_init_kalman(
     rho: f64,
     err: *mut zw_error,
 ) -> zw_status {
-    let model = match model {
-        m if m == zw_q_model::ZwWhiteJerk as i32 => QModel::WhiteJerk,
-        m if m == zw_q_model::ZwDiagonal as i32 => QModel::Diagonal,
-        // SAFETY: `err` as the contract.
-        _ => {
-            return unsafe {
-                explain(
-                    err,
-                    zw_status::ZwBadParameter,
-                    "model",
-                    "model must be ZW_WHITE_JERK or ZW_DIAGONAL",
-                )
+    init_guarded(e, || {
+        let model = match model {
+            m if m == zw_q_model::ZwWhiteJerk as i32 => QModel::WhiteJerk,
+            m if m == zw_q_model::ZwDiagonal as i32 => QModel::Diagonal,
+            // SAFETY: `err` as the contract.
+            _ => {
+                return unsafe {
+                    explain(
+                        err,
+                        zw_status::ZwBadParameter,
+                        "model",
+                        "model must be ZW_WHITE_JERK or ZW_DIAGONAL",
+                    )
+                }
             }
-        }
-    };
-    let rho = if rho <= 0.0 { None } else { Some(rho) };
-    let spec = KindSpec::Kalman { q, model, rho }.into();
-    // SAFETY: as the contract.
-    guarded(|| unsafe { fill(e, &spec, rate_hz, quantization_m, err) })
+        };
+        let rho = if rho <= 0.0 { None } else { Some(rho) };
+        let spec = KindSpec::Kalman { q, model, rho }.into();
+        // SAFETY: as the contract.
+        unsafe { fill(e, &spec, rate_hz, quantization_m, err) }
+    })
 }
 
 /// Fill `e` with FOAW: `fit` a `zw_foaw_fit`, band half-width `d_m` ≥ 0 (usually the encoder
@@ -423,31 +499,33 @@ pub unsafe extern "C" fn zw_init_foaw(
     outlier_tolerance: bool,
     err: *mut zw_error,
 ) -> zw_status {
-    let fit = match fit {
-        f if f == zw_foaw_fit::ZwFoawEnd as i32 => FoawFit::End,
-        f if f == zw_foaw_fit::ZwFoawBest as i32 => FoawFit::Best,
-        f if f == zw_foaw_fit::ZwFoawBestR as i32 => FoawFit::BestR,
-        // SAFETY: `err` as the contract.
-        _ => {
-            return unsafe {
-                explain(
-                    err,
-                    zw_status::ZwBadParameter,
-                    "fit",
-                    "fit must be ZW_FOAW_END, ZW_FOAW_BEST or ZW_FOAW_BEST_R",
-                )
+    init_guarded(e, || {
+        let fit = match fit {
+            f if f == zw_foaw_fit::ZwFoawEnd as i32 => FoawFit::End,
+            f if f == zw_foaw_fit::ZwFoawBest as i32 => FoawFit::Best,
+            f if f == zw_foaw_fit::ZwFoawBestR as i32 => FoawFit::BestR,
+            // SAFETY: `err` as the contract.
+            _ => {
+                return unsafe {
+                    explain(
+                        err,
+                        zw_status::ZwBadParameter,
+                        "fit",
+                        "fit must be ZW_FOAW_END, ZW_FOAW_BEST or ZW_FOAW_BEST_R",
+                    )
+                }
             }
+        };
+        let spec = KindSpec::Foaw {
+            fit,
+            d: Some(d_m),
+            max_window: max_window as usize,
+            outlier_tolerance,
         }
-    };
-    let spec = KindSpec::Foaw {
-        fit,
-        d: Some(d_m),
-        max_window: max_window as usize,
-        outlier_tolerance,
-    }
-    .into();
-    // SAFETY: as the contract.
-    guarded(|| unsafe { fill(e, &spec, rate_hz, 1.0, err) })
+        .into();
+        // SAFETY: as the contract.
+        unsafe { fill(e, &spec, rate_hz, 1.0, err) }
+    })
 }
 
 /// Fill `e` with Levant's differentiator (`scheme` a `zw_levant_scheme`), gains `alpha` (m/s²) and
@@ -465,26 +543,34 @@ pub unsafe extern "C" fn zw_init_levant(
     err: *mut zw_error,
 ) -> zw_status {
     use zw_levant_scheme as S;
-    let (discretization, output) = match scheme {
-        s if s == S::ZwLevantExplicit as i32 => (Discretization::Explicit, ImplicitOutput::State),
-        s if s == S::ZwLevantImplicit as i32 => (Discretization::Implicit, ImplicitOutput::State),
-        s if s == S::ZwLevantImplicitEq7 as i32 => (Discretization::Implicit, ImplicitOutput::Eq7),
-        // SAFETY: `err` as the contract.
-        _ => {
-            return unsafe {
-                explain(err, zw_status::ZwBadParameter, "scheme", "scheme must be ZW_LEVANT_EXPLICIT, ZW_LEVANT_IMPLICIT or ZW_LEVANT_IMPLICIT_EQ7")
+    init_guarded(e, || {
+        let (discretization, output) = match scheme {
+            s if s == S::ZwLevantExplicit as i32 => {
+                (Discretization::Explicit, ImplicitOutput::State)
             }
+            s if s == S::ZwLevantImplicit as i32 => {
+                (Discretization::Implicit, ImplicitOutput::State)
+            }
+            s if s == S::ZwLevantImplicitEq7 as i32 => {
+                (Discretization::Implicit, ImplicitOutput::Eq7)
+            }
+            // SAFETY: `err` as the contract.
+            _ => {
+                return unsafe {
+                    explain(err, zw_status::ZwBadParameter, "scheme", "scheme must be ZW_LEVANT_EXPLICIT, ZW_LEVANT_IMPLICIT or ZW_LEVANT_IMPLICIT_EQ7")
+                }
+            }
+        };
+        let spec = KindSpec::Levant {
+            alpha,
+            lambda,
+            discretization,
+            output,
         }
-    };
-    let spec = KindSpec::Levant {
-        alpha,
-        lambda,
-        discretization,
-        output,
-    }
-    .into();
-    // SAFETY: as the contract.
-    guarded(|| unsafe { fill(e, &spec, rate_hz, 1.0, err) })
+        .into();
+        // SAFETY: as the contract.
+        unsafe { fill(e, &spec, rate_hz, 1.0, err) }
+    })
 }
 
 /// One position `y` (m) in, the velocity estimate (m/s) into `*v`. A
@@ -506,14 +592,21 @@ pub unsafe extern "C" fn zw_step(e: *mut zw_estimator, y: f64, v: *mut f64) -> z
         if !y.is_finite() {
             return zw_status::ZwBadParameter;
         }
-        // SAFETY: `v` is a valid double, as the contract.
-        unsafe { v.write(est.step(y)) };
+        match finite_step(est, y) {
+            // SAFETY: `v` is a valid double, as the contract.
+            Some(x) => unsafe { v.write(x) },
+            None => return zw_status::ZwBadParameter,
+        }
         zw_status::ZwOk
     })
 }
 
 /// `zw_step` over `n` positions: `v[i]` from `y[i]`. A non-finite position
-/// refuses the whole block before any step (`ZW_BAD_PARAMETER`).
+/// refuses the whole block before any step (`ZW_BAD_PARAMETER`); a step
+/// whose estimate would not be finite resets the state and returns
+/// `ZW_BAD_PARAMETER`, the estimates before it written. `e` is checked
+/// first (`ZW_NULL`, `ZW_NOT_INITIALIZED`), even when `n` is 0; with `n`
+/// 0, `y` and `v` may be null.
 ///
 /// # Safety
 /// `e` null or a `zw_estimator`; `y` and `v` null or arrays of `n` doubles
@@ -526,17 +619,17 @@ pub unsafe extern "C" fn zw_step_n(
     n: usize,
 ) -> zw_status {
     guarded(|| {
+        // SAFETY: as the contract.
+        let est = match unsafe { filled(e) } {
+            Ok(est) => est,
+            Err(s) => return s,
+        };
         if n == 0 {
             return zw_status::ZwOk;
         }
         if y.is_null() || v.is_null() {
             return zw_status::ZwNull;
         }
-        // SAFETY: as the contract.
-        let est = match unsafe { filled(e) } {
-            Ok(est) => est,
-            Err(s) => return s,
-        };
         // Read through raw pointers: `y` and `v` may alias (in place).
         // SAFETY: `y` holds n doubles, as the contract.
         if (0..n).any(|i| !unsafe { y.add(i).read() }.is_finite()) {
@@ -544,10 +637,28 @@ pub unsafe extern "C" fn zw_step_n(
         }
         for i in 0..n {
             // SAFETY: both hold n doubles, as the contract.
-            unsafe { v.add(i).write(est.step(y.add(i).read())) };
+            match finite_step(est, unsafe { y.add(i).read() }) {
+                // SAFETY: as above.
+                Some(x) => unsafe { v.add(i).write(x) },
+                None => return zw_status::ZwBadParameter,
+            }
         }
         zw_status::ZwOk
     })
+}
+
+/// One step whose estimate is a finite number, or `None` with the state
+/// reset (as `zw_reset`): a position far enough out (±1e308 m into a
+/// difference) overflows the estimator's arithmetic, and every later
+/// estimate would be NaN.
+fn finite_step(est: &mut RigEstimator, y: f64) -> Option<f64> {
+    let x = est.step(y);
+    if x.is_finite() {
+        Some(x)
+    } else {
+        est.reset();
+        None
+    }
 }
 
 /// Forget all history, as if newly filled.
@@ -624,4 +735,49 @@ pub unsafe extern "C" fn zw_dsp_identity(
         copy_c(dst, &json);
         zw_status::ZwOk
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    /// Panics the process's own hook saw.
+    static SEEN: AtomicUsize = AtomicUsize::new(0);
+
+    /// The library prints nothing of its own panics (issue 45: two threads
+    /// on one struct printed caught panics from inside `zw_step`), and
+    /// passes every other panic to the hook that was there before. The
+    /// only test of this binary: it owns the process's panic hook.
+    #[test]
+    fn a_panic_inside_is_internal_and_silent_and_others_reach_the_old_hook() {
+        std::panic::set_hook(Box::new(|info| {
+            eprintln!("{info}");
+            SEEN.fetch_add(1, Ordering::SeqCst);
+        }));
+        assert_eq!(guarded(|| panic!("a bug")), zw_status::ZwInternal);
+        assert_eq!(
+            SEEN.load(Ordering::SeqCst),
+            0,
+            "the library's panic was printed"
+        );
+        assert_eq!(guarded(|| zw_status::ZwOk), zw_status::ZwOk);
+        // Outside the library, after the quiet hook is installed: the old
+        // hook still sees the panic.
+        assert!(std::panic::catch_unwind(|| panic!("the host's")).is_err());
+        assert_eq!(SEEN.load(Ordering::SeqCst), 1);
+        // A failed init marks the struct unfilled.
+        let mut e = Box::new(zw_estimator {
+            words: [0; ZW_ESTIMATOR_WORDS],
+        });
+        let p: *mut zw_estimator = &mut *e;
+        // SAFETY: `p` is a valid struct; `err` null is allowed.
+        unsafe {
+            assert_eq!(zw_init_fdm(p, 1e3, std::ptr::null_mut()), zw_status::ZwOk);
+            assert_eq!(init_guarded(p, || panic!("a bug")), zw_status::ZwInternal);
+            let mut v = 0.0;
+            assert_eq!(zw_step(p, 0.0, &mut v), zw_status::ZwNotInitialized);
+        }
+        assert_eq!(SEEN.load(Ordering::SeqCst), 1);
+    }
 }

@@ -172,6 +172,16 @@ static int refusals(void) {
     REFUSE(zw_init_fdm(&est, INFINITY, &err), ZW_BAD_PARAMETER);
     REFUSE(zw_init_butterworth(&est, 1e3, 100.0, 11, &err), ZW_CAPACITY);
     CHECK(strcmp(err.parameter, "order") == 0, "order names %s", err.parameter);
+    /* Order 0 is a bad parameter, not beyond the capacity (issue 45). */
+    REFUSE(zw_init_butterworth(&est, 1e3, 100.0, 0, &err), ZW_BAD_PARAMETER);
+    CHECK(strcmp(err.parameter, "order") == 0, "order 0 names %s", err.parameter);
+    /* One limit, one code: a window past this build's 64 through JSON is
+     * ZW_CAPACITY, as through zw_init_foaw, though the service's own limit
+     * (4096) refuses it as well. */
+    REFUSE(zw_init_json(&est, "{\"kind\":\"foaw\",\"fit\":\"end\",\"max_window\":5000}", 1e3, 1e-6, &err),
+           ZW_CAPACITY);
+    CHECK(strcmp(err.parameter, "max_window") == 0 && strstr(err.message, "64") != NULL,
+          "capacity through JSON names %s: %s", err.parameter, err.message);
     REFUSE(zw_init_kalman(&est, 1e3, 1e-6, 1e4, 7, 0.0, &err), ZW_BAD_PARAMETER);
     CHECK(strcmp(err.parameter, "model") == 0, "model names %s", err.parameter);
     REFUSE(zw_init_kalman(&est, 1e3, 1e-6, 1e4, ZW_WHITE_JERK, 1.5, &err), ZW_BAD_PARAMETER);
@@ -199,6 +209,36 @@ static int refusals(void) {
     CHECK(y[0] == 0.0, "a refused block writes nothing");
     REFUSE(zw_step_n(&est, NULL, y, 2), ZW_NULL);
     REFUSE(zw_step_n(&est, NULL, NULL, 0), ZW_OK);
+    REFUSE(zw_step_n(NULL, NULL, NULL, 0), ZW_NULL);
+    REFUSE(zw_step_n(&zeroed, NULL, NULL, 0), ZW_NOT_INITIALIZED);
+    /* A position that overflows the estimate (2e308 m/ms) is refused and
+     * resets the state: never ZW_OK with a non-finite estimate. */
+    REFUSE(zw_init_fdm(&est, 1e3, &err), ZW_OK);
+    REFUSE(zw_step(&est, 1e308, &v), ZW_OK);
+    CHECK(isfinite(v), "the first step is finite: %g", v);
+    v = 7.0;
+    REFUSE(zw_step(&est, -1e308, &v), ZW_BAD_PARAMETER);
+    CHECK(v == 7.0, "a refused step writes nothing");
+    REFUSE(zw_step(&est, 1e-3, &v), ZW_OK);
+    REFUSE(zw_step(&est, 2e-3, &v), ZW_OK);
+    CHECK(v == 1.0, "after the reset FDM gives (2e-3 - 1e-3)*1e3 = 1, got %g", v);
+    y[0] = 1e308;
+    y[1] = -1e308;
+    REFUSE(zw_step_n(&est, y, y, 2), ZW_BAD_PARAMETER);
+    REFUSE(zw_step(&est, 0.0, &v), ZW_OK);
+    CHECK(isfinite(v), "finite after a refused block: %g", v);
+    /* A failed re-init leaves the struct refusing, not the old filter
+     * running: by a bad value, bad JSON and a bad enumerator. */
+    REFUSE(zw_init_fdm(&est, 0.0, &err), ZW_BAD_PARAMETER);
+    REFUSE(zw_step(&est, 0.0, &v), ZW_NOT_INITIALIZED);
+    REFUSE(zw_init_fdm(&est, 1e3, &err), ZW_OK);
+    REFUSE(zw_init_json(&est, "{", 1e3, 1e-6, &err), ZW_PARSE);
+    REFUSE(zw_reset(&est), ZW_NOT_INITIALIZED);
+    REFUSE(zw_init_fdm(&est, 1e3, &err), ZW_OK);
+    REFUSE(zw_init_kalman(&est, 1e3, 1e-6, 1e4, 7, 0.0, &err), ZW_BAD_PARAMETER);
+    REFUSE(zw_fingerprint(&est, &fp), ZW_NOT_INITIALIZED);
+    REFUSE(zw_init_fdm(&est, 1e3, &err), ZW_OK);
+    REFUSE(zw_step(&est, 0.0, &v), ZW_OK);
     REFUSE(zw_fingerprint(&est, NULL), ZW_NULL);
     REFUSE(zw_fingerprint(&est, &fp), ZW_OK);
     CHECK(zw_abi_version() == ZW_ABI_VERSION, "abi version");
