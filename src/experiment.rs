@@ -91,23 +91,9 @@ impl ExperimentSpec {
             ExperimentSpec::Map(m) => search::validate(m),
             ExperimentSpec::Compare(c) => {
                 let scene = c.scene.clone().unwrap_or_else(compare::seed_2018_scene);
-                let sc = scene.validate().map_err(|e| e.within("scene"))?;
+                scene.validate().map_err(|e| e.within("scene"))?;
                 if let Some(list) = &c.estimators {
-                    if list.is_empty() || list.len() > 20 {
-                        return Err(SpecError::new(
-                            "estimators",
-                            list.len(),
-                            "give 1 to 20 estimators, or leave it out for the paper's four",
-                        ));
-                    }
-                    for (i, e) in list.iter().enumerate() {
-                        sc.with_estimator(e.clone()).map_err(|err| SpecError {
-                            field: err
-                                .field
-                                .replacen("estimator", &format!("estimators[{i}]"), 1),
-                            ..err
-                        })?;
-                    }
+                    compare::check_estimators(&scene, list)?;
                 }
                 if let Some(t) = &c.tuned {
                     if c.estimators.is_some() {

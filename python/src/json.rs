@@ -153,8 +153,17 @@ impl Serialize for Walk<'_, '_> {
             return s.serialize_bool(b.is_true());
         }
         if let Ok(d) = o.cast::<PyDict>() {
-            let mut m = s.serialize_map(Some(d.len()))?;
-            for (k, v) in d.iter() {
+            // A snapshot of the items: a value whose `__float__` or
+            // `__index__` changes the dict would make pyo3's iterator panic
+            // (a PanicException past `except Exception`: issue 45).
+            let items: Vec<(Bound<'_, PyAny>, Bound<'_, PyAny>)> = d
+                .items()
+                .iter()
+                .map(|kv| kv.extract())
+                .collect::<PyResult<_>>()
+                .map_err(ser::Error::custom)?;
+            let mut m = s.serialize_map(Some(items.len()))?;
+            for (k, v) in items {
                 let Ok(key) = k.cast::<PyString>() else {
                     return Err(self
                         .inner(&k, format!("{} key", self.path).trim_start().to_string())

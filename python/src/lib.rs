@@ -24,6 +24,11 @@ const POLL: std::time::Duration = std::time::Duration::from_millis(100);
 /// `quantization` the encoder step (m). `step(y)` takes one position (m)
 /// and returns the velocity (m/s); `run(positions)` a 1-D array of them
 /// (the GIL released); `reset()` forgets the history.
+///
+/// Threads: one Estimator is used by one thread at a time (it is one
+/// filter's state); a call from a second thread while one runs raises
+/// RuntimeError ("Already borrowed") and changes nothing. Estimators are
+/// independent: one per thread run in parallel.
 #[pyclass(module = "zwidth")]
 struct Estimator {
     built: Built,
@@ -48,6 +53,22 @@ fn spec_text(spec: &Bound<'_, PyAny>) -> PyResult<String> {
 /// Any error as a ValueError with its message (the spec errors name the field).
 pub(crate) fn value_error(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
+}
+
+/// `obj` as positions (m): a contiguous float64 array read as it is,
+/// anything else through `zwidth._arrays.positions` (one conversion for
+/// the package, naming `name` when it refuses).
+fn positions_of(py: Python<'_>, name: &str, obj: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
+    if let Ok(a) = obj.extract::<PyReadonlyArray1<'_, f64>>() {
+        if let Ok(s) = a.as_slice() {
+            return Ok(s.to_vec());
+        }
+    }
+    let converted = py
+        .import("zwidth._arrays")?
+        .call_method1("positions", (name, obj))?;
+    let a: PyReadonlyArray1<'_, f64> = converted.extract()?;
+    Ok(a.as_slice().map_err(value_error)?.to_vec())
 }
 
 /// A position that is not a finite number, named with its index.
@@ -86,13 +107,16 @@ impl Estimator {
         Ok(self.built.update(y))
     }
 
-    /// Velocities (m/s) for a 1-D array of positions (m), in order.
+    /// Velocities (m/s) for positions (m), in order: a 1-D array of any
+    /// numeric dtype (converted), a list or tuple, a strided view (copied),
+    /// or a table (structured or record array, DataFrame, dict) by its
+    /// `position_m` column; anything else is a ValueError naming it.
     fn run<'py>(
         &mut self,
         py: Python<'py>,
-        positions: PyReadonlyArray1<'py, f64>,
+        positions: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let ys = positions.as_slice().map_err(value_error)?.to_vec();
+        let ys = positions_of(py, "positions", positions)?;
         check_finite(&ys)?;
         // In slices of about POLL, the GIL taken back between them to
         // deliver Ctrl-C: one sample can cost milliseconds (FOAW's best

@@ -170,3 +170,13 @@ def test_https_with_the_ca_given_by_argument_or_environment(tmp_path, monkeypatc
     finally:
         p.terminate()
         p.wait(timeout=30)
+
+
+def test_compare_refuses_a_bare_string():
+    """Issue 45: `compare("id")` asked for runs "i,d" and answered 404 "no
+    experiment 0"; a bare string is refused before any request."""
+    c = zwidth.Client("http://127.0.0.1:9")
+    for bad, words in [("abc", "ids = 'abc'"), ([], "one or more"), (["a", 3], "one or more")]:
+        with pytest.raises(ValueError) as e:
+            c.compare(bad)
+        assert words in str(e.value), str(e.value)

@@ -51,3 +51,18 @@ def test_a_slow_sine_s_derivative_is_recovered():
 def test_bad_input_names_the_field(call, field):
     with pytest.raises(ValueError, match=field):
         call()
+
+
+def test_a_table_read_with_its_header_is_differentiated_by_its_position_column():
+    """Issue 45: np.genfromtxt(names=True), the usual way to read a CSV with
+    a header, gave numpy's TypeError even with the documented column name."""
+    import io
+
+    csv = "t_s,force_n,position_m\n" + "".join(f"{i * 1e-3},0,{i * 1e-6}\n" for i in range(10))
+    table = np.genfromtxt(io.StringIO(csv), delimiter=",", names=True)
+    x_hat, v = zwidth.diff.fdm(table, 1e-3)
+    want_x, want_v = zwidth.diff.fdm(table["position_m"], 1e-3)
+    assert np.array_equal(x_hat, want_x) and np.array_equal(v, want_v)
+    assert np.array_equal(zwidth.estimate(table, {"kind": "fdm"}, 1000), want_v)
+    with pytest.raises(ValueError, match=r"^x = \(a table with columns \['t_s', 'force_n'\]\)"):
+        zwidth.diff.fdm(table[["t_s", "force_n"]], 1e-3)

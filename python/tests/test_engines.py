@@ -327,3 +327,14 @@ def test_ctrl_c_stops_a_long_estimator_run_and_the_accuracy_study():
     elapsed = _interrupted_after(0.5, lambda: zwidth.accuracy(list(range(1000, 41000, 1000)),
                                                                quantization=1e-6))
     assert elapsed < 3.0, elapsed
+
+
+def test_compare_takes_the_api_s_number_of_estimators():
+    """Issue 45: 0 or 21 estimators ran in Python where the API refuses them
+    (422); the limit is one constant (zwidth-core's compare::MAX_ESTIMATORS)."""
+    for n in (0, 21):
+        with pytest.raises(ValueError, match=rf"^estimators = {n} is not allowed: give 1 to 20"):
+            zwidth.compare(EX / "linear_1khz.json", accuracy="draft", estimators=[{"kind": "fdm"}] * n)
+    with pytest.raises(ValueError, match=r"^estimators\[1\]\.cutoff_hz = "):
+        zwidth.compare(EX / "linear_1khz.json", accuracy="draft",
+                       estimators=[{"kind": "fdm"}, {"kind": "butterworth", "cutoff_hz": -1}])

@@ -141,5 +141,89 @@ def test_bad_positions_are_refused_and_change_nothing():
         e.step(float("inf"))
     # Unchanged: the next difference is from 1e-3.
     assert e.step(2e-3) == pytest.approx(1.0, rel=1e-12)
-    with pytest.raises(TypeError):
+    with pytest.raises(ValueError, match=r"^positions = \(an array of shape \(2, 2\)\)"):
         e.run(np.zeros((2, 2)))
+
+
+def test_positions_of_any_numeric_kind_are_converted_or_refused_naming_them():
+    """Issue 45: float32, int, list and 2-D inputs raised numpy's TypeError
+    ("cannot be cast"), a strided view "not contiguous" naming nothing."""
+    ys = np.arange(12) * 1e-3  # m
+    want = zwidth.Estimator({"kind": "fdm"}, 1000, 1e-6).run(ys)
+
+    def run(x):
+        return zwidth.Estimator({"kind": "fdm"}, 1000, 1e-6).run(x)
+
+    for x in (ys.astype(np.float32), ys.tolist(), tuple(ys)):
+        assert np.array_equal(run(x), run(np.asarray(x, dtype=float)))
+    assert np.array_equal(run(np.arange(12)), run(np.arange(12.0)))
+    # A strided view: every other sample of a longer array, copied.
+    longer = np.repeat(ys, 2)
+    assert np.array_equal(run(longer[::2]), want)
+    # A table by its position_m column: what np.genfromtxt(names=True)
+    # gives for the CSV header t_s,force_n,position_m.
+    table = np.zeros(12, dtype=[("t_s", float), ("force_n", float), ("position_m", float)])
+    table["position_m"] = ys
+    assert np.array_equal(run(table), want)
+    assert np.array_equal(run(table.view(np.recarray)), want)
+    assert np.array_equal(run({"position_m": ys}), want)
+    for bad, words in [
+        (np.zeros((3, 2)), "shape (3, 2)"),
+        ("0.001", "'0.001'"),
+        (["a", "b"], "numbers (m)"),
+        (np.zeros(3, dtype=[("x", float)]), "needs a position_m column"),
+        (np.float64(1.0), "shape ()"),
+    ]:
+        with pytest.raises(ValueError) as e:
+            run(bad)
+        assert str(e.value).startswith("positions = ") and words in str(e.value), str(e.value)
+
+
+def test_one_estimator_is_used_by_one_thread_at_a_time_as_documented():
+    """The thread rule the docstring states: a second thread's call while a
+    run holds the estimator is a RuntimeError and changes nothing; two
+    estimators run in parallel."""
+    assert "one thread at a time" in zwidth.Estimator.__doc__
+    slow = {"kind": "foaw", "fit": "best_r", "max_window": 4096, "outlier_tolerance": True}
+    e = zwidth.Estimator(slow, 1000, 1e-6)
+    started, errors = threading.Event(), []
+
+    def long_run():
+        started.set()
+        e.run(np.zeros(20_000))
+
+    t = threading.Thread(target=long_run)
+    t.start()
+    started.wait()
+    import time
+
+    deadline = time.monotonic() + 30
+    while t.is_alive() and not errors and time.monotonic() < deadline:
+        try:
+            e.step(0.0)
+        except RuntimeError as x:
+            errors.append(str(x))
+        time.sleep(0.01)
+    t.join()
+    assert errors and "borrowed" in errors[0].lower(), errors
+
+
+def test_a_dict_changed_while_it_is_read_is_a_value_error_not_a_panic():
+    """Issue 45: a value whose conversion changes the dict made pyo3's
+    iterator panic (a PanicException, which `except Exception` misses)."""
+    spec = {"kind": "butterworth", "cutoff_hz": 100.0}
+
+    class Sneaky:
+        """An int by value (as numpy's are) that adds a key when read."""
+
+        def __index__(self):
+            spec["added_while_read"] = 1
+            return 2
+
+    spec["order"] = Sneaky()
+    try:
+        zwidth.Estimator(spec, 1000, 1e-6)
+    except ValueError:
+        pass  # refused naming a field: also fine
+    except BaseException as x:  # noqa: BLE001 - a PanicException is a BaseException
+        pytest.fail(f"{type(x).__name__}: {x}")

@@ -73,3 +73,14 @@ def test_bad_traces_raise_value_error_naming_line_and_column(recorded):
         zwidth.record(SCENE, period_s=0)
     with pytest.raises(ValueError, match=r"^peak_force = nan is not allowed: every number must be finite"):
         zwidth.record(SCENE, peak_force=float("nan"))
+
+
+def test_a_structured_array_with_the_documented_columns_is_a_trace(recorded):
+    """Issue 45: a structured array (np.genfromtxt(names=True)) gave numpy's
+    TypeError; with the columns t_s, force_n, position_m it is the trace."""
+    table = np.genfromtxt(recorded, delimiter=",", names=True)
+    got = zwidth.identify(table)
+    want = zwidth.identify(parse(recorded))
+    assert got.to_dict() == want.to_dict()
+    with pytest.raises(ValueError, match="missing position_m"):
+        zwidth.identify(table[["t_s", "force_n"]])

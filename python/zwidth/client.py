@@ -169,6 +169,14 @@ class Client:
         or SVG with `format="text"` or `"svg"`."""
         if format not in ("json", "text", "svg"):
             raise ValueError(f"format = {format} is not allowed: json, text or svg")
+        if isinstance(ids, (str, bytes)):
+            # A bare id would be read letter by letter ("abc" as a, b, c).
+            raise ValueError(f"ids = {ids!r} is not allowed: a list of experiment ids, "
+                             f"e.g. [{ids!r}, …]")
+        ids = list(ids)
+        bad = [i for i in ids if not isinstance(i, str) or not i]
+        if not ids or bad:
+            raise ValueError(f"ids = {ids!r} is not allowed: one or more experiment ids (str)")
         q = {"runs": ",".join(ids), "format": format}
         return self._request("GET", "/v1/compare", query=q, raw=format != "json")
 

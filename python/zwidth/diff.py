@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from typing import Any, Callable, Tuple
 
+from ._arrays import positions
 from ._zwidth import Estimator
 
 __all__ = ["KINDS", "fdm", "butterworth", "kalman", "adaptive_kalman", "foaw", "levant"]
@@ -28,17 +29,13 @@ KINDS = ("fdm", "butterworth", "kalman", "adaptive_kalman", "foaw", "levant")
 
 def _method(kind: str) -> Callable[..., Tuple[Any, Any]]:
     def differentiate(x: Any, dt: float, *, quantization: float = 1e-9, **params: Any):
-        import numpy as np
-
         try:
             ok = math.isfinite(float(dt)) and float(dt) > 0
         except (TypeError, ValueError):
             ok = False
         if not ok:
             raise ValueError(f"dt = {dt} is not allowed: must be a finite number > 0 (s)")
-        xs = np.ascontiguousarray(x, dtype=float)
-        if xs.ndim != 1:
-            raise ValueError(f"x = (an array of shape {xs.shape}) is not allowed: must be 1-D (m)")
+        xs = positions("x", x)
         e = Estimator({"kind": kind, **params}, 1.0 / float(dt), quantization)
         return xs.copy(), e.run(xs)
 

@@ -490,9 +490,8 @@ def estimate(positions: Any, estimator: Union[str, Dict[str, Any]], rate_hz: flo
     """Velocities (m/s) for positions (m) sampled at `rate_hz` through an
     encoder of step `quantization` (m), by `estimator` (an API estimator
     spec): `zwidth estimate` in process, the same bits (zwidth-dsp)."""
-    import numpy as np
-
+    from ._arrays import positions as as_positions
     from ._zwidth import Estimator
 
     return Estimator(estimator, float(rate_hz), float(quantization)).run(
-        np.ascontiguousarray(positions, dtype=float))
+        as_positions("positions", positions))

@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 
 from . import _zwidth
+from ._arrays import column_names
 from .engines import _scene_text
 
 TYPE_CHECKING = False
@@ -107,10 +108,11 @@ def _csv(name: str, trace: Any) -> str:
             raise ValueError(f"{name} = {path} is not allowed: a readable CSV file ({why})") from None
     import numpy as np
 
-    if hasattr(trace, "columns") or isinstance(trace, dict):
-        missing = [c for c in COLUMNS if c not in trace]
+    names = column_names(trace)
+    if names is not None:
+        missing = [c for c in COLUMNS if c not in names]
         if missing:
-            raise ValueError(f"{name} = (columns {list(trace.keys())}) is not allowed: "
+            raise ValueError(f"{name} = (columns {names}) is not allowed: "
                              f"needs the columns {', '.join(COLUMNS)}; missing {', '.join(missing)}")
         cols = [np.atleast_1d(np.asarray(trace[c], dtype=float)) for c in COLUMNS]
     else:

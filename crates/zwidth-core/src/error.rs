@@ -51,15 +51,38 @@ pub fn parse_json<T: serde::de::DeserializeOwned>(
             "" | "." | "?" => what.to_string(),
             p => format!("{what}.{p}"),
         };
+        let inner = e.inner().to_string();
+        // A refusal a hand-written Deserialize wrote as SpecError writes
+        // one (`estimators::kind_error`): the field below this path.
+        if let Some(nested) = refusal_in(&inner) {
+            return nested.within(&field);
+        }
         SpecError::new(
             field,
             "(as written)",
-            format!("is not a valid {noun}: {}", e.inner()),
+            format!("is not a valid {noun}: {inner}"),
         )
     })?;
     de.end()
         .map_err(|e| SpecError::new(what, "(document)", format!("is not a valid {noun}: {e}")))?;
     Ok(parsed)
+}
+
+/// `"key = value is not allowed: why"` (a field name of lower-case letters,
+/// digits and `_`, as `SpecError` displays one, then serde's " at line …"
+/// cut), as a `SpecError` for `key`.
+fn refusal_in(message: &str) -> Option<SpecError> {
+    let (key, rest) = message.split_once(" = ")?;
+    let plain = |c: char| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_';
+    if key.is_empty() || !key.chars().all(plain) {
+        return None;
+    }
+    let (value, allowed) = rest.split_once(" is not allowed: ")?;
+    let allowed = match allowed.rfind(" at line ") {
+        Some(i) => &allowed[..i],
+        None => allowed,
+    };
+    Some(SpecError::new(key, value, allowed))
 }
 
 /// A key written twice in one JSON object: the object's path (`""` the

@@ -105,13 +105,47 @@ impl<'de> Deserialize<'de> for EstimatorSpec {
         };
         let median_position = take_window("median_position")?;
         let median_velocity = take_window("median_velocity")?;
-        let kind =
-            EstimatorKind::deserialize(serde_json::Value::Object(map)).map_err(D::Error::custom)?;
+        let kind = EstimatorKind::deserialize(serde_json::Value::Object(map.clone()))
+            .map_err(|e| D::Error::custom(kind_error(&map, &e)))?;
         Ok(Self {
             kind,
             median_position,
             median_velocity,
         })
+    }
+}
+
+/// Why `map` is not an estimator kind, naming the field: serde's tagged
+/// enums lose the path, so an invalid type or value (`"max_window": -1`,
+/// `"order": 2.0`) said only "estimator = (as written)". The field is the
+/// one whose removal changes the error; the refusal is written as
+/// `SpecError` writes one (`error::parse_json` reads it back).
+fn kind_error(map: &serde_json::Map<String, serde_json::Value>, e: &serde_json::Error) -> String {
+    let text = e.to_string();
+    if !(text.starts_with("invalid type") || text.starts_with("invalid value")) {
+        return text;
+    }
+    let changes = |key: &str| {
+        let mut rest = map.clone();
+        rest.remove(key);
+        match EstimatorKind::deserialize(serde_json::Value::Object(rest)) {
+            Ok(_) => true,
+            Err(other) => other.to_string() != text,
+        }
+    };
+    let culprit = map
+        .iter()
+        .find(|(key, _)| key.as_str() != "kind" && changes(key));
+    match culprit {
+        Some((key, value)) => {
+            let whole = if text.contains("expected u") {
+                "must be a whole number"
+            } else {
+                "has the wrong type"
+            };
+            format!("{key} = {value} is not allowed: {whole} ({text})")
+        }
+        None => text,
     }
 }
 
@@ -321,6 +355,56 @@ mod tests {
 
     fn parse(s: &str) -> Result<EstimatorSpec, SpecError> {
         EstimatorSpec::from_json(s)
+    }
+
+    /// A value of the wrong type or sign names its field, as a range error
+    /// does (issue 45: `"max_window": -1` said "estimator = (as written)"),
+    /// at the top level and inside a scene.
+    #[test]
+    fn a_wrong_type_or_sign_names_the_field() {
+        for (text, field, value) in [
+            (
+                r#"{"kind":"foaw","fit":"end","max_window":-1}"#,
+                "estimator.max_window",
+                "-1",
+            ),
+            (
+                r#"{"kind":"butterworth","cutoff_hz":100,"order":2.0}"#,
+                "estimator.order",
+                "2.0",
+            ),
+            (
+                r#"{"kind":"butterworth","cutoff_hz":"100"}"#,
+                "estimator.cutoff_hz",
+                "\"100\"",
+            ),
+            (r#"{"kind":"kalman","q":true}"#, "estimator.q", "true"),
+            (
+                r#"{"kind":"fdm","median_velocity":-3}"#,
+                "estimator.median_velocity",
+                "-3",
+            ),
+        ] {
+            let e = parse(text).unwrap_err();
+            assert_eq!(
+                (e.field.as_str(), e.value.as_str()),
+                (field, value),
+                "{text}: {e}"
+            );
+            assert!(!e.allowed.contains(" at line "), "{e}");
+        }
+        let whole = parse(r#"{"kind":"foaw","fit":"end","max_window":-1}"#).unwrap_err();
+        assert!(
+            whole.allowed.starts_with("must be a whole number"),
+            "{whole}"
+        );
+        // Inside a scene the path continues from the scene's.
+        let scene = r#"{"estimator":{"kind":"foaw","fit":"end","max_window":-1}}"#;
+        let e = crate::zwidth::SceneSpec::from_json(scene).unwrap_err();
+        assert_eq!(e.field, "scene.estimator.max_window", "{e}");
+        // Unknown kinds and fields keep serde's own words.
+        let e = parse(r#"{"kind":"nope"}"#).unwrap_err();
+        assert!(e.allowed.contains("unknown variant"), "{e}");
     }
 
     #[test]

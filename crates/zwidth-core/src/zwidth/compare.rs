@@ -274,6 +274,9 @@ pub fn compare_observed(
     estimators: Option<&[EstimatorSpec]>,
     observer: Option<std::sync::Arc<Observer>>,
 ) -> Result<CompareResult, SpecError> {
+    if let Some(list) = estimators {
+        check_estimators(scene, list)?;
+    }
     let c = estimate_c(scene)?;
     let estimators = match estimators {
         Some(list) => list
@@ -286,6 +289,32 @@ pub fn compare_observed(
         o.set_scopes(estimators.len());
     }
     compare_rows(scene, accuracy, criterion, c, estimators, observer)
+}
+
+/// Most estimators one compare takes: the same limit in the API, the CLI
+/// and Python.
+pub const MAX_ESTIMATORS: usize = 20;
+
+/// A compare's own estimator list: 1 to `MAX_ESTIMATORS`, each valid on
+/// `scene` (its errors named `estimators[i].…`).
+pub fn check_estimators(scene: &SceneSpec, list: &[EstimatorSpec]) -> Result<(), SpecError> {
+    if list.is_empty() || list.len() > MAX_ESTIMATORS {
+        return Err(SpecError::new(
+            "estimators",
+            list.len(),
+            format!("give 1 to {MAX_ESTIMATORS} estimators, or leave it out for the paper's four"),
+        ));
+    }
+    let sc = scene.validate().map_err(|e| e.within("scene"))?;
+    for (i, e) in list.iter().enumerate() {
+        sc.with_estimator(e.clone()).map_err(|err| SpecError {
+            field: err
+                .field
+                .replacen("estimator", &format!("estimators[{i}]"), 1),
+            ..err
+        })?;
+    }
+    Ok(())
 }
 
 /// One map per (name, parameters, estimator), in parallel, as scopes 0, 1, …
