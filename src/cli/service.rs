@@ -301,12 +301,25 @@ fn secrets(
             .map_err(|e| CliError::Input(format!("{flag} {} cannot be read: {e}", f.display())))?;
         all.extend(text.lines().map(str::to_owned));
     }
-    Ok(all
+    let all: Vec<String> = all
         .into_iter()
         .map(|t| t.trim().to_string())
         .filter(|t| !t.is_empty())
-        .collect())
+        .collect();
+    // A token is a password anyone on the lab's network may guess at:
+    // refuse one short enough to guess (the ones `serve` makes are 48 hex
+    // digits). Its length is named, never the token.
+    if let Some(short) = all.iter().find(|t| t.chars().count() < MIN_TOKEN_CHARS) {
+        return Err(CliError::Input(format!(
+            "{flag}: a token of {} characters is too short: give at least {MIN_TOKEN_CHARS} (e.g. `openssl rand -hex 32`), or none and serve makes one",
+            short.chars().count()
+        )));
+    }
+    Ok(all)
 }
+
+/// The shortest token `serve` accepts (characters).
+pub const MIN_TOKEN_CHARS: usize = 16;
 
 /// A lease from 300 ms (tests) to 10 minutes.
 fn check_lease_ms(lease_ms: i64) -> Result<(), CliError> {
@@ -353,13 +366,34 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("zwidth-secrets-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let f = dir.join("tokens");
-        std::fs::write(&f, "b\n\n  c \r\n").unwrap();
-        let got = secrets(vec![" a ".into(), String::new()], Some(&f), "--token-file").unwrap();
-        assert_eq!(got, ["a", "b", "c"]);
+        let (a, b, c) = ("a".repeat(16), "b".repeat(17), "c".repeat(40));
+        std::fs::write(&f, format!("{b}\n\n  {c} \r\n")).unwrap();
+        let got = secrets(
+            vec![format!(" {a} "), String::new()],
+            Some(&f),
+            "--token-file",
+        )
+        .unwrap();
+        assert_eq!(got, [a.clone(), b.clone(), c.clone()]);
         assert_eq!(
-            secrets(vec!["x".into()], None, "--token-file").unwrap(),
-            ["x"]
+            secrets(vec![a.clone()], None, "--token-file").unwrap(),
+            [a.clone()]
         );
+        // Fifteen characters are refused (issue 45: tokens had no minimum),
+        // naming the flag and the length, never the token.
+        std::fs::write(&f, format!("{b}\n{}\n", "s".repeat(15))).unwrap();
+        match secrets(vec![], Some(&f), "--token-file") {
+            Err(CliError::Input(m)) => {
+                assert!(
+                    m.starts_with(
+                        "--token-file: a token of 15 characters is too short: give at least 16"
+                    ),
+                    "{m}"
+                );
+                assert!(!m.contains(&"s".repeat(15)), "{m}");
+            }
+            other => panic!("{other:?}"),
+        }
         let missing = dir.join("nope");
         match secrets(vec![], Some(&missing), "--agent-token-file") {
             Err(CliError::Input(m)) => {

@@ -157,6 +157,7 @@ async fn connection<IO>(
     builder
         .timer(TokioTimer::new())
         .header_read_timeout(HEADER_READ_TIMEOUT);
+    let io = TokioIo::new(ProblemOnBadHead::new(io.into_inner()));
     let conn = builder.serve_connection(io, service).with_upgrades();
     let mut conn = std::pin::pin!(conn);
     loop {
@@ -172,6 +173,172 @@ async fn connection<IO>(
                     conn.as_mut().graceful_shutdown();
                 }
             }
+        }
+    }
+}
+
+/// The heads hyper writes itself when it cannot read a request's head,
+/// before any handler runs (then it closes the connection): the status,
+/// and what the problem+json that replaces it says.
+const BARE_HEADS: [(&str, u16, &str, &str); 3] = [
+    (
+        "HTTP/1.1 400 Bad Request\r\nconnection: close\r\ncontent-length: 0\r\n",
+        400,
+        "Bad Request",
+        "the request's head could not be read: a request line or header that is not HTTP/1.1 (a control character in a header, a header without a colon)",
+    ),
+    (
+        "HTTP/1.1 431 Request Header Fields Too Large\r\nconnection: close\r\ncontent-length: 0\r\n",
+        431,
+        "Request Header Fields Too Large",
+        "the request's head is too large: at most 100 headers and about 400 KiB in all",
+    ),
+    (
+        "HTTP/1.1 414 URI Too Long\r\nconnection: close\r\ncontent-length: 0\r\n",
+        414,
+        "URI Too Long",
+        "the request's URI is too long: at most 65534 bytes",
+    ),
+];
+
+/// The problem+json answer in place of hyper's bare `head`, if it is one.
+fn problem_for_bare(head: &[u8]) -> Option<Vec<u8>> {
+    if !head.ends_with(b"\r\n\r\n") {
+        return None;
+    }
+    let (_, status, title, detail) = BARE_HEADS
+        .iter()
+        .find(|(bare, ..)| head.starts_with(bare.as_bytes()))?;
+    let body = serde_json::json!({
+        "type": "about:blank",
+        "title": title,
+        "status": status,
+        "detail": detail,
+    })
+    .to_string();
+    Some(
+        format!(
+            "HTTP/1.1 {status} {title}\r\ncontent-type: application/problem+json\r\nconnection: close\r\ncontent-length: {}\r\n\r\n{body}",
+            body.len()
+        )
+        .into_bytes(),
+    )
+}
+
+/// A stream that replaces the bare 400, 431 or 414 hyper writes for a
+/// request head it cannot read (a control byte in a header, more than 100
+/// headers, a URI past its limit: no handler ever sees those requests)
+/// with the same status and a problem+json body, as every other error of
+/// the API has (issue 45). Every other write passes through unchanged.
+pub struct ProblemOnBadHead<T> {
+    io: T,
+    /// A replacement still being written, and how much of it is.
+    out: Vec<u8>,
+    sent: usize,
+}
+
+impl<T> ProblemOnBadHead<T> {
+    pub fn new(io: T) -> Self {
+        Self {
+            io,
+            out: Vec::new(),
+            sent: 0,
+        }
+    }
+}
+
+impl<T: AsyncWrite + Unpin> ProblemOnBadHead<T> {
+    /// Write what is left of a replacement.
+    fn drain(&mut self, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        while self.sent < self.out.len() {
+            match Pin::new(&mut self.io).poll_write(cx, &self.out[self.sent..]) {
+                Poll::Ready(Ok(0)) => return Poll::Ready(Err(io::ErrorKind::WriteZero.into())),
+                Poll::Ready(Ok(n)) => self.sent += n,
+                Poll::Ready(Err(e)) => return Poll::Ready(Err(e)),
+                Poll::Pending => return Poll::Pending,
+            }
+        }
+        Poll::Ready(Ok(()))
+    }
+
+    /// `buf` taken as written when it is a bare head: its replacement is
+    /// queued (and written as far as the socket takes it now).
+    fn swap(&mut self, cx: &mut Context<'_>, buf: &[u8]) -> Option<Poll<io::Result<usize>>> {
+        let replacement = problem_for_bare(buf)?;
+        self.out = replacement;
+        self.sent = 0;
+        Some(match self.drain(cx) {
+            Poll::Ready(Err(e)) => Poll::Ready(Err(e)),
+            // Queued: poll_flush and poll_shutdown finish it.
+            _ => Poll::Ready(Ok(buf.len())),
+        })
+    }
+}
+
+impl<T: AsyncRead + Unpin> AsyncRead for ProblemOnBadHead<T> {
+    fn poll_read(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.get_mut().io).poll_read(cx, buf)
+    }
+}
+
+impl<T: AsyncWrite + Unpin> AsyncWrite for ProblemOnBadHead<T> {
+    fn poll_write(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<io::Result<usize>> {
+        let this = self.get_mut();
+        match this.drain(cx) {
+            Poll::Ready(Ok(())) => {}
+            Poll::Ready(Err(e)) => return Poll::Ready(Err(e)),
+            Poll::Pending => return Poll::Pending,
+        }
+        if let Some(r) = this.swap(cx, buf) {
+            return r;
+        }
+        Pin::new(&mut this.io).poll_write(cx, buf)
+    }
+
+    fn poll_write_vectored(
+        self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[io::IoSlice<'_>],
+    ) -> Poll<io::Result<usize>> {
+        let this = self.get_mut();
+        match this.drain(cx) {
+            Poll::Ready(Ok(())) => {}
+            Poll::Ready(Err(e)) => return Poll::Ready(Err(e)),
+            Poll::Pending => return Poll::Pending,
+        }
+        if let Some(first) = bufs.iter().find(|b| !b.is_empty()) {
+            if let Some(r) = this.swap(cx, first) {
+                return r;
+            }
+        }
+        Pin::new(&mut this.io).poll_write_vectored(cx, bufs)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.io.is_write_vectored()
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        let this = self.get_mut();
+        match this.drain(cx) {
+            Poll::Ready(Ok(())) => Pin::new(&mut this.io).poll_flush(cx),
+            other => other,
+        }
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        let this = self.get_mut();
+        match this.drain(cx) {
+            Poll::Ready(Ok(())) => Pin::new(&mut this.io).poll_shutdown(cx),
+            other => other,
         }
     }
 }
@@ -293,6 +460,79 @@ mod tests {
         };
         assert_eq!(err.kind(), io::ErrorKind::TimedOut);
         assert!(err.to_string().contains("0.2 s"), "{err}");
+    }
+
+    /// hyper's own answers to heads it cannot read are problem+json now
+    /// (issue 45: a control byte in a header gave an empty 400, 120
+    /// headers an empty 431), over a real connection; a good request and
+    /// the app's own 404 pass unchanged.
+    #[tokio::test]
+    async fn a_head_hyper_cannot_read_is_answered_with_problem_json() {
+        use tokio::io::AsyncReadExt;
+        let l = TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = l.local_addr().unwrap();
+        let app = Router::new().route("/", axum::routing::get(|| async { "ok" }));
+        tokio::spawn(serve(l, app, 8, None, std::future::pending()));
+        let ask = |req: Vec<u8>| async move {
+            let mut s = TcpStream::connect(addr).await.unwrap();
+            s.write_all(&req).await.unwrap();
+            let mut out = Vec::new();
+            let _ = tokio::time::timeout(Duration::from_secs(10), s.read_to_end(&mut out)).await;
+            String::from_utf8_lossy(&out).into_owned()
+        };
+        let many: String = (0..120).map(|i| format!("x-{i}: 1\r\n")).collect();
+        for (req, status) in [
+            (
+                b"GET / HTTP/1.1\r\nhost: a\r\nx-a: a\x01b\r\n\r\n".to_vec(),
+                400,
+            ),
+            (
+                format!("GET / HTTP/1.1\r\nhost: a\r\n{many}\r\n").into_bytes(),
+                431,
+            ),
+            (
+                format!("GET /{} HTTP/1.1\r\nhost: a\r\n\r\n", "a".repeat(70_000)).into_bytes(),
+                414,
+            ),
+            (b"GARBAGE\r\n\r\n".to_vec(), 400),
+        ] {
+            let r = ask(req).await;
+            let (head, body) = r.split_once("\r\n\r\n").unwrap_or((&r, ""));
+            assert!(head.starts_with(&format!("HTTP/1.1 {status} ")), "{r}");
+            assert!(
+                head.contains("content-type: application/problem+json"),
+                "{r}"
+            );
+            assert!(
+                head.contains(&format!("content-length: {}", body.len())),
+                "{r}"
+            );
+            let v: serde_json::Value = serde_json::from_str(body).unwrap();
+            assert_eq!(v["status"], status, "{r}");
+            assert!(v["detail"].as_str().is_some_and(|d| !d.is_empty()), "{r}");
+        }
+        let ok = ask(b"GET / HTTP/1.1\r\nhost: a\r\nconnection: close\r\n\r\n".to_vec()).await;
+        assert!(
+            ok.starts_with("HTTP/1.1 200 ") && ok.ends_with("\r\n\r\nok"),
+            "{ok}"
+        );
+        let missing =
+            ask(b"GET /nope HTTP/1.1\r\nhost: a\r\nconnection: close\r\n\r\n".to_vec()).await;
+        assert!(
+            missing.starts_with("HTTP/1.1 404 ") && !missing.contains("problem+json"),
+            "{missing}"
+        );
+    }
+
+    /// Only hyper's bare heads are replaced: an app's 400 with a body, or
+    /// a head cut short, is not.
+    #[test]
+    fn only_a_whole_bare_head_is_replaced() {
+        let bare = b"HTTP/1.1 400 Bad Request\r\nconnection: close\r\ncontent-length: 0\r\ndate: x\r\n\r\n";
+        assert!(problem_for_bare(bare).is_some());
+        assert!(problem_for_bare(&bare[..bare.len() - 2]).is_none());
+        let app = b"HTTP/1.1 400 Bad Request\r\ncontent-type: application/problem+json\r\ncontent-length: 2\r\n\r\n";
+        assert!(problem_for_bare(app).is_none());
     }
 
     /// The cap counts per address and gives slots back.

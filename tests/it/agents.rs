@@ -523,12 +523,20 @@ fn tokens_open_sessions_only_for_agents_and_bad_hellos_are_refused_saying_why() 
     let dir = fresh_dir();
     let s = start_with(
         dir,
-        &["--rigs", "sim:1,bench:attached", "--token", "user-secret"],
+        &[
+            "--rigs",
+            "sim:1,bench:attached",
+            "--token",
+            "user-secret-token-16",
+        ],
     );
     let token = agent_token(&s);
     // No token, a user's token: no session. An agent token cannot submit.
     assert_eq!(dial(&s, "").err().unwrap(), "HTTP 401 Unauthorized");
-    assert_eq!(dial(&s, "user-secret").err().unwrap(), "HTTP 403 Forbidden");
+    assert_eq!(
+        dial(&s, "user-secret-token-16").err().unwrap(),
+        "HTTP 403 Forbidden"
+    );
     let (code, _, _) = fetch(
         authed::post(&format!("{}/v1/experiments", s.base))
             .set("content-type", "application/json")

@@ -114,12 +114,12 @@ fn specs_beyond_the_cost_limits_are_refused_naming_the_field() {
 #[test]
 fn every_documented_limit_answers_its_status_and_field() {
     let dir = temp_dir("limits");
-    let s = start_with(dir, &["--token", "tok"]);
+    let s = start_with(dir, &["--token", "reliability-token-16"]);
     let url = format!("{}/v1/experiments", s.base);
     let authed = |u: &str| {
         authed::post(u)
             .set("content-type", "application/json")
-            .set("authorization", "Bearer tok")
+            .set("authorization", "Bearer reliability-token-16")
     };
     // Nothing runs: only validation is under test.
     let (code, _, v) = call(authed(&format!("{}/v1/queue/pause", s.base)).send_string(""));
@@ -235,7 +235,7 @@ fn every_documented_limit_answers_its_status_and_field() {
         assert_problem(code, &ct, &v, 401, Some("Authorization"));
         let (code, ct, v) = call(req(Some("Bearer wrong")).send_string(body));
         assert_problem(code, &ct, &v, 403, Some("Authorization"));
-        let (code, _, v) = call(req(Some("Bearer tok")).send_string(body));
+        let (code, _, v) = call(req(Some("Bearer reliability-token-16")).send_string(body));
         assert!((200..300).contains(&code), "{method} {u}: {code} {v}");
     }
 }
@@ -748,7 +748,7 @@ fn shutdown_checkpoints_and_backup_copies_a_live_database() {
 #[test]
 fn tokens_stay_out_of_logs_and_can_come_from_a_file() {
     let dir = temp_dir("token");
-    std::fs::write(dir.join("tokens"), "file-secret\n").unwrap();
+    std::fs::write(dir.join("tokens"), "file-secret-token-16\n").unwrap();
     let child = Command::new(bin())
         .args(["serve", "--bind", "127.0.0.1:0", "--token-file"])
         .arg(dir.join("tokens"))
@@ -778,7 +778,7 @@ fn tokens_stay_out_of_logs_and_can_come_from_a_file() {
     assert_eq!(code, 401);
     let (code, _, v) = call(
         authed::post(&pause)
-            .set("authorization", "Bearer file-secret")
+            .set("authorization", "Bearer file-secret-token-16")
             .call(),
     );
     assert_eq!(code, 200, "{v}");
@@ -790,7 +790,7 @@ fn tokens_stay_out_of_logs_and_can_come_from_a_file() {
     let log = std::fs::read_to_string(dir.join("err.log")).unwrap();
     assert!(log.contains("healthz"), "the request was logged: {log}");
     assert!(!log.contains("query-secret"), "{log}");
-    assert!(!log.contains("file-secret"), "{log}");
+    assert!(!log.contains("file-secret-token-16"), "{log}");
 }
 
 /// A small tmpfs, unmounted (and its directory removed) when dropped.

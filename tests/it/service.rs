@@ -263,7 +263,7 @@ fn tokens_guard_mutations() {
         uuid_like()
     ));
     std::fs::create_dir_all(&dir).unwrap();
-    let s = start_with(dir, &["--token", "s3cret,other"]);
+    let s = start_with(dir, &["--token", "s3cret-token-0001,other-token-00002"]);
     let url = format!("{}/v1/experiments", s.base);
     let body = r#"{"kind":"map","scene":{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}},"b":[0]}"#;
     let status = |r: Result<ureq::Response, ureq::Error>| match r {
@@ -284,7 +284,7 @@ fn tokens_guard_mutations() {
         403
     );
     assert_eq!(
-        status(post_json(Some("Bearer other")).send_string(body)),
+        status(post_json(Some("Bearer other-token-00002")).send_string(body)),
         202
     );
     // Reading needs no token.

@@ -56,6 +56,9 @@ impl Default for Excitation {
     }
 }
 
+/// The largest peak force a record's excitation may ask for (N).
+pub const MAX_PEAK_FORCE: f64 = 1e4;
+
 /// Most samples one recorded trace may hold (10 million: 240 MB of
 /// columns, ~600 MB of CSV).
 pub const MAX_RECORD_SAMPLES: f64 = 1e7;
@@ -64,6 +67,8 @@ impl Excitation {
     pub fn validate(&self, scene: &Scene) -> Result<(), SpecError> {
         require_range("period_s", self.period_s, 0.01, 1000.0, "s")?;
         require_positive("peak_force", self.peak_force, "N")?;
+        // A force no haptic device makes (1e300 N was taken, issue 45).
+        require_range("peak_force", self.peak_force, 0.0, MAX_PEAK_FORCE, "N")?;
         let nyquist = 0.5 / scene.dt;
         require_range(
             "f_max_hz",
@@ -99,6 +104,7 @@ impl Excitation {
         }
         if let Some(band) = &self.band {
             require_positive("band.peak_force", band.peak_force, "N")?;
+            require_range("band.peak_force", band.peak_force, 0.0, MAX_PEAK_FORCE, "N")?;
             require_range(
                 "band.f_max_hz",
                 band.f_max_hz,
@@ -228,6 +234,25 @@ mod tests {
             ),
             Err("f_max_hz".into())
         );
+        // A peak force no device makes: 1e300 N was taken (issue 45); the
+        // bound itself is allowed.
+        for (peak, ok) in [
+            (1e300, false),
+            (MAX_PEAK_FORCE * 1.000001, false),
+            (MAX_PEAK_FORCE, true),
+        ] {
+            let got = field(
+                &at_1k,
+                Excitation {
+                    peak_force: peak,
+                    ..ex.clone()
+                },
+            );
+            assert_eq!(got.is_ok(), ok, "{peak}: {got:?}");
+            if !ok {
+                assert_eq!(got, Err("peak_force".into()));
+            }
+        }
         // At 1 MHz an hour is 3.6e9 samples, past MAX_RECORD_SAMPLES (1e7);
         // 10 s is exactly 1e7.
         let at_1m = scene(r#"{"loop":{"sample_hz":1e6,"render_hz":1000}}"#);
