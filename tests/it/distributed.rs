@@ -66,7 +66,10 @@ impl Drop for Procs {
             let _ = c.kill();
             let _ = c.wait();
         }
-        let _ = std::fs::remove_dir_all(&self.dir);
+        // ZWIDTH_KEEP=1 keeps the processes' logs for a failure's reading.
+        if std::env::var_os("ZWIDTH_KEEP").is_none() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
     }
 }
 
@@ -625,6 +628,44 @@ fn a_cancel_reaches_units_on_other_workers() {
         "{us:?}"
     );
     assert!(us.iter().any(|u| u["state"] == "cancelled"), "{us:?}");
+}
+
+/// Issue 45 item 14: a cancel written by another API process reaches the
+/// driver through its heartbeat (`Held::Cancelled`), not only its units.
+/// One worker, one runner: the run would take ≥ 60 s uncancelled, and the
+/// next submission can start only once the driver has let the cancelled
+/// run go, so a driver that ignored the cancel (waiting for units that
+/// never finish) would hold it past the bound. (`no busy worker` in the
+/// test above reads the database's state, which a cancel changes at once:
+/// it passed with the heartbeat's cancel removed.)
+#[test]
+fn a_cancel_from_another_process_frees_the_driver_for_the_next_run() {
+    let Some(url) = pg::fresh_database_blocking("cancel_driver") else {
+        return;
+    };
+    let mut p = Procs {
+        children: vec![],
+        dir: fresh_dir("cancel_driver"),
+    };
+    let base = api(&mut p, &url, true, "api.err");
+    let other = api(&mut p, &url, true, "api2.err");
+    worker(&mut p, &url, "15000", "w.err");
+    let id = submit(&base, &long_columns());
+    // Past the planning of its units (a cancel then would reach the driver
+    // as a lost lease when it plans them): one unit done.
+    wait_for("a unit done", 60, || {
+        units(&base, &id).iter().any(|u| u["state"] == "done")
+    });
+    let (code, v, _) = post(&format!("{other}/v1/experiments/{id}/cancel"), "");
+    assert_eq!(code, 200, "{v}");
+    let next = submit(&base, QUICK[0]);
+    // The lease is 15 s, heartbeats every quarter of it: the driver hears
+    // the cancel within ~4 s, then its runner takes the next run.
+    wait_for("the next run done on the same worker", 20, || {
+        get(&format!("{base}/v1/experiments/{next}"))["state"] == "succeeded"
+    });
+    let v = get(&format!("{base}/v1/experiments/{id}"));
+    assert_eq!(v["state"], "cancelled", "{v}");
 }
 
 /// Issue 30, defect 7: a run on a rig that no live worker runs says so
