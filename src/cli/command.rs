@@ -397,8 +397,9 @@ pub enum Command {
         #[arg(long)]
         name: Option<String>,
         /// The agent token file (default `zwidth.db.agent-token`, made by
-        /// `serve` next to its database); or ZWIDTH_AGENT_TOKEN.
-        #[arg(long)]
+        /// `serve` next to its database; or ZWIDTH_AGENT_TOKEN_FILE, e.g. a
+        /// compose secret); or ZWIDTH_AGENT_TOKEN.
+        #[arg(long, env = "ZWIDTH_AGENT_TOKEN_FILE")]
         token_file: Option<PathBuf>,
         /// Where unacknowledged results wait (default `<rig>.outbox`).
         #[arg(long)]

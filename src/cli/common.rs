@@ -35,6 +35,15 @@ pub fn read_samples(input: impl BufRead) -> Result<Vec<f64>, CliError> {
     Ok(out)
 }
 
+/// `--db` as a store location, its PostgreSQL password from the file
+/// `ZWIDTH_DB_PASSWORD_FILE` names when set (a compose secret).
+pub(super) fn db_location(db: &str) -> Result<crate::store::Location, CliError> {
+    let file = std::env::var_os("ZWIDTH_DB_PASSWORD_FILE")
+        .filter(|f| !f.is_empty())
+        .map(std::path::PathBuf::from);
+    crate::store::Location::parse_with_password(db, file.as_deref()).map_err(CliError::Input)
+}
+
 /// A client of `server` with the user token from `ZWIDTH_TOKEN`, else the
 /// file `ZWIDTH_TOKEN_FILE`, else the one `serve` made next to its
 /// database (`$ZWIDTH_DB.token`, default `zwidth.db.token`).

@@ -389,7 +389,7 @@ pub(super) fn run(
                     "bench scale: --maps must be 2 to 1000 (got {maps}), --sweeps 1 to 100 (got {sweeps}), --claims 10 to 1000000 (got {claims}), --repeat 1 to 10 (got {repeat})"
                 )));
             }
-            let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
+            let db = db_location(&db)?;
             if db.sqlite_path().is_some() {
                 return Err(CliError::Input(format!(
                     "--db {db}: bench scale measures a PostgreSQL database (postgres://…)"
@@ -425,7 +425,7 @@ pub(super) fn run(
                     "bench ui: --experiments must be 5 to 1000000 (got {experiments}), --trials 1 to 100000000 (got {trials}), --big 1 to 1000000 and at most --trials (got {big}), --repeat 1 to 100 (got {repeat})"
                 )));
             }
-            let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
+            let db = db_location(&db)?;
             let rt = tokio::runtime::Builder::new_multi_thread()
                 .enable_all()
                 .build()

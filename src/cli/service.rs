@@ -51,7 +51,7 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             let tokens = secrets(tokens, token_file.as_deref(), "--token-file")?;
             let rigs = crate::rig::parse_list(&rigs)
                 .map_err(|e| CliError::Input(format!("--rigs: {e}")))?;
-            let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
+            let db = db_location(&db)?;
             check_lease_ms(lease_ms)?;
             if !(1..=100_000).contains(&max_connections_per_client) {
                 return Err(CliError::Input(format!(
@@ -111,7 +111,7 @@ pub(super) fn run(command: Command, stdout: &mut impl Write) -> Result<(), CliEr
             })
         }
         Command::Worker { db, rigs, lease_ms } => {
-            let db = crate::store::Location::parse(&db).map_err(CliError::Input)?;
+            let db = db_location(&db)?;
             if db.sqlite_path().is_some() {
                 return Err(CliError::Input(format!(
                     "--db {db}: zwidth worker needs a PostgreSQL database (postgres://…); with SQLite, `zwidth serve` runs the experiments itself"

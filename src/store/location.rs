@@ -41,6 +41,51 @@ impl Location {
         Ok(Location::Sqlite(PathBuf::from(s)))
     }
 
+    /// `parse`, with the PostgreSQL password read from `password_file`
+    /// when one is given (`ZWIDTH_DB_PASSWORD_FILE`: a compose secret, so
+    /// the password is in no environment variable): its first line, put
+    /// into a URL that has none. A URL with a password of its own, or a
+    /// SQLite location, is refused with a file given (one source each).
+    pub fn parse_with_password(
+        s: &str,
+        password_file: Option<&std::path::Path>,
+    ) -> Result<Self, String> {
+        let loc = Self::parse(s)?;
+        let Some(file) = password_file else {
+            return Ok(loc);
+        };
+        let Location::Postgres(url) = &loc else {
+            return Err(format!(
+                "ZWIDTH_DB_PASSWORD_FILE {} is given, but --db {loc} is a SQLite file: the password file is for a postgres:// URL",
+                file.display()
+            ));
+        };
+        if has_password(url) {
+            return Err(format!(
+                "--db {loc} has a password of its own and ZWIDTH_DB_PASSWORD_FILE {} gives one too: give one of them",
+                file.display()
+            ));
+        }
+        let text = std::fs::read_to_string(file).map_err(|e| {
+            format!(
+                "ZWIDTH_DB_PASSWORD_FILE {} cannot be read: {e}",
+                file.display()
+            )
+        })?;
+        let password = text.lines().next().unwrap_or("").trim_end_matches('\r');
+        if password.is_empty() {
+            return Err(format!(
+                "ZWIDTH_DB_PASSWORD_FILE {} is empty: its first line is the password",
+                file.display()
+            ));
+        }
+        // The password as a query parameter (libpq's form), percent-encoded;
+        // checked as the URL it becomes.
+        let sep = if url.contains('?') { '&' } else { '?' };
+        let with = format!("{url}{sep}password={}", percent_encode(password));
+        Self::parse(&with)
+    }
+
     /// The SQLite file, if this is one.
     pub fn sqlite_path(&self) -> Option<&std::path::Path> {
         match self {
@@ -48,6 +93,32 @@ impl Location {
             Location::Postgres(_) => None,
         }
     }
+}
+
+/// Whether a PostgreSQL URL carries a password (in its user part or as
+/// `password=`).
+fn has_password(url: &str) -> bool {
+    let rest = url.split_once("://").map_or(url, |(_, r)| r);
+    let authority = rest.split(['/', '?']).next().unwrap_or("");
+    let in_user = authority
+        .rsplit_once('@')
+        .is_some_and(|(user, _)| user.contains(':'));
+    let in_query = url
+        .split_once('?')
+        .is_some_and(|(_, q)| q.split('&').any(|kv| kv.starts_with("password=")));
+    in_user || in_query
+}
+
+/// `s` with every byte but RFC 3986's unreserved characters as `%XX`.
+fn percent_encode(s: &str) -> String {
+    s.bytes()
+        .map(|b| match b {
+            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'-' | b'.' | b'_' | b'~' => {
+                (b as char).to_string()
+            }
+            _ => format!("%{b:02X}"),
+        })
+        .collect()
 }
 
 /// A URL as shown in logs and errors: never its password. A PostgreSQL URL
@@ -109,6 +180,61 @@ mod tests {
         let e = Location::parse("postgres://u:pw@host:notaport/z").unwrap_err();
         assert!(e.contains("not a valid PostgreSQL URL"), "{e}");
         assert!(!e.contains(":pw@"), "{e}");
+    }
+
+    /// A compose secret's password file (issue 45 item 6): its first line
+    /// becomes the URL's password (percent-encoded, so any character
+    /// works), never shown; a URL with a password, a SQLite file, an
+    /// empty or missing file are refused naming the variable.
+    #[test]
+    fn a_password_file_gives_the_postgres_password() {
+        let dir = std::env::temp_dir().join(format!("zwidth-pwfile-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = dir.join("pw");
+        std::fs::write(&f, "s3 cr@t/&?x\nsecond line\n").unwrap();
+        let loc = Location::parse_with_password("postgres://u@h/db", Some(&f)).unwrap();
+        let Location::Postgres(url) = &loc else {
+            panic!("{loc:?}")
+        };
+        let o: sqlx::postgres::PgConnectOptions = url.parse().unwrap();
+        assert_eq!(o.get_username(), "u");
+        assert_eq!(o.get_database(), Some("db"));
+        assert!(url.ends_with("?password=s3%20cr%40t%2F%26%3Fx"), "{url}");
+        assert!(!loc.to_string().contains("s3"), "{loc}");
+        // An existing query keeps its parameters.
+        let Location::Postgres(q) =
+            Location::parse_with_password("postgres://u@h/db?sslmode=disable", Some(&f)).unwrap()
+        else {
+            panic!()
+        };
+        assert!(
+            q.starts_with("postgres://u@h/db?sslmode=disable&password="),
+            "{q}"
+        );
+        // No file: the URL as it is.
+        assert_eq!(
+            Location::parse_with_password("postgres://u:p@h/db", None).unwrap(),
+            Location::Postgres("postgres://u:p@h/db".into())
+        );
+        for (url, words) in [
+            ("postgres://u:p@h/db", "has a password of its own"),
+            ("postgres://u@h/db?password=p", "has a password of its own"),
+            ("zwidth.db", "is a SQLite file"),
+        ] {
+            let e = Location::parse_with_password(url, Some(&f)).unwrap_err();
+            assert!(e.contains(words), "{url}: {e}");
+            assert!(!e.contains("cr@t"), "{e}");
+        }
+        std::fs::write(&f, "\n").unwrap();
+        let e = Location::parse_with_password("postgres://u@h/db", Some(&f)).unwrap_err();
+        assert!(e.contains("is empty"), "{e}");
+        let e =
+            Location::parse_with_password("postgres://u@h/db", Some(&dir.join("no"))).unwrap_err();
+        assert!(
+            e.starts_with("ZWIDTH_DB_PASSWORD_FILE ") && e.contains("cannot be read"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
