@@ -42,7 +42,27 @@ check("worker has a replica count", services["worker"].get("deploy", {}).get("re
 check("worker runs `zwidth worker`", services["worker"]["command"][:2] == ["zwidth", "worker"])
 check("api runs `zwidth serve --api-only`", services["api"]["command"] == ["zwidth", "serve", "--api-only"])
 check("api has a health check", "test" in services["api"].get("healthcheck", {}))
-check("api takes the agents' tokens from ZWIDTH_AGENT_TOKENS", "ZWIDTH_AGENT_TOKENS" in services["api"]["environment"])
+# Secrets are files (compose secrets), never environment variables (issue 45
+# item 6): no value of a variable named like a secret, no interpolated
+# secret, the password not in the database URL.
+secretish = ("TOKEN", "PASSWORD", "KEY", "SECRET")
+for name, svc in services.items():
+    for var, value in (svc.get("environment") or {}).items():
+        if any(w in var for w in secretish):
+            check(f"{name}: {var} names a file under /run/secrets, not a secret",
+                  var.endswith("_FILE") or var.endswith("_CERT") or var.endswith("_KEY"))
+            check(f"{name}: {var} is a file under /run/secrets", str(value).startswith("/run/secrets/"))
+    db = str((svc.get("environment") or {}).get("ZWIDTH_DB", ""))
+    userinfo = db.split("//", 1)[-1].split("@", 1)[0] if "@" in db else ""
+    check(f"{name}: no password in ZWIDTH_DB", ":" not in userinfo and "password=" not in db)
+for name, files in [("api", ["zwidth_token", "pg_password"]), ("worker", ["pg_password"]),
+                    ("postgres", ["pg_password"]), ("agent", ["rig_token"]), ("zwidth", ["zwidth_token"])]:
+    check(f"{name} is given its secrets ({', '.join(files)})",
+          all(f in services[name].get("secrets", []) for f in files))
+check("every secret is a file", all("file" in v for v in doc.get("secrets", {}).values()))
+check("api reads its token from its secret", services["api"]["environment"].get("ZWIDTH_TOKEN_FILE") == "/run/secrets/zwidth_token")
+check("postgres reads its password from its secret",
+      services["postgres"]["environment"].get("POSTGRES_PASSWORD_FILE") == "/run/secrets/pg_password")
 check("the API is published on loopback only (reads need no token)",
       all(p == "127.0.0.1:8080:8080" for name in ("api", "zwidth") for p in services[name]["ports"]))
 check("agent dials the API by its service name", services["agent"]["environment"]["ZWIDTH_SERVER"] == "http://api:8080")
@@ -82,6 +102,20 @@ with tempfile.TemporaryDirectory() as apt:
         f.write("deb http://apt-proxy.lab:3142/debian bookworm main contrib\n")
     check("a one-line .list source comes first", apt_mirror.mirror("bookworm", apt) == "http://apt-proxy.lab:3142/debian")
     check("another suite: Debian's own", apt_mirror.mirror("trixie", apt) == apt_mirror.DEFAULT)
+
+# The TLS path (issue 45 item 3): docker-compose.tls.yml over this file.
+tls = yaml.safe_load(open(os.path.join(os.path.dirname(compose_path) or ".", "docker-compose.tls.yml")))
+jsonschema.validate(tls, schema, cls=jsonschema.Draft201909Validator)
+tapi, tagent = tls["services"]["api"], tls["services"]["agent"]
+check("tls: the API serves its certificate and key from secrets",
+      tapi["environment"] == {"ZWIDTH_TLS_CERT": "/run/secrets/tls_cert", "ZWIDTH_TLS_KEY": "/run/secrets/tls_key"})
+check("tls: the API keeps its other secrets", all(f in tapi["secrets"] for f in ("zwidth_token", "pg_password", "tls_cert", "tls_key")))
+check("tls: the API's health check speaks HTTPS, trusting the CA",
+      "https://localhost:8080/healthz" in tapi["healthcheck"]["test"] and "/run/secrets/tls_ca" in tapi["healthcheck"]["test"])
+check("tls: the agent dials wss by the service name, trusting the CA",
+      tagent["environment"] == {"ZWIDTH_SERVER": "https://api:8080", "ZWIDTH_CA_FILE": "/run/secrets/tls_ca"}
+      and all(f in tagent["secrets"] for f in ("rig_token", "tls_ca")))
+check("tls: its secrets are files", all("file" in v for v in tls["secrets"].values()))
 
 for name, svc in services.items():
     for dep in svc.get("depends_on", {}):

@@ -4,7 +4,12 @@
 # socket, a scram password over the network); every start: run the server as
 # the postgres user. An initialised $PGDATA is kept.
 set -eu
-: "${POSTGRES_PASSWORD:?set POSTGRES_PASSWORD}"
+# POSTGRES_PASSWORD_FILE (a compose secret), as the official image reads it.
+if [ -n "${POSTGRES_PASSWORD_FILE:-}" ]; then
+  [ -z "${POSTGRES_PASSWORD:-}" ] || { echo "postgres-entrypoint: give POSTGRES_PASSWORD or POSTGRES_PASSWORD_FILE, not both" >&2; exit 2; }
+  POSTGRES_PASSWORD=$(head -n 1 "$POSTGRES_PASSWORD_FILE")
+fi
+: "${POSTGRES_PASSWORD:?set POSTGRES_PASSWORD or POSTGRES_PASSWORD_FILE}"
 user="${POSTGRES_USER:-postgres}"
 db="${POSTGRES_DB:-$user}"
 if [ "$(id -u)" = 0 ]; then

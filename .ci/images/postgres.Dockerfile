@@ -1,7 +1,7 @@
 # PostgreSQL for the compose stack when no registry can be reached (CI):
 # the distribution's server on the local Debian base (.ci/images/build),
 # initialised at first start as the official image is: POSTGRES_USER,
-# POSTGRES_PASSWORD and POSTGRES_DB from the environment, data in
+# POSTGRES_PASSWORD (or POSTGRES_PASSWORD_FILE) and POSTGRES_DB from the environment, data in
 # /var/lib/postgresql/data, `pg_isready` for the health check.
 # A lab with a registry runs the official postgres image instead.
 ARG BASE_IMAGE=zwidth-ci/bookworm
