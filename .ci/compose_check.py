@@ -77,8 +77,8 @@ for name, svc in services.items():
     check(f"{name}: no privilege gained (no-new-privileges)", "no-new-privileges:true" in svc.get("security_opt", []))
     check(f"{name}: every capability dropped", svc.get("cap_drop") == ["ALL"])
     check(f"{name}: a memory ceiling", bool(svc.get("mem_limit")))
+    check(f"{name}: a read-only root with a tmpfs /tmp", svc.get("read_only") is True and "/tmp" in svc.get("tmpfs", []))
     if name != "postgres":
-        check(f"{name}: a read-only root with a tmpfs /tmp", svc.get("read_only") is True and "/tmp" in svc.get("tmpfs", []))
         check(f"{name}: no capability added back", not svc.get("cap_add"))
 
 # The image script's Debian mirror is this machine's apt's (issue 45 item 13).

@@ -13,6 +13,10 @@ fi
 user="${POSTGRES_USER:-postgres}"
 db="${POSTGRES_DB:-$user}"
 if [ "$(id -u)" = 0 ]; then
+  # The socket's directory: a tmpfs under a read-only root (docker-compose.yml).
+  mkdir -p /run/postgresql
+  chown postgres:postgres /run/postgresql
+  chmod 2775 /run/postgresql
   mkdir -p "$PGDATA"
   chown postgres:postgres "$PGDATA"
   chmod 700 "$PGDATA"

@@ -121,6 +121,12 @@ fn unit_state(state: ExperimentState) -> &'static str {
     }
 }
 
+/// The longest the listener's connect or LISTEN may take.
+const LISTEN_CALL: std::time::Duration = std::time::Duration::from_secs(10);
+/// Without a notification this long, the listener reconnects (a connection
+/// silently cut off shows no error: this bounds how long it goes unheard).
+const LISTEN_QUIET: std::time::Duration = std::time::Duration::from_secs(60);
+
 impl Store {
     /// The wake-ups of this store's units.
     pub fn wakeups(&self) -> &Wakeups {
@@ -149,11 +155,28 @@ impl Store {
         let (pool, wake) = (pool.clone(), self.wake.clone());
         tokio::spawn(async move {
             loop {
+                // Every call bounded (issue 45 item 8): a connection cut off
+                // mid-statement would otherwise hold the listener for good.
+                // Quiet for LISTEN_QUIET, the listener starts again on a new
+                // connection (notifications are best effort: waiters poll).
                 let relay = async {
-                    let mut l = sqlx::postgres::PgListener::connect_with(&own).await?;
-                    l.listen_all([QUEUED, ENDED]).await?;
+                    let bounded = |what: &'static str| {
+                        move |_| sqlx::Error::Protocol(format!("{what} took over {LISTEN_CALL:?}"))
+                    };
+                    let mut l = tokio::time::timeout(
+                        LISTEN_CALL,
+                        sqlx::postgres::PgListener::connect_with(&own),
+                    )
+                    .await
+                    .map_err(bounded("connecting the listener"))??;
+                    tokio::time::timeout(LISTEN_CALL, l.listen_all([QUEUED, ENDED]))
+                        .await
+                        .map_err(bounded("LISTEN"))??;
                     loop {
-                        let n = l.recv().await?;
+                        let Ok(n) = tokio::time::timeout(LISTEN_QUIET, l.recv()).await else {
+                            return Ok(());
+                        };
+                        let n = n?;
                         match n.channel() {
                             QUEUED => wake.queued.notify_waiters(),
                             _ => {
