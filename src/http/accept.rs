@@ -524,6 +524,94 @@ mod tests {
         );
     }
 
+    /// A writer that takes `per_write` bytes a call, says Pending every
+    /// other call (waking at once), or fails every write.
+    struct Trickle {
+        out: Vec<u8>,
+        per_write: usize,
+        pending_next: bool,
+        fail: bool,
+        vectored: bool,
+    }
+
+    impl Trickle {
+        fn new(per_write: usize) -> Self {
+            Self {
+                out: Vec::new(),
+                per_write,
+                pending_next: false,
+                fail: false,
+                vectored: false,
+            }
+        }
+    }
+
+    impl AsyncWrite for Trickle {
+        fn poll_write(
+            self: Pin<&mut Self>,
+            cx: &mut Context<'_>,
+            buf: &[u8],
+        ) -> Poll<io::Result<usize>> {
+            let this = self.get_mut();
+            if this.fail {
+                return Poll::Ready(Err(io::ErrorKind::BrokenPipe.into()));
+            }
+            this.pending_next = !this.pending_next;
+            if this.pending_next {
+                cx.waker().wake_by_ref();
+                return Poll::Pending;
+            }
+            let n = buf.len().min(this.per_write);
+            this.out.extend_from_slice(&buf[..n]);
+            Poll::Ready(Ok(n))
+        }
+        fn is_write_vectored(&self) -> bool {
+            self.vectored
+        }
+        fn poll_flush(self: Pin<&mut Self>, _: &mut Context<'_>) -> Poll<io::Result<()>> {
+            Poll::Ready(Ok(()))
+        }
+        fn poll_shutdown(self: Pin<&mut Self>, _: &mut Context<'_>) -> Poll<io::Result<()>> {
+            Poll::Ready(Ok(()))
+        }
+    }
+
+    const BARE: &[u8] =
+        b"HTTP/1.1 431 Request Header Fields Too Large\r\nconnection: close\r\ncontent-length: 0\r\ndate: x\r\n\r\n";
+
+    /// Through `poll_write` onto a socket that takes 7 bytes at a time and
+    /// is often not ready: the whole replacement arrives, by the flush or
+    /// by the shutdown that ends the connection; other bytes pass as they
+    /// are; a failing socket's error is the write's.
+    #[tokio::test]
+    async fn the_replacement_is_written_whole_onto_a_slow_socket() {
+        let want = problem_for_bare(BARE).unwrap();
+        for end_by_shutdown in [false, true] {
+            let mut w = ProblemOnBadHead::new(Trickle::new(7));
+            w.write_all(BARE).await.unwrap();
+            if end_by_shutdown {
+                w.shutdown().await.unwrap();
+            } else {
+                w.flush().await.unwrap();
+            }
+            assert_eq!(w.io.out, want, "shutdown {end_by_shutdown}");
+        }
+        let mut w = ProblemOnBadHead::new(Trickle::new(7));
+        w.write_all(b"HTTP/1.1 200 OK\r\n\r\nok").await.unwrap();
+        w.flush().await.unwrap();
+        assert_eq!(w.io.out, b"HTTP/1.1 200 OK\r\n\r\nok");
+        let mut broken = Trickle::new(7);
+        broken.fail = true;
+        let mut w = ProblemOnBadHead::new(broken);
+        let e = w.write_all(BARE).await.unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::BrokenPipe);
+        for vectored in [false, true] {
+            let mut t = Trickle::new(7);
+            t.vectored = vectored;
+            assert_eq!(ProblemOnBadHead::new(t).is_write_vectored(), vectored);
+        }
+    }
+
     /// Only hyper's bare heads are replaced: an app's 400 with a body, or
     /// a head cut short, is not.
     #[test]

@@ -54,6 +54,9 @@ impl Default for AccuracyConfig {
     }
 }
 
+/// The most sample rates one study takes.
+pub const MAX_RATES: usize = 64;
+
 impl AccuracyConfig {
     pub fn validate(&self) -> Result<(), SpecError> {
         if self.rates.is_empty() {
@@ -61,6 +64,15 @@ impl AccuracyConfig {
                 "rates",
                 "[]",
                 "give at least one sample rate (Hz)",
+            ));
+        }
+        // Each rate costs every estimator a run (8.8 s at the longest):
+        // a list is bounded as the API's lists are (issue 45 item 9).
+        if self.rates.len() > MAX_RATES {
+            return Err(SpecError::new(
+                "rates",
+                format!("({} rates)", self.rates.len()),
+                format!("give at most {MAX_RATES} sample rates"),
             ));
         }
         for &r in &self.rates {
@@ -365,6 +377,25 @@ pub fn format_rate(r: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A study takes 1 to MAX_RATES rates (issue 45: any number was taken,
+    /// 8.8 s each), each named when refused.
+    #[test]
+    fn the_rates_are_bounded_in_number_and_value() {
+        let with = |rates: Vec<f64>| AccuracyConfig {
+            rates,
+            ..Default::default()
+        };
+        assert_eq!(with(vec![1e3; MAX_RATES]).validate(), Ok(()));
+        let e = with(vec![1e3; MAX_RATES + 1]).validate().unwrap_err();
+        assert_eq!(
+            (e.field.as_str(), e.value.as_str()),
+            ("rates", "(65 rates)"),
+            "{e}"
+        );
+        assert_eq!(with(vec![]).validate().unwrap_err().field, "rates");
+        assert_eq!(with(vec![1e3, 5.0]).validate().unwrap_err().value, "5");
+    }
 
     #[test]
     fn fdm_error_matches_truncation_theory() {

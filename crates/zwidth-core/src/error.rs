@@ -323,6 +323,32 @@ impl From<SpecError> for CliError {
 mod duplicate_tests {
     use super::*;
 
+    /// A hand-written Deserialize's refusal is read back only in
+    /// `SpecError`'s own form with a plain field name (serde's own texts,
+    /// which contain " = " too, are not taken for one).
+    #[test]
+    fn a_refusal_is_read_back_only_with_a_plain_field_name() {
+        let r = refusal_in("max_window = -1 is not allowed: a whole number at line 1 column 9")
+            .unwrap();
+        assert_eq!(
+            (r.field.as_str(), r.value.as_str(), r.allowed.as_str()),
+            ("max_window", "-1", "a whole number")
+        );
+        assert_eq!(refusal_in(" = -1 is not allowed: x"), None, "no field name");
+        assert_eq!(
+            refusal_in("a b = -1 is not allowed: x"),
+            None,
+            "not a field name"
+        );
+        assert_eq!(refusal_in("Max = -1 is not allowed: x"), None, "upper case");
+        assert_eq!(
+            refusal_in("max = -1 is refused"),
+            None,
+            "not SpecError's words"
+        );
+        assert_eq!(refusal_in("invalid type: map, expected a string"), None);
+    }
+
     #[test]
     fn a_key_written_twice_is_found_with_its_object() {
         // Issue 45 item 11: `{"kind":"map","kind":"compare"}` was run as a

@@ -298,6 +298,28 @@ impl Butterworth {
 mod tests {
     use super::*;
 
+    /// Order 0 is a bad parameter, 1 to MAX_ORDER are designed, beyond is
+    /// past the capacity (one limit, one code: the C ABI's `ZW_CAPACITY`).
+    #[test]
+    fn orders_from_one_to_the_cap_and_the_two_refusals() {
+        assert!(matches!(
+            design_lowpass(0, 100.0, 1000.0),
+            Err(Error::Parameter { name: "order", .. })
+        ));
+        for order in [1, MAX_ORDER] {
+            let (_, used) = design_lowpass(order, 100.0, 1000.0).unwrap();
+            assert_eq!(used, (order as usize).div_ceil(2), "{order}");
+        }
+        assert_eq!(
+            design_lowpass(MAX_ORDER + 1, 100.0, 1000.0).err(),
+            Some(Error::Capacity {
+                name: "order",
+                value: MAX_ORDER as usize + 1,
+                cap: MAX_ORDER as usize
+            })
+        );
+    }
+
     /// scipy's `_cplxreal` order: one of each conjugate pair (imag > 0),
     /// complex by real part, then the reals by value; an input that needs
     /// each root moved more than one place.

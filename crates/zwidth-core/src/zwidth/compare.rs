@@ -465,6 +465,34 @@ impl CompareResult {
 mod tests {
     use super::*;
 
+    /// An explicit list takes 1 to MAX_ESTIMATORS (20, the API's limit),
+    /// each valid on the scene and named by its place when not.
+    #[test]
+    fn a_list_takes_one_to_twenty_valid_estimators_named_by_place() {
+        let scene = seed_2018_scene();
+        let fdm = EstimatorSpec::from_json(r#"{"kind":"fdm"}"#).unwrap();
+        assert_eq!(MAX_ESTIMATORS, 20);
+        for n in [1, 20] {
+            assert_eq!(
+                check_estimators(&scene, &vec![fdm.clone(); n]),
+                Ok(()),
+                "{n}"
+            );
+        }
+        for n in [0, 21] {
+            let e = check_estimators(&scene, &vec![fdm.clone(); n]).unwrap_err();
+            assert_eq!(
+                (e.field.as_str(), e.value.clone()),
+                ("estimators", n.to_string())
+            );
+            assert!(e.allowed.starts_with("give 1 to 20 estimators"), "{e}");
+        }
+        // The seed device samples at 1 kHz: a 600 Hz cutoff is past Nyquist.
+        let bad = EstimatorSpec::from_json(r#"{"kind":"butterworth","cutoff_hz":600}"#).unwrap();
+        let e = check_estimators(&scene, &[fdm.clone(), bad]).unwrap_err();
+        assert_eq!(e.field, "estimators[1].cutoff_hz", "{e}");
+    }
+
     #[test]
     fn a_stability_comparison_runs_the_time_engine_on_a_nonlinear_scene() {
         // The seed device at 1 kHz with short hits: `auto` answers the
