@@ -81,6 +81,25 @@ fn check_finite(ys: &[f64]) -> PyResult<()> {
     }
 }
 
+impl Estimator {
+    /// Estimates `v` (the first at position index `from`) all finite, or a
+    /// ValueError naming the position whose estimate overflowed, the
+    /// estimator reset (as the C ABI does: a position far enough out,
+    /// ±1e308 m into a difference, made every later estimate inf or NaN).
+    fn overflowed(&mut self, v: &[f64], from: usize) -> PyResult<()> {
+        match v.iter().position(|x| !x.is_finite()) {
+            None => Ok(()),
+            Some(i) => {
+                self.built.reset();
+                Err(PyValueError::new_err(format!(
+                    "positions[{}] is not allowed: its estimate overflowed (not a finite number); the estimator was reset",
+                    from + i
+                )))
+            }
+        }
+    }
+}
+
 #[pymethods]
 impl Estimator {
     #[new]
@@ -104,7 +123,9 @@ impl Estimator {
     /// One position (m) in, the velocity estimate (m/s) out.
     fn step(&mut self, y: f64) -> PyResult<f64> {
         check_finite(&[y])?;
-        Ok(self.built.update(y))
+        let v = self.built.update(y);
+        self.overflowed(&[v], 0)?;
+        Ok(v)
     }
 
     /// Velocities (m/s) for positions (m), in order: a 1-D array of any
@@ -138,7 +159,9 @@ impl Estimator {
                 }
                 v
             });
+            let from = out.len();
             out.extend(slice);
+            self.overflowed(&out[from..], from)?;
             py.check_signals()?;
         }
         Ok(PyArray1::from_vec(py, out))

@@ -227,3 +227,22 @@ def test_a_dict_changed_while_it_is_read_is_a_value_error_not_a_panic():
         pass  # refused naming a field: also fine
     except BaseException as x:  # noqa: BLE001 - a PanicException is a BaseException
         pytest.fail(f"{type(x).__name__}: {x}")
+
+
+def test_a_position_whose_estimate_overflows_is_refused_and_resets():
+    """Issue 45's probe: positions near 1e308 m made inf; as through the C
+    ABI, the position is named and the estimator reset, so the next
+    estimates are a fresh estimator's (FDM's (2e-3 - 1e-3) * 1e3 = 1)."""
+    e = zwidth.Estimator({"kind": "fdm"}, 1000, 1e-6)
+    e.step(1e308)
+    with pytest.raises(ValueError, match=r"^positions\[0\] is not allowed: its estimate overflowed"):
+        e.step(-1e308)
+    e.step(1e-3)
+    assert e.step(2e-3) == pytest.approx(1.0, rel=1e-12)
+    # (1e308 - 0) * 1e3 overflows at the second position.
+    with pytest.raises(ValueError, match=r"^positions\[1\] is not allowed: its estimate overflowed"):
+        e.run(np.array([0.0, 1e308, -1e308, 0.0]))
+    fresh = zwidth.Estimator({"kind": "fdm"}, 1000, 1e-6)
+    assert np.array_equal(e.run(np.array([1e-3, 2e-3])), fresh.run(np.array([1e-3, 2e-3])))
+    with pytest.raises(ValueError, match="overflowed"):
+        zwidth.estimate([0.0, 1e308, -1e308], {"kind": "fdm"}, 1000)
