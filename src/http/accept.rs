@@ -292,11 +292,7 @@ impl<T: AsyncWrite + Unpin> AsyncWrite for ProblemOnBadHead<T> {
         buf: &[u8],
     ) -> Poll<io::Result<usize>> {
         let this = self.get_mut();
-        match this.drain(cx) {
-            Poll::Ready(Ok(())) => {}
-            Poll::Ready(Err(e)) => return Poll::Ready(Err(e)),
-            Poll::Pending => return Poll::Pending,
-        }
+        std::task::ready!(this.drain(cx))?;
         if let Some(r) = this.swap(cx, buf) {
             return r;
         }
@@ -309,11 +305,7 @@ impl<T: AsyncWrite + Unpin> AsyncWrite for ProblemOnBadHead<T> {
         bufs: &[io::IoSlice<'_>],
     ) -> Poll<io::Result<usize>> {
         let this = self.get_mut();
-        match this.drain(cx) {
-            Poll::Ready(Ok(())) => {}
-            Poll::Ready(Err(e)) => return Poll::Ready(Err(e)),
-            Poll::Pending => return Poll::Pending,
-        }
+        std::task::ready!(this.drain(cx))?;
         if let Some(first) = bufs.iter().find(|b| !b.is_empty()) {
             if let Some(r) = this.swap(cx, first) {
                 return r;

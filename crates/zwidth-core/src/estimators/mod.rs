@@ -105,8 +105,15 @@ impl<'de> Deserialize<'de> for EstimatorSpec {
         };
         let median_position = take_window("median_position")?;
         let median_velocity = take_window("median_velocity")?;
-        let kind = EstimatorKind::deserialize(serde_json::Value::Object(map.clone()))
-            .map_err(|e| D::Error::custom(kind_error(&map, &e)))?;
+        // Read through a reference: the map stays for the error's search
+        // without a copy on the way that succeeds.
+        let value = serde_json::Value::Object(map);
+        let kind = EstimatorKind::deserialize(&value).map_err(|e| {
+            let why = value
+                .as_object()
+                .map_or_else(|| e.to_string(), |map| kind_error(map, &e));
+            D::Error::custom(why)
+        })?;
         Ok(Self {
             kind,
             median_position,
