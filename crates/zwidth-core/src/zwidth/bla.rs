@@ -170,6 +170,16 @@ pub fn replicate_seed(seed: u64, r: usize) -> u64 {
     SplitMix64::new(seed ^ (r as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)).next_u64()
 }
 
+/// The probe seed of trial `index` of column `column` in a search whose
+/// trials are independent (`SearchKind::Psi`): a SplitMix draw from all
+/// three, so no two trials of a map share a realization, and two maps
+/// that differ only in a parameter still see the same draws trial for
+/// trial (common random numbers).
+pub fn trial_seed(seed: u64, column: u32, index: u32) -> u64 {
+    let place = (u64::from(column) << 32 | u64::from(index)).wrapping_add(1);
+    SplitMix64::new(seed ^ place.wrapping_mul(0xBF58_476D_1CE4_E5B9)).next_u64()
+}
+
 /// What a point's realizations say.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BlaVerdict {

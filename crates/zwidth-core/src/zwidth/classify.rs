@@ -46,6 +46,13 @@ impl Classifier {
     }
 
     pub fn classify(&self, k: f64, b: f64) -> Point {
+        self.classify_seeded(k, b, self.scene.spec.probe.seed)
+    }
+
+    /// The verdict at (K, B) with a noisy probe's realizations drawn from
+    /// `seed` (a trial of its own: `bla::trial_seed`); a trial sent to the
+    /// rig's backend carries it as its scene's probe seed.
+    pub fn classify_seeded(&self, k: f64, b: f64, seed: u64) -> Point {
         let mut p = Point {
             k,
             b,
@@ -78,11 +85,13 @@ impl Classifier {
             }
             let p = match (o.backend(), &self.accuracy) {
                 (Some(backend), Some(accuracy)) => {
+                    let mut scene = self.scene.spec.clone();
+                    scene.probe.seed = seed;
                     let request = super::trial::TrialRequest {
                         scope: self.scope,
                         k,
                         b,
-                        scene: self.scene.spec.clone(),
+                        scene,
                         method: self.method,
                         criterion: self.criterion,
                         accuracy: accuracy.clone(),
@@ -96,12 +105,12 @@ impl Classifier {
                         }
                     }
                 }
-                _ => self.evaluate(p),
+                _ => self.evaluate_seeded(p, seed),
             };
             o.record(trial(p.clone()));
             return p;
         }
-        self.evaluate(p)
+        self.evaluate_seeded(p, seed)
     }
 
     /// The farm this map's units go to, if any.
@@ -173,8 +182,9 @@ impl Classifier {
     }
 }
 
-/// Whether a map is one unit of work (a trace, the analytic engine), not
-/// one per column.
+/// Whether a map is one unit of work (a trace, the analytic engine, the
+/// Psi search: its second pass depends on every column's first), not one
+/// per column.
 pub(super) fn whole_map_unit(spec: &MapSpec, ev: &Evaluator) -> bool {
-    spec.search == SearchKind::Trace || ev.model.is_some()
+    matches!(spec.search, SearchKind::Trace | SearchKind::Psi) || ev.model.is_some()
 }

@@ -184,6 +184,8 @@ pub fn of_map(spec: &MapSpec, res: &Resolved, exact: bool) -> Result<Cost, SpecE
             // the whole K range between columns.
             SearchKind::Trace if spec.b.is_none() => 2 * k_steps + 3 * b_columns,
             SearchKind::Trace => b_columns.saturating_mul(k_steps + 2),
+            // At most the budget of a column's posterior (`psi_search.rs`).
+            SearchKind::Psi => b_columns.saturating_mul(super::psi_search::BUDGET as u64),
             SearchKind::Grid => {
                 let nb = if spec.b.is_some() {
                     b_columns

@@ -6,7 +6,7 @@
 use super::analytic::{ImpedanceCurve, LinearModel};
 use super::hit::{replicated_hits, wall_hit, NoTrace};
 use super::point::Point;
-use super::probe::{probe_with, ProbeSetup};
+use super::probe::{probe_seeded, ProbeSetup};
 use super::scene::{ProbeMethod, Scene, SceneSpec};
 use super::settings::{Criterion, Method, Resolved};
 use crate::error::SpecError;
@@ -176,11 +176,16 @@ impl Evaluator {
     }
 
     fn probe(&self, k: f64, b: f64) -> super::probe::ProbeOutcome {
+        self.probe_seeded(k, b, self.scene.spec.probe.seed)
+    }
+
+    /// The probe with its realizations drawn from `seed`.
+    fn probe_seeded(&self, k: f64, b: f64, seed: u64) -> super::probe::ProbeOutcome {
         let setup = self
             .probe_setup
             .as_ref()
             .expect("frequency method has a probe setup");
-        probe_with(setup, &self.scene, k, b, self.res.probe)
+        probe_seeded(setup, &self.scene, k, b, self.res.probe, seed)
     }
 
     /// The impedance curve at (K, B) from whichever engine can give one.
@@ -202,7 +207,13 @@ impl Evaluator {
         })
     }
 
-    pub(super) fn evaluate(&self, mut p: Point) -> Point {
+    pub(super) fn evaluate(&self, p: Point) -> Point {
+        self.evaluate_seeded(p, self.scene.spec.probe.seed)
+    }
+
+    /// The verdict with a noisy probe's realizations drawn from `seed` (a
+    /// trial of its own, `bla::trial_seed`); the other engines draw nothing.
+    pub(super) fn evaluate_seeded(&self, mut p: Point, seed: u64) -> Point {
         let (k, b) = (p.k, p.b);
         match (self.criterion, &self.model) {
             (Criterion::Stability, Some(m)) => p.stable = Some(m.spectral_radius(k, b) < 1.0),
@@ -224,7 +235,7 @@ impl Evaluator {
                 p.fidelity = Some(c.fidelity);
             }
             (Criterion::Impedance, None) => {
-                let o = self.probe(k, b);
+                let o = self.probe_seeded(k, b, seed);
                 p.passive = Some(o.passive);
                 p.fidelity = Some(o.impedance.fidelity);
                 p.saturated = (o.saturated_renders > 0).then_some(true);

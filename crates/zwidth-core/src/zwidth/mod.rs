@@ -16,6 +16,8 @@ pub mod observer;
 pub mod point;
 pub mod poly;
 pub mod probe;
+pub mod psi;
+mod psi_search;
 pub mod scene;
 pub mod search;
 pub mod settings;

@@ -47,6 +47,16 @@ impl Point {
         !self.ok() && self.decided != Some(false)
     }
 
+    /// Noisy scenes: the loop diverged (escaped) in the last of its
+    /// `realizations`. The frequency engine states a divergence as a
+    /// decided verdict with margin −1 and standard error 0 (`probe.rs`,
+    /// `diverged`: "Re Z = −1 on every line stands for no steady state");
+    /// a measured margin never has a standard error of exactly 0 over two
+    /// or more realizations.
+    pub fn diverged(&self) -> bool {
+        self.decided == Some(true) && self.margin == Some(-1.0) && self.margin_se == Some(0.0)
+    }
+
     pub fn ok(&self) -> bool {
         self.stable.or(self.passive).unwrap_or(false)
     }

@@ -185,12 +185,25 @@ pub fn probe_with(
     b: f64,
     knobs: ProbeKnobs,
 ) -> ProbeOutcome {
+    probe_seeded(setup, scene, k, b, knobs, scene.spec.probe.seed)
+}
+
+/// The same with the random-phase realizations drawn from `seed` instead
+/// of the scene's (a trial of its own: `bla::trial_seed`).
+pub fn probe_seeded(
+    setup: &ProbeSetup,
+    scene: &Scene,
+    k: f64,
+    b: f64,
+    knobs: ProbeKnobs,
+    seed: u64,
+) -> ProbeOutcome {
     let d = &scene.spec.device;
     let welch = scene.spec.probe.method == ProbeMethod::Tfestimate;
     match (d.coulomb > 0.0, d.quantization > 0.0, welch) {
-        (true, true, false) => run_bla::<true, true>(setup, scene, k, b, knobs),
-        (true, false, false) => run_bla::<true, false>(setup, scene, k, b, knobs),
-        (false, true, false) => run_bla::<false, true>(setup, scene, k, b, knobs),
+        (true, true, false) => run_bla::<true, true>(setup, scene, k, b, knobs, seed),
+        (true, false, false) => run_bla::<true, false>(setup, scene, k, b, knobs, seed),
+        (false, true, false) => run_bla::<false, true>(setup, scene, k, b, knobs, seed),
         (true, true, true) => run_tfestimate::<true, true>(setup, scene, k, b, knobs),
         (true, false, true) => run_tfestimate::<true, false>(setup, scene, k, b, knobs),
         (false, true, true) => run_tfestimate::<false, true>(setup, scene, k, b, knobs),
@@ -283,6 +296,7 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
     k: f64,
     b: f64,
     knobs: ProbeKnobs,
+    seed: u64,
 ) -> ProbeOutcome {
     let p = &scene.spec.probe;
     let per_period = setup.force.len();
@@ -299,7 +313,7 @@ fn run_bla<const FRICTION: bool, const QUANT: bool>(
     let renders = setup.renders(scene, knobs.periods);
     let decides = bla::clipping_decides(p.amplitude, scene.spec.device.force_limit);
     for m in 0..max_m {
-        let ms = bla::realization(&setup.design, p.seed, m);
+        let ms = bla::realization(&setup.design, seed, m);
         let (force, f_lines) = setup.excitation(&ms, per_period);
         let mut g = Vec::with_capacity(knobs.periods as usize);
         let mut window = ClipWindow::default();

@@ -129,10 +129,20 @@ fn prepare(spec: &MapSpec) -> Result<(Evaluator, Cost), SpecError> {
             }
         }
     }
-    let ev = Evaluator::new(scene, spec.method, spec.criterion, res)?;
+    let mut ev = Evaluator::new(scene, spec.method, spec.criterion, res)?;
+    if defined_by_its_trial(spec, &ev) {
+        let trial = spec.accuracy.standard_trial().resolve(&ev.scene)?;
+        (ev.res.probe, ev.res.hit) = (trial.probe, trial.hit);
+    }
     let exact = ev.criterion == Criterion::StrictPassivity && ev.model.is_some();
     let cost = super::cost::of_map(spec, &ev.res, exact)?;
     Ok((ev, cost))
+}
+
+/// Whether the map's boundary is defined by its trial (the Psi search on
+/// noisy verdicts): every preset then runs the standard preset's trial.
+fn defined_by_its_trial(spec: &MapSpec, ev: &Evaluator) -> bool {
+    spec.search == SearchKind::Psi && ev.noisy()
 }
 
 /// Which trials the force limit clipped, and how many boundary points such
@@ -182,6 +192,8 @@ pub fn map_observed(
     if whole_map_unit(spec, &ev) {
         ev.farm_units(spec, &[Unit::Map], &|_| {});
     }
+    // The Psi search states the K-width as the largest K* over its columns.
+    let mut psi_width: Option<(f64, [f64; 2])> = None;
     let (boundary, points) = match (spec.search, ev.criterion, &ev.model) {
         (_, Criterion::StrictPassivity, Some(m)) => {
             // Exact per B: no search needed.
@@ -200,17 +212,27 @@ pub fn map_observed(
             }
             (boundary, points)
         }
-        (SearchKind::Bisect | SearchKind::RobustBisect, _, _) => bisect_all(&ev, spec, &b_auto),
+        (SearchKind::Psi, _, _) if ev.noisy() => {
+            let m = super::psi_search::psi_all(&ev, spec, &b_auto);
+            psi_width = Some((m.k_width, m.k_width_interval));
+            (m.boundary, m.points)
+        }
+        (SearchKind::Bisect | SearchKind::RobustBisect | SearchKind::Psi, _, _) => {
+            bisect_all(&ev, spec, &b_auto)
+        }
         (SearchKind::Trace, _, _) => trace(&ev, spec, &b_auto),
         (SearchKind::Grid, _, _) => grid(&ev, spec, &b_auto),
     };
-    let k_width = boundary.iter().map(|p| p.k_max).fold(0.0, f64::max);
+    let mut k_width = boundary.iter().map(|p| p.k_max).fold(0.0, f64::max);
     let b_width = boundary
         .iter()
         .filter(|p| p.k_max > 0.0)
         .map(|p| p.b)
         .fold(0.0, f64::max);
-    let (k_width_interval, b_width_interval) = widths_interval(&boundary, res.k_step);
+    let (mut k_width_interval, b_width_interval) = widths_interval(&boundary, res.k_step);
+    if let Some((k, interval)) = psi_width {
+        (k_width, k_width_interval) = (k, Some(interval));
+    }
     let max_fidelity_error = points
         .iter()
         .filter(|p| p.passive == Some(true))
@@ -225,7 +247,10 @@ pub fn map_observed(
         (_, Criterion::StrictPassivity, _) => {
             "exact per B (θ grid of 8192 points, refined)".to_string()
         }
-        (SearchKind::Bisect, _, _) => format!("K to {:.2} % (bisection)", 100.0 * res.k_rel_tol),
+        (SearchKind::Psi, _, _) if ev.noisy() => super::psi_search::resolution(&ev),
+        (SearchKind::Bisect | SearchKind::Psi, _, _) => {
+            format!("K to {:.2} % (bisection)", 100.0 * res.k_rel_tol)
+        }
         (SearchKind::RobustBisect, _, _) => format!(
             "K to {:.2} % (bisection, checked at 0.3–0.9 of the result: the first failure from below)",
             100.0 * res.k_rel_tol
@@ -269,7 +294,11 @@ fn map_evaluator(
 ) -> Result<(Classifier, Vec<f64>), SpecError> {
     let (ev, _) = prepare(spec)?;
     let mut ev = Classifier::new(ev);
-    ev.accuracy = Some(spec.accuracy.clone());
+    ev.accuracy = Some(if defined_by_its_trial(spec, &ev) {
+        spec.accuracy.standard_trial()
+    } else {
+        spec.accuracy.clone()
+    });
     ev.observer = observer;
     ev.scope = scope;
     // The automatic B range, only when no list is given (its length was
@@ -474,7 +503,7 @@ fn bisect_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryP
 }
 
 /// One column of a bisection map (`bisect_column` with its spec bound).
-type ColumnOf<'a> = dyn Fn(f64) -> (BoundaryPoint, Vec<Point>) + Sync + 'a;
+pub(super) type ColumnOf<'a> = dyn Fn(f64) -> (BoundaryPoint, Vec<Point>) + Sync + 'a;
 
 /// The automatic B range computed here: each thread takes the next column
 /// in B order as soon as it is free, so none waits for a batch's slowest
@@ -482,7 +511,11 @@ type ColumnOf<'a> = dyn Fn(f64) -> (BoundaryPoint, Vec<Point>) + Sync + 'a;
 /// row once both are done (the range ends there or before); those started
 /// past the range's end are dropped, trials and all, as a batch's are, so
 /// the map is the same on any number of threads (issue 14).
-fn in_order(ev: &Classifier, b_auto: &[f64], one: &ColumnOf) -> Vec<(BoundaryPoint, Vec<Point>)> {
+pub(super) fn in_order(
+    ev: &Classifier,
+    b_auto: &[f64],
+    one: &ColumnOf,
+) -> Vec<(BoundaryPoint, Vec<Point>)> {
     use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
     let k_floor = ev.res.k_step;
     let n = b_auto.len();

@@ -49,6 +49,12 @@ pub enum SearchKind {
     RobustBisect,
     /// A full K × B grid.
     Grid,
+    /// Noisy scenes: every trial of a column informs one posterior of its
+    /// boundary (the Psi method, `psi.rs`), each trial with realizations
+    /// of its own; the next K is where a verdict narrows it most. Columns
+    /// are first located coarsely, then those that may set the K-width to
+    /// the resolution. On a scene without noise, bisection.
+    Psi,
 }
 
 impl SearchKind {
@@ -59,6 +65,7 @@ impl SearchKind {
             SearchKind::Bisect => "bisect",
             SearchKind::RobustBisect => "robust_bisect",
             SearchKind::Grid => "grid",
+            SearchKind::Psi => "psi",
         }
     }
 }
@@ -133,6 +140,22 @@ pub const PAPER_K_STEP: f64 = 1488.24;
 pub const PAPER_B_STEP: f64 = 14.88;
 
 impl Accuracy {
+    /// The accuracy of one trial where the trial defines the boundary
+    /// (`SearchKind::Psi`: the boundary is where a trial fails with
+    /// probability ½, so every preset runs the same trial and presets differ
+    /// only in how narrowly they locate it): the standard preset's trial
+    /// knobs, with those the spec names.
+    pub fn standard_trial(&self) -> Accuracy {
+        let knobs = match self {
+            Accuracy::Preset(_) => AccuracyKnobs::default(),
+            Accuracy::Knobs(k) => k.clone(),
+        };
+        Accuracy::Knobs(AccuracyKnobs {
+            preset: Preset::Standard,
+            ..knobs
+        })
+    }
+
     pub fn resolve(&self, scene: &Scene) -> Result<Resolved, SpecError> {
         let knobs = match self {
             Accuracy::Preset(p) => AccuracyKnobs {
@@ -305,7 +328,7 @@ mod tests {
     #[test]
     fn search_names_are_the_spec_names() {
         use SearchKind::*;
-        for k in [Trace, Bisect, RobustBisect, Grid] {
+        for k in [Trace, Bisect, RobustBisect, Grid, Psi] {
             assert_eq!(serde_json::to_value(k).unwrap(), k.name());
         }
     }

@@ -1,0 +1,249 @@
+//! The Psi search (`SearchKind::Psi`): each column's boundary from a
+//! posterior told every trial of the column (`psi.rs`), each trial with
+//! realizations of its own (`bla::trial_seed`).
+//!
+//! Two passes. The first locates every column to a few times the
+//! resolution (its columns in parallel, the automatic B range ending as a
+//! bisection map's does). The second refines, to the resolution, the
+//! columns whose interval reaches the largest lower end over the columns:
+//! those that may set the K-width. Each pass depends only on the verdicts
+//! before it, so the map is the same on any number of threads; the map is
+//! one unit of work for a farm (`classify::whole_map_unit`).
+
+use std::collections::HashMap;
+use std::sync::Mutex;
+
+use rayon::prelude::*;
+
+use super::bla::trial_seed;
+use super::classify::Classifier;
+use super::point::{BoundaryPoint, Point};
+use super::psi::{max_estimate, repeat_k, Outcome, PsiColumn, PsiMarginal, PsiModel, PsiState};
+use super::settings::MapSpec;
+
+/// Trials a column may take in all.
+pub const BUDGET: usize = 100;
+
+/// The first pass's resolution, as a multiple of the preset's (at most
+/// ±25 %).
+const COARSE: f64 = 4.0;
+
+/// Rounds of the second pass: a refined column can lower the largest lower
+/// end and so bring another column in.
+const ROUNDS: usize = 8;
+
+/// One column's trials, in order, and what they told its posterior (the
+/// posterior itself is rebuilt from them when a pass needs it: a map may
+/// have thousands of columns).
+#[derive(Default)]
+struct Column {
+    history: Vec<(usize, Outcome)>,
+    points: Vec<Point>,
+    /// The marginal posterior of K* after the last trial.
+    marginal: Option<PsiMarginal>,
+}
+
+/// Each end of a column's interval is wrong with posterior probability α,
+/// the scene's per-verdict error rate.
+fn alpha(ev: &Classifier) -> f64 {
+    1.0 - ev.scene.spec.probe.confidence
+}
+
+fn coarse(ev: &Classifier) -> f64 {
+    (COARSE * ev.res.k_rel_tol).min(0.25)
+}
+
+/// The map's resolution, in words.
+pub(super) fn resolution(ev: &Classifier) -> String {
+    format!(
+        "K to ±{:.2} % where a column may set the K-width, ±{:.2} % elsewhere ({:.0} % credible intervals of a posterior told every trial of the column, the Psi method; at most {BUDGET} trials a column)",
+        100.0 * ev.res.k_rel_tol,
+        100.0 * coarse(ev),
+        100.0 * (1.0 - 2.0 * alpha(ev)),
+    )
+}
+
+/// When a column's trials stop, besides its state (`PsiColumn::state`).
+#[derive(Clone, Copy)]
+struct Stop {
+    /// Resolved at this half-width (relative).
+    rel_tol: f64,
+    /// Or: P(K* > K at this lattice point) at most `tail`, unless the
+    /// column's own lower end passes `lead` (N/m): it then leads.
+    above: Option<(usize, f64, f64)>,
+}
+
+/// Tell `c` trials at `b` until `stop` holds, the column is resolved,
+/// empty or above the cap, its budget is spent or the run is cancelled;
+/// its boundary point.
+fn run(
+    ev: &Classifier,
+    spec: &MapSpec,
+    model: &PsiModel,
+    b: f64,
+    c: &mut Column,
+    stop: Stop,
+) -> BoundaryPoint {
+    let column = ev.columns.get(&b.to_bits()).copied().unwrap_or(0);
+    let cancelled = || ev.observer.as_ref().is_some_and(|o| o.cancelled());
+    let mut psi = PsiColumn::from_history(model, &c.history);
+    let alpha = alpha(ev);
+    let stopped = |psi: &PsiColumn| {
+        psi.state(model, alpha, stop.rel_tol, BUDGET) != PsiState::Open
+            || stop.above.is_some_and(|(m, tail, lead)| {
+                psi.marginal_of().tail(m) <= tail || psi.estimate(model, alpha).k_lo > lead
+            })
+    };
+    while !stopped(&psi) && !cancelled() {
+        let m = psi.ask(model);
+        let k = repeat_k(model.k(m).min(spec.k_max), psi.repeats(m));
+        let index = u32::try_from(psi.trials()).unwrap_or(u32::MAX);
+        let p = ev.classify_seeded(k, b, trial_seed(ev.scene.spec.probe.seed, column, index));
+        psi.tell(model, m, outcome(&p));
+        c.points.push(p);
+    }
+    c.history = psi.history().to_vec();
+    c.marginal = Some(psi.marginal_of());
+    boundary_point(ev, model, b, &psi)
+}
+
+/// What a trial's verdict tells the posterior.
+fn outcome(p: &Point) -> Outcome {
+    let realizations = p.realizations.unwrap_or(1);
+    match (p.diverged(), p.ok()) {
+        (true, _) => Outcome::Escaped { at: realizations },
+        (_, true) => Outcome::Survived { realizations },
+        (_, false) => Outcome::Failed,
+    }
+}
+
+fn boundary_point(ev: &Classifier, model: &PsiModel, b: f64, psi: &PsiColumn) -> BoundaryPoint {
+    let e = psi.estimate(model, alpha(ev));
+    BoundaryPoint {
+        b,
+        k_max: e.k_mid,
+        k_lo: Some(e.k_lo),
+        k_hi: Some(e.k_hi),
+    }
+}
+
+/// A Psi map: its boundary, its trials in (column, index) order, and the
+/// K-width with its interval, the largest K* over the columns
+/// (`psi::max_estimate`).
+pub(super) struct PsiMap {
+    pub boundary: Vec<BoundaryPoint>,
+    pub points: Vec<Point>,
+    pub k_width: f64,
+    pub k_width_interval: [f64; 2],
+}
+
+pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap {
+    let model = PsiModel::new(ev.res.k_step, spec.k_max, ev.res.probe.realizations);
+    let columns: Mutex<HashMap<u64, Column>> = Mutex::default();
+    let coarse = Stop {
+        rel_tol: coarse(ev),
+        above: None,
+    };
+    let first = |b: f64| {
+        let mut c = Column::default();
+        let bp = run(ev, spec, &model, b, &mut c, coarse);
+        columns
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(b.to_bits(), c);
+        (bp, Vec::new())
+    };
+    let mut boundary: Vec<BoundaryPoint> = match &spec.b {
+        Some(bs) => bs.par_iter().map(|&b| first(b).0).collect(),
+        None => super::search::in_order(ev, b_auto, &first)
+            .into_iter()
+            .map(|(bp, _)| bp)
+            .collect(),
+    };
+    let mut columns = columns.into_inner().unwrap_or_else(|e| e.into_inner());
+    let alpha = alpha(ev);
+    let tol = ev.res.k_rel_tol;
+    let marginals =
+        |columns: &HashMap<u64, Column>, boundary: &[BoundaryPoint]| -> Vec<PsiMarginal> {
+            boundary
+                .iter()
+                .filter_map(|bp| {
+                    columns
+                        .get(&bp.b.to_bits())
+                        .and_then(|c| c.marginal.clone())
+                })
+                .collect()
+        };
+    for _ in 0..ROUNDS {
+        // The K-width's interval is the largest K*'s: within ±tol once
+        // P(max K* > upper) ≤ α, upper = lead·(1 + tol)/(1 − tol) for its
+        // lower end `lead`. Each of the N columns that may exceed the lead
+        // takes trials until P(K*_c > upper) ≤ α/N (so the sum over them
+        // is at most α), or until it leads itself (the next round).
+        let max = max_estimate(&model, &marginals(&columns, &boundary), alpha);
+        let lead = max.k_lo;
+        let upper = lead * (1.0 + tol) / (1.0 - tol);
+        let m_lead = model.lattice(lead);
+        let m_upper = model.lattice(upper);
+        let rivals = boundary
+            .iter()
+            .filter(|bp| {
+                columns
+                    .get(&bp.b.to_bits())
+                    .and_then(|c| c.marginal.as_ref())
+                    .is_some_and(|mg| mg.tail(m_lead) > 1e-3)
+            })
+            .count()
+            .max(1);
+        let tail = alpha / rivals as f64;
+        let todo: Vec<usize> = (0..boundary.len())
+            .filter(|&i| {
+                columns.get(&boundary[i].b.to_bits()).is_some_and(|c| {
+                    c.marginal
+                        .as_ref()
+                        .is_some_and(|mg| mg.tail(m_upper) > tail)
+                        && c.history.len() < BUDGET
+                })
+            })
+            .collect();
+        if todo.is_empty() || ev.observer.as_ref().is_some_and(|o| o.cancelled()) {
+            break;
+        }
+        let stop = Stop {
+            rel_tol: tol / 4.0,
+            above: Some((m_upper, tail, lead)),
+        };
+        let mut taken: Vec<(usize, Column)> = todo
+            .iter()
+            .filter_map(|&i| columns.remove(&boundary[i].b.to_bits()).map(|c| (i, c)))
+            .collect();
+        let refined: Vec<BoundaryPoint> = taken
+            .par_iter_mut()
+            .map(|(i, c)| run(ev, spec, &model, boundary[*i].b, c, stop))
+            .collect();
+        for ((i, c), bp) in taken.into_iter().zip(refined) {
+            boundary[i] = bp;
+            columns.insert(bp.b.to_bits(), c);
+        }
+    }
+    let max = max_estimate(&model, &marginals(&columns, &boundary), alpha);
+    let points = boundary
+        .iter()
+        .flat_map(|bp| {
+            columns
+                .remove(&bp.b.to_bits())
+                .map(|c| c.points)
+                .unwrap_or_default()
+        })
+        .collect();
+    PsiMap {
+        boundary,
+        points,
+        k_width: max.k_mid,
+        k_width_interval: [max.k_lo, max.k_hi],
+    }
+}
+
+#[cfg(test)]
+#[path = "psi_search_tests.rs"]
+mod tests;

@@ -1,0 +1,110 @@
+//! Tests of the Psi search's driver on the seed device (friction and
+//! quantization: noisy verdicts), at the draft preset on a few columns.
+
+use std::sync::Arc;
+
+use crate::zwidth::observer::Observer;
+use crate::zwidth::point::StoredTrial;
+use crate::zwidth::scene::SceneSpec;
+use crate::zwidth::search::map_observed;
+use crate::zwidth::settings::{Criterion, MapSpec, Method, SearchKind};
+
+fn seed_device(b: Vec<f64>) -> MapSpec {
+    MapSpec {
+        scene: SceneSpec::default(),
+        method: Method::Frequency,
+        criterion: Criterion::Impedance,
+        search: SearchKind::Psi,
+        accuracy: serde_json::from_str(r#""draft""#).unwrap(),
+        b: Some(b),
+        b_max: 1000.0,
+        k_max: 1e7,
+    }
+}
+
+#[test]
+fn a_psi_map_is_the_same_on_any_thread_count_and_replays_from_its_trials() {
+    let spec = seed_device(vec![0.0, 200.0, 400.0]);
+    let mut first: Option<(Vec<StoredTrial>, String)> = None;
+    for threads in [1, 3] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let o = Arc::new(Observer::default());
+        let r = pool
+            .install(|| map_observed(&spec, Some(o.clone()), 2))
+            .unwrap();
+        let mut stored = o.take_new();
+        stored.sort_by_key(|t| (t.column, t.index));
+        let points: Vec<_> = stored.iter().map(|t| t.point.clone()).collect();
+        assert_eq!(
+            r.points, points,
+            "{threads} threads: the points in (column, index) order"
+        );
+        // Each column's trials at distinct K (a trial is stored, and
+        // replayed, by its K).
+        for column in 0..3 {
+            let mut ks: Vec<u64> = stored
+                .iter()
+                .filter(|t| t.column == column)
+                .map(|t| t.point.k.to_bits())
+                .collect();
+            let n = ks.len();
+            ks.sort_unstable();
+            ks.dedup();
+            assert_eq!(ks.len(), n, "column {column}");
+        }
+        let boundary = serde_json::to_string(&r.boundary).unwrap();
+        match &first {
+            None => first = Some((stored, boundary)),
+            Some((s0, b0)) => {
+                assert_eq!(&stored, s0, "{threads} threads");
+                assert_eq!(&boundary, b0, "{threads} threads");
+            }
+        }
+    }
+    // Resumed from every stored trial, nothing is computed again and the
+    // map is the same.
+    let (stored, boundary) = first.unwrap();
+    let o = Arc::new(Observer::resuming(stored.clone()));
+    let r = map_observed(&spec, Some(o.clone()), 2).unwrap();
+    assert_eq!(serde_json::to_string(&r.boundary).unwrap(), boundary);
+    assert!(o.take_new().is_empty(), "a replayed trial stored again");
+}
+
+#[test]
+fn a_psi_map_brackets_each_boundary_and_states_its_resolution() {
+    let spec = seed_device(vec![0.0, 200.0]);
+    let r = map_observed(&spec, None, 0).unwrap();
+    assert!(r.resolution.contains("Psi method"), "{}", r.resolution);
+    for bp in &r.boundary {
+        let (lo, hi) = (bp.k_lo.unwrap(), bp.k_hi.unwrap());
+        assert!(lo <= bp.k_max && bp.k_max <= hi, "{bp:?}");
+        // Every trial of the column below the lower end by more than the
+        // bracket passed or was undecided, and the column's trials
+        // straddle its boundary: one above it failed.
+        let column: Vec<_> = r.points.iter().filter(|p| p.b == bp.b).collect();
+        assert!(column.iter().any(|p| p.k > bp.k_max && !p.ok()), "{bp:?}");
+        assert!(column.iter().any(|p| p.k < bp.k_max && p.ok()), "{bp:?}");
+    }
+    // The draft bisection of the same columns defines its boundary by a
+    // shorter trial (10 realizations, not the standard 24) on one
+    // excitation sequence per column; its interval still meets the Psi
+    // interval.
+    let bisect = map_observed(
+        &MapSpec {
+            search: SearchKind::Bisect,
+            ..spec.clone()
+        },
+        None,
+        0,
+    )
+    .unwrap();
+    for (p, q) in r.boundary.iter().zip(&bisect.boundary) {
+        assert!(
+            q.k_lo.unwrap() <= p.k_hi.unwrap() && p.k_lo.unwrap() <= q.k_hi.unwrap(),
+            "psi {p:?}, bisection {q:?}"
+        );
+    }
+}
