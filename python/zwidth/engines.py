@@ -315,7 +315,7 @@ def map(  # noqa: A001 - the product's word for it
 
     `method`: auto | analytic | time | frequency; `criterion`: impedance |
     stability | strict_passivity; `search`: bisect | robust_bisect | trace |
-    grid; `accuracy`: draft | standard | reference, or a dict of knobs
+    grid | psi; `accuracy`: draft | standard | reference, or a dict of knobs
     (`{"preset": "draft", "k_rel_tol": 0.02}`); `b`: only these dampings
     (N·s/m); `b_max` (N·s/m) and `k_max` (N/m) bound the search.
     """

@@ -140,7 +140,7 @@ pub enum Command {
         /// stability | impedance | strict_passivity
         #[arg(long, default_value = "impedance")]
         criterion: String,
-        /// robust_bisect | bisect | trace | grid: how each map searches.
+        /// robust_bisect | bisect | trace | grid | psi: how each map searches.
         #[arg(long, default_value = "robust_bisect")]
         search: String,
         /// auto | brent | golden | nelder_mead | particle_swarm | grid | halton

@@ -4,6 +4,7 @@
 use std::sync::Arc;
 
 use crate::zwidth::observer::Observer;
+use crate::zwidth::point::Point;
 use crate::zwidth::point::StoredTrial;
 use crate::zwidth::scene::SceneSpec;
 use crate::zwidth::search::map_observed;
@@ -107,4 +108,34 @@ fn a_psi_map_brackets_each_boundary_and_states_its_resolution() {
             "psi {p:?}, bisection {q:?}"
         );
     }
+}
+
+#[test]
+fn a_psi_map_whose_trials_run_elsewhere_is_the_same_map_to_the_bit() {
+    // A rig's backend (`agent --sim`) gets each trial as a request: its
+    // scene carries the trial's own seed and its accuracy the standard
+    // trial, after a JSON round trip; computed from the request alone
+    // (`trial::run`), every verdict is the one this process computes.
+    use crate::zwidth::control::RunControl;
+    use crate::zwidth::trial::{run, TrialBackend, TrialRequest};
+    struct OverTheWire;
+    impl TrialBackend for OverTheWire {
+        fn trial(&self, request: &TrialRequest, _: &dyn RunControl) -> Option<Point> {
+            let wire = serde_json::to_string(request).unwrap();
+            let back: TrialRequest = serde_json::from_str(&wire).unwrap();
+            Some(run(&back).unwrap())
+        }
+    }
+    // At the draft preset: the standard trial must cross the wire too.
+    let spec = seed_device(vec![300.0]);
+    let here = map_observed(&spec, None, 0).unwrap();
+    let o = Arc::new(Observer::default().with_backend(Arc::new(OverTheWire)));
+    let there = map_observed(&spec, Some(o), 0).unwrap();
+    assert_eq!(here.points, there.points);
+    assert_eq!(
+        serde_json::to_string(&here.boundary).unwrap(),
+        serde_json::to_string(&there.boundary).unwrap()
+    );
+    // The standard trial: 24 realizations at most (draft's cap is 10).
+    assert!(here.points.iter().any(|p| p.realizations > Some(10)));
 }
