@@ -342,9 +342,13 @@ impl PsiMarginal {
 }
 
 /// The largest K* over columns whose posteriors are independent (each
-/// column's trials are its own): its quantiles at α, ½ and 1 − α (N/m),
-/// from P(max ≤ K) = Π_c P(K*_c ≤ K). On a plateau of many columns the
-/// upper end lies above every column's own: each may be the largest.
+/// column's trials are its own) (N/m): the largest of the columns'
+/// medians, as every search states the K-width; below it the largest of
+/// their lower ends (the column whose lower end that is lies above it with
+/// posterior probability α at most); above it the 1 − α quantile of the
+/// largest, from P(max ≤ K) = Π_c P(K*_c ≤ K) — on a plateau of many
+/// columns it lies above every column's own upper end: each of them may be
+/// the largest.
 pub fn max_estimate(model: &PsiModel, columns: &[PsiMarginal], alpha: f64) -> PsiEstimate {
     let k = |m: usize| {
         if m < model.floor {
@@ -353,6 +357,17 @@ pub fn max_estimate(model: &PsiModel, columns: &[PsiMarginal], alpha: f64) -> Ps
             model.k(m.min(model.cap))
         }
     };
+    let quantile = |c: &PsiMarginal, q: f64| {
+        let mut acc = 0.0;
+        for (i, p) in c.p.iter().enumerate() {
+            acc += p;
+            if acc >= q {
+                return c.lo + i;
+            }
+        }
+        c.lo + c.p.len().saturating_sub(1)
+    };
+    let largest = |q: f64| columns.iter().map(|c| quantile(c, q)).max().unwrap_or(0);
     let lo = columns.iter().map(|c| c.lo).min().unwrap_or(0);
     let hi = columns
         .iter()
@@ -360,9 +375,10 @@ pub fn max_estimate(model: &PsiModel, columns: &[PsiMarginal], alpha: f64) -> Ps
         .max()
         .unwrap_or(0)
         .min(model.n);
-    // Running CDFs, one pass over the lattice.
+    // Running CDFs, one pass over the lattice, to the first point where
+    // the product reaches 1 − α.
     let mut acc: Vec<f64> = vec![0.0; columns.len()];
-    let mut at = [None; 3];
+    let mut upper = hi.saturating_sub(1);
     for m in lo..hi {
         let mut prod = 1.0;
         for (a, c) in acc.iter_mut().zip(columns) {
@@ -371,17 +387,15 @@ pub fn max_estimate(model: &PsiModel, columns: &[PsiMarginal], alpha: f64) -> Ps
             }
             prod *= a.min(1.0);
         }
-        for (slot, q) in at.iter_mut().zip([alpha, 0.5, 1.0 - alpha]) {
-            if slot.is_none() && prod >= q {
-                *slot = Some(m);
-            }
+        if prod >= 1.0 - alpha {
+            upper = m;
+            break;
         }
     }
-    let last = hi.saturating_sub(1);
     PsiEstimate {
-        k_lo: k(at[0].unwrap_or(last)),
-        k_mid: k(at[1].unwrap_or(last)),
-        k_hi: k(at[2].unwrap_or(last)),
+        k_lo: k(largest(alpha)),
+        k_mid: k(largest(0.5)),
+        k_hi: k(upper),
     }
 }
 

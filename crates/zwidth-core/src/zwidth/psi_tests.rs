@@ -233,10 +233,11 @@ fn the_budget_ends_a_column_and_a_repeat_runs_at_a_k_of_its_own() {
 }
 
 #[test]
-fn the_largest_boundary_over_columns_multiplies_their_distributions() {
+fn the_largest_boundary_over_columns_multiplies_their_distributions_above() {
     // Two columns with the same posterior, resolved: the largest of two
-    // independent draws has CDF F², so its median is F's √½ quantile and
-    // its upper end lies above either column's.
+    // independent draws has CDF F², so its upper end is F's √0.95
+    // quantile, above either column's; its median and lower end are the
+    // columns' own (the largest median, the largest lower end).
     let model = PsiModel::new(1488.24, 1e7, 24);
     let one = {
         let mut col = PsiColumn::new(&model);
@@ -255,18 +256,21 @@ fn the_largest_boundary_over_columns_multiplies_their_distributions() {
     };
     let mg = one.marginal_of();
     let alone = max_estimate(&model, std::slice::from_ref(&mg), 0.05);
-    assert_eq!(
-        alone,
-        one.estimate(&model, 0.05),
-        "one column: its own quantiles"
-    );
+    assert_eq!(alone, one.estimate(&model, 0.05), "one column: its own quantiles");
     let two = max_estimate(&model, &[mg.clone(), mg.clone()], 0.05);
     let quantile = |q: f64| {
         let m = (0..model.n).find(|&m| mg.cdf(m) >= q).unwrap();
         model.k(m)
     };
-    assert_eq!(two.k_mid, quantile(0.5f64.sqrt()));
-    assert_eq!(two.k_lo, quantile(0.05f64.sqrt()));
+    assert_eq!((two.k_lo, two.k_mid), (alone.k_lo, alone.k_mid));
     assert_eq!(two.k_hi, quantile(0.95f64.sqrt()));
     assert!(two.k_hi > alone.k_hi);
+    // A column far below changes nothing.
+    let mut low = PsiColumn::new(&model);
+    for _ in 0..6 {
+        let m = model.lattice(2e4);
+        low.tell(&model, m, Outcome::Escaped { at: 1 });
+    }
+    let with_low = max_estimate(&model, &[mg.clone(), low.marginal_of()], 0.05);
+    assert_eq!(with_low, alone);
 }
