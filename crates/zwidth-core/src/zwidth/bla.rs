@@ -663,6 +663,26 @@ mod tests {
     }
 
     #[test]
+    fn trial_seeds_are_the_documented_splitmix_draws() {
+        // SplitMix64 (Steele, Lea & Flood 2014) seeded with
+        // seed ^ ((column << 32 | index) + 1)·0xBF58476D1CE4E5B9 (mod 2⁶⁴),
+        // its first output, recomputed in Python's integers.
+        for (seed, column, index, want) in [
+            (1, 0, 0, 12_070_987_431_962_021_367),
+            (1, 0, 1, 7_553_722_183_268_099_388),
+            (1, 1, 0, 629_562_507_338_241_980),
+            (7, 3, 5, 18_092_310_681_123_277_709),
+            (u64::MAX, u32::MAX, u32::MAX, 16_490_336_266_968_443_936),
+        ] {
+            assert_eq!(
+                trial_seed(seed, column, index),
+                want,
+                "({seed}, {column}, {index})"
+            );
+        }
+    }
+
+    #[test]
     fn realization_phases_are_the_documented_splitmix_draws() {
         // Stored runs replay by (seed, m): the phases must not change between
         // versions. Reference: SplitMix64 (Steele, Lea & Flood 2014; Vigna's

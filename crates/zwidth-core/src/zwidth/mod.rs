@@ -5,6 +5,7 @@ pub mod analytic;
 mod bisect;
 pub mod bla;
 pub mod classify;
+mod columns;
 pub mod compare;
 pub mod control;
 pub mod controller;

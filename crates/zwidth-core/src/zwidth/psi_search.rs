@@ -155,7 +155,7 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
     };
     let mut boundary: Vec<BoundaryPoint> = match &spec.b {
         Some(bs) => bs.par_iter().map(|&b| first(b).0).collect(),
-        None => super::search::in_order(ev, b_auto, &first)
+        None => super::columns::in_order(ev, b_auto, &first)
             .into_iter()
             .map(|(bp, _)| bp)
             .collect(),

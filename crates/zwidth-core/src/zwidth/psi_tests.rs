@@ -256,7 +256,11 @@ fn the_largest_boundary_over_columns_multiplies_their_distributions_above() {
     };
     let mg = one.marginal_of();
     let alone = max_estimate(&model, std::slice::from_ref(&mg), 0.05);
-    assert_eq!(alone, one.estimate(&model, 0.05), "one column: its own quantiles");
+    assert_eq!(
+        alone,
+        one.estimate(&model, 0.05),
+        "one column: its own quantiles"
+    );
     let two = max_estimate(&model, &[mg.clone(), mg.clone()], 0.05);
     let quantile = |q: f64| {
         let m = (0..model.n).find(|&m| mg.cdf(m) >= q).unwrap();
