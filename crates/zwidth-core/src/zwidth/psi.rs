@@ -60,6 +60,16 @@ const PLAN_POINTS: usize = 400;
 /// What starting a trial costs, in realizations (`PsiColumn::ask`).
 pub const TRIAL_OVERHEAD: f64 = 4.0;
 
+/// A neighbour prior's smallest spread in ln K (its σ): 5 %, a boundary
+/// that bends between neighbouring columns (the seed device's moves 1–10 %
+/// a column where it is smooth, docs/zwidth.md).
+pub const PRIOR_SPREAD: f64 = 0.05;
+
+/// The weight of the log-uniform part of a neighbour prior: what keeps a
+/// jump in the boundary between neighbours findable (a few trials that
+/// contradict the neighbours move the posterior there, `psi_tests.rs`).
+pub const PRIOR_UNIFORM: f64 = 0.03;
+
 /// Cells whose log posterior lies this far below the largest are dropped
 /// for good (e^−30 = 1e-13: no run of trials brings them back into the
 /// quantiles).
@@ -324,6 +334,8 @@ pub struct PsiColumn {
 pub struct PsiMarginal {
     lo: usize,
     p: Vec<f64>,
+    /// The marginal posterior of β over [`BETAS`].
+    beta: [f64; BETAS.len()],
 }
 
 impl PsiMarginal {
@@ -338,6 +350,60 @@ impl PsiMarginal {
     /// P(K* > K at lattice point m).
     pub fn tail(&self, m: usize) -> f64 {
         (1.0 - self.cdf(m)).max(0.0)
+    }
+
+    /// The lattice point at quantile q.
+    pub fn quantile(&self, q: f64) -> usize {
+        let mut acc = 0.0;
+        for (i, p) in self.p.iter().enumerate() {
+            acc += p;
+            if acc >= q {
+                return self.lo + i;
+            }
+        }
+        self.lo + self.p.len().saturating_sub(1)
+    }
+}
+
+/// A column's prior from its neighbours' posteriors: K* log-normal, mixed
+/// with the log-uniform ([`PRIOR_UNIFORM`]), on the lattice.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Prior {
+    /// The centre, a (fractional) lattice point.
+    pub centre: f64,
+    /// The spread σ in lattice steps.
+    pub sigma: f64,
+    /// The prior of β: the neighbours' β posteriors averaged, mixed with
+    /// the uniform as K*'s is (the steepness changes slowly with B, and a
+    /// column whose trials cluster near its prior's centre learns little
+    /// of it by itself).
+    pub beta: [f64; BETAS.len()],
+}
+
+impl Prior {
+    /// Between two neighbours (the columns next to it on either side): the
+    /// centre halfway between their medians in ln K (a boundary straight
+    /// between them), the spread from the larger of [`PRIOR_SPREAD`] and
+    /// half their gap, with each one's own uncertainty (its 90 % interval
+    /// as ±1.645σ) added in quadrature.
+    pub fn between(model: &PsiModel, a: &PsiMarginal, b: &PsiMarginal) -> Self {
+        let med = |m: &PsiMarginal| m.quantile(0.5) as f64;
+        let sd = |m: &PsiMarginal| (m.quantile(0.95) - m.quantile(0.05)) as f64 / (2.0 * 1.645);
+        let gap = (med(a) - med(b)).abs() / 2.0;
+        let smooth = PRIOR_SPREAD / model.h;
+        let sigma = (gap.max(smooth).powi(2) + sd(a).powi(2) + sd(b).powi(2))
+            .sqrt()
+            .max(1.0);
+        let mut beta = [0.0; BETAS.len()];
+        for (j, p) in beta.iter_mut().enumerate() {
+            *p = (1.0 - PRIOR_UNIFORM) * (a.beta[j] + b.beta[j]) / 2.0
+                + PRIOR_UNIFORM / BETAS.len() as f64;
+        }
+        Self {
+            centre: (med(a) + med(b)) / 2.0,
+            sigma,
+            beta,
+        }
     }
 }
 
@@ -357,17 +423,7 @@ pub fn max_estimate(model: &PsiModel, columns: &[PsiMarginal], alpha: f64) -> Ps
             model.k(m.min(model.cap))
         }
     };
-    let quantile = |c: &PsiMarginal, q: f64| {
-        let mut acc = 0.0;
-        for (i, p) in c.p.iter().enumerate() {
-            acc += p;
-            if acc >= q {
-                return c.lo + i;
-            }
-        }
-        c.lo + c.p.len().saturating_sub(1)
-    };
-    let largest = |q: f64| columns.iter().map(|c| quantile(c, q)).max().unwrap_or(0);
+    let largest = |q: f64| columns.iter().map(|c| c.quantile(q)).max().unwrap_or(0);
     let lo = columns.iter().map(|c| c.lo).min().unwrap_or(0);
     let hi = columns
         .iter()
@@ -421,10 +477,37 @@ impl PsiColumn {
         }
     }
 
-    /// The column told `history` in order (what [`PsiColumn::history`]
-    /// returned): a column need not be kept between passes.
-    pub fn from_history(model: &PsiModel, history: &[(usize, Outcome)]) -> Self {
+    /// A column starting from `prior` (its neighbours' estimate), or
+    /// knowing nothing. β stays uniform: the neighbours' steepness may
+    /// differ.
+    pub fn with_prior(model: &PsiModel, prior: Option<Prior>) -> Self {
         let mut c = Self::new(model);
+        if let Some(p) = prior {
+            let nb = BETAS.len();
+            let uniform = PRIOR_UNIFORM / model.n as f64;
+            for i in 0..model.n {
+                // (1 − w)·N(i; μ, σ) + w/n on the lattice (σ in steps).
+                let z = (i as f64 - p.centre) / p.sigma;
+                let normal = (-0.5 * z * z).exp() / (p.sigma * (2.0 * std::f64::consts::PI).sqrt());
+                let ln = ((1.0 - PRIOR_UNIFORM) * normal + uniform).ln();
+                for (j, &pb) in p.beta.iter().enumerate() {
+                    c.ln_post[i * nb + j] = ln + pb.ln();
+                }
+            }
+            c.settle();
+        }
+        c
+    }
+
+    /// The column from `prior`, told `history` in order (what
+    /// [`PsiColumn::history`] returned): a column need not be kept between
+    /// passes.
+    pub fn from_history(
+        model: &PsiModel,
+        prior: Option<Prior>,
+        history: &[(usize, Outcome)],
+    ) -> Self {
+        let mut c = Self::with_prior(model, prior);
         for &(m, outcome) in history {
             c.tell(model, m, outcome);
         }
@@ -451,7 +534,12 @@ impl PsiColumn {
             }
         }
         self.history.push((m, outcome));
-        // Drop the lattice ends that carry no mass.
+        self.settle();
+    }
+
+    /// Drop the lattice ends that carry no mass; the marginal again.
+    fn settle(&mut self) {
+        let nb = BETAS.len();
         let top = self.ln_post[self.lo * nb..self.hi * nb]
             .iter()
             .fold(f64::NEG_INFINITY, |a, &b| a.max(b));
@@ -532,9 +620,16 @@ impl PsiColumn {
         let mg = self.marginal();
         let first = mg.iter().position(|&p| p > 1e-12).unwrap_or(0);
         let last = mg.iter().rposition(|&p| p > 1e-12).unwrap_or(0).max(first);
+        let nb = BETAS.len();
+        let (w, total) = self.weights();
+        let mut beta = [0.0; BETAS.len()];
+        for (j, b) in beta.iter_mut().enumerate() {
+            *b = w.iter().skip(j).step_by(nb).sum::<f64>() / total;
+        }
         PsiMarginal {
             lo: self.lo + first,
             p: mg[first..=last].to_vec(),
+            beta,
         }
     }
 

@@ -4,11 +4,15 @@
 //!
 //! Two passes. The first locates every column to a few times the
 //! resolution (its columns in parallel, the automatic B range ending as a
-//! bisection map's does). The second refines, to the resolution, the
-//! columns whose interval reaches the largest lower end over the columns:
-//! those that may set the K-width. Each pass depends only on the verdicts
-//! before it, so the map is the same on any number of threads; the map is
-//! one unit of work for a farm (`classify::whole_map_unit`).
+//! bisection map's does): every fourth column knowing nothing, then the
+//! columns halfway between, then the rest, each of these from a prior
+//! between its nearest located neighbours (`psi::Prior::between`, wide
+//! enough that a jump between them is still found). The second refines,
+//! to the resolution, the columns whose interval reaches the largest lower
+//! end over the columns: those that may set the K-width. Each pass (and
+//! each level of the first) depends only on the verdicts before it, so
+//! the map is the same on any number of threads; the map is one unit of
+//! work for a farm (`classify::whole_map_unit`).
 
 use std::collections::HashMap;
 use std::sync::Mutex;
@@ -18,7 +22,9 @@ use rayon::prelude::*;
 use super::bla::trial_seed;
 use super::classify::Classifier;
 use super::point::{BoundaryPoint, Point};
-use super::psi::{max_estimate, repeat_k, Outcome, PsiColumn, PsiMarginal, PsiModel, PsiState};
+use super::psi::{
+    max_estimate, repeat_k, Outcome, Prior, PsiColumn, PsiMarginal, PsiModel, PsiState,
+};
 use super::settings::MapSpec;
 
 /// Trials a column may take in all.
@@ -28,19 +34,30 @@ pub const BUDGET: usize = 100;
 /// ±25 %).
 const COARSE: f64 = 4.0;
 
-/// Rounds of the second pass: a refined column can lower the largest lower
-/// end and so bring another column in.
-const ROUNDS: usize = 8;
+/// Rounds of the second pass at most: a refined column can raise the
+/// largest lower end (and so the upper end every rival is held to), so a
+/// round stops a column whose lower end passes the lead and the next one
+/// starts from the new lead. The pass ends sooner, when a round runs no
+/// trial (every column's budget is a bound on the rounds that do).
+const ROUNDS: usize = 64;
 
 /// One column's trials, in order, and what they told its posterior (the
 /// posterior itself is rebuilt from them when a pass needs it: a map may
 /// have thousands of columns).
 #[derive(Default)]
 struct Column {
+    /// Its neighbours' estimate, or none (`levels`).
+    prior: Option<Prior>,
     history: Vec<(usize, Outcome)>,
     points: Vec<Point>,
-    /// The marginal posterior of K* after the last trial.
+    /// The marginal posterior of K* after the last trial (from the prior).
     marginal: Option<PsiMarginal>,
+    /// The same from the column's own trials alone: what the K-width is
+    /// made of (`max_estimate` takes the columns as independent; two
+    /// columns that share a neighbour's evidence are not).
+    own: Option<PsiMarginal>,
+    /// Its boundary point after the first pass.
+    point: Option<BoundaryPoint>,
 }
 
 /// Each end of a column's interval is wrong with posterior probability α,
@@ -86,7 +103,10 @@ fn run(
 ) -> BoundaryPoint {
     let column = ev.columns.get(&b.to_bits()).copied().unwrap_or(0);
     let cancelled = || ev.observer.as_ref().is_some_and(|o| o.cancelled());
-    let mut psi = PsiColumn::from_history(model, &c.history);
+    // The second pass refines a column from its own trials alone.
+    let refining = stop.above.is_some();
+    let prior = if refining { None } else { c.prior };
+    let mut psi = PsiColumn::from_history(model, prior, &c.history);
     let alpha = alpha(ev);
     let stopped = |psi: &PsiColumn| {
         psi.state(model, alpha, stop.rel_tol, BUDGET) != PsiState::Open
@@ -104,6 +124,9 @@ fn run(
     }
     c.history = psi.history().to_vec();
     c.marginal = Some(psi.marginal_of());
+    if refining || c.prior.is_none() {
+        c.own = c.marginal.clone();
+    }
     boundary_point(ev, model, b, &psi)
 }
 
@@ -127,6 +150,73 @@ fn boundary_point(ev: &Classifier, model: &PsiModel, b: f64, psi: &PsiColumn) ->
     }
 }
 
+/// Positions of the columns searched first, knowing nothing, among `n` in
+/// B order: every fourth and the last.
+fn seed_positions(n: usize) -> Vec<usize> {
+    let mut seeds: Vec<usize> = (0..n).step_by(4).collect();
+    if n > 0 && seeds.last() != Some(&(n - 1)) {
+        seeds.push(n - 1);
+    }
+    seeds
+}
+
+/// The columns at `bs` (ascending) not among `seeds` (done), in two
+/// levels: halfway between the seeds, then the rest; each starts from a
+/// prior between its nearest done neighbours (`Prior::between`). Each level
+/// depends only on the ones before it, so the map is the same on any
+/// number of threads. Every column's boundary, in the order of `bs`.
+fn levels(
+    model: &PsiModel,
+    bs: &[f64],
+    seeds: &[usize],
+    columns: &Mutex<HashMap<u64, Column>>,
+    first: &(dyn Fn(f64, Option<Prior>) -> BoundaryPoint + Sync),
+) -> Vec<BoundaryPoint> {
+    let mut done = vec![false; bs.len()];
+    for &i in seeds {
+        done[i] = true;
+    }
+    for stride in [2, 1] {
+        let level: Vec<usize> = (0..bs.len())
+            .filter(|&i| i % stride == 0 && !done[i])
+            .collect();
+        let priors: Vec<Option<Prior>> = {
+            let cols = columns.lock().unwrap_or_else(|e| e.into_inner());
+            let marginal = |i: usize| cols.get(&bs[i].to_bits()).and_then(|c| c.marginal.clone());
+            level
+                .iter()
+                .map(|&i| {
+                    let below = (0..i).rev().find(|&j| done[j]);
+                    let above = (i + 1..bs.len()).find(|&j| done[j]);
+                    match (below.and_then(marginal), above.and_then(marginal)) {
+                        (Some(a), Some(b)) => Some(Prior::between(model, &a, &b)),
+                        _ => None,
+                    }
+                })
+                .collect()
+        };
+        level.par_iter().zip(priors).for_each(|(&i, prior)| {
+            first(bs[i], prior);
+        });
+        for i in level {
+            done[i] = true;
+        }
+    }
+    let cols = columns.lock().unwrap_or_else(|e| e.into_inner());
+    bs.iter()
+        .map(|&b| {
+            cols.get(&b.to_bits())
+                .and_then(|c| c.point)
+                .unwrap_or(BoundaryPoint {
+                    b,
+                    k_max: 0.0,
+                    k_lo: None,
+                    k_hi: None,
+                })
+        })
+        .collect()
+}
+
 /// A Psi map: its boundary, its trials in (column, index) order, and the
 /// K-width with its interval, the largest K* over the columns
 /// (`psi::max_estimate`).
@@ -144,34 +234,73 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
         rel_tol: coarse(ev),
         above: None,
     };
-    let first = |b: f64| {
-        let mut c = Column::default();
+    let first = |b: f64, prior: Option<Prior>| {
+        let mut c = Column {
+            prior,
+            ..Column::default()
+        };
         let bp = run(ev, spec, &model, b, &mut c, coarse);
+        c.point = Some(bp);
         columns
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .insert(b.to_bits(), c);
-        (bp, Vec::new())
+        bp
     };
     let mut boundary: Vec<BoundaryPoint> = match &spec.b {
-        Some(bs) => bs.par_iter().map(|&b| first(b).0).collect(),
-        None => super::columns::in_order(ev, b_auto, &first)
-            .into_iter()
-            .map(|(bp, _)| bp)
-            .collect(),
+        Some(bs) => {
+            // Each column's neighbours are the next B on either side.
+            let mut order: Vec<usize> = (0..bs.len()).collect();
+            order.sort_by(|&i, &j| bs[i].total_cmp(&bs[j]));
+            let sorted: Vec<f64> = order.iter().map(|&i| bs[i]).collect();
+            let seeds = seed_positions(sorted.len());
+            seeds.par_iter().for_each(|&i| {
+                first(sorted[i], None);
+            });
+            let by_b = levels(&model, &sorted, &seeds, &columns, &first);
+            bs.iter()
+                .map(|b| by_b[sorted.partition_point(|s| s < b)])
+                .collect()
+        }
+        None => {
+            // Every fourth column of the automatic range (and the last)
+            // until it ends, then those between from their neighbours.
+            let seeds = seed_positions(b_auto.len());
+            let seed_b: Vec<f64> = seeds.iter().map(|&i| b_auto[i]).collect();
+            let done = super::columns::in_order(ev, &seed_b, &|b| (first(b, None), Vec::new()));
+            let reach = done.len().checked_sub(1).map_or(0, |last| seeds[last] + 1);
+            let seeds: Vec<usize> = seeds[..done.len()].to_vec();
+            let mut all: Vec<(BoundaryPoint, Vec<Point>)> =
+                levels(&model, &b_auto[..reach], &seeds, &columns, &first)
+                    .into_iter()
+                    .map(|bp| (bp, Vec::new()))
+                    .collect();
+            let cancelled = ev.observer.as_ref().is_some_and(|o| o.cancelled());
+            if let Some(end) =
+                super::columns::end_of_auto_range(&all, 0, ev.res.k_step).filter(|_| !cancelled)
+            {
+                super::columns::cut_at_end(ev, &mut all, b_auto, end);
+            }
+            all.into_iter().map(|(bp, _)| bp).collect()
+        }
     };
     let mut columns = columns.into_inner().unwrap_or_else(|e| e.into_inner());
+    // The columns that started from a prior, told their own trials alone.
+    columns
+        .values_mut()
+        .filter(|c| c.own.is_none())
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .for_each(|c| {
+            c.own = Some(PsiColumn::from_history(&model, None, &c.history).marginal_of());
+        });
     let alpha = alpha(ev);
     let tol = ev.res.k_rel_tol;
     let marginals =
         |columns: &HashMap<u64, Column>, boundary: &[BoundaryPoint]| -> Vec<PsiMarginal> {
             boundary
                 .iter()
-                .filter_map(|bp| {
-                    columns
-                        .get(&bp.b.to_bits())
-                        .and_then(|c| c.marginal.clone())
-                })
+                .filter_map(|bp| columns.get(&bp.b.to_bits()).and_then(|c| c.own.clone()))
                 .collect()
         };
     for _ in 0..ROUNDS {
@@ -190,7 +319,7 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
             .filter(|bp| {
                 columns
                     .get(&bp.b.to_bits())
-                    .and_then(|c| c.marginal.as_ref())
+                    .and_then(|c| c.own.as_ref())
                     .is_some_and(|mg| mg.tail(m_lead) > 1e-3)
             })
             .count()
@@ -199,9 +328,7 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
         let todo: Vec<usize> = (0..boundary.len())
             .filter(|&i| {
                 columns.get(&boundary[i].b.to_bits()).is_some_and(|c| {
-                    c.marginal
-                        .as_ref()
-                        .is_some_and(|mg| mg.tail(m_upper) > tail)
+                    c.own.as_ref().is_some_and(|mg| mg.tail(m_upper) > tail)
                         && c.history.len() < BUDGET
                 })
             })
@@ -217,13 +344,18 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
             .iter()
             .filter_map(|&i| columns.remove(&boundary[i].b.to_bits()).map(|c| (i, c)))
             .collect();
+        let before: usize = taken.iter().map(|(_, c)| c.history.len()).sum();
         let refined: Vec<BoundaryPoint> = taken
             .par_iter_mut()
             .map(|(i, c)| run(ev, spec, &model, boundary[*i].b, c, stop))
             .collect();
+        let after: usize = taken.iter().map(|(_, c)| c.history.len()).sum();
         for ((i, c), bp) in taken.into_iter().zip(refined) {
             boundary[i] = bp;
             columns.insert(bp.b.to_bits(), c);
+        }
+        if after == before {
+            break;
         }
     }
     let max = max_estimate(&model, &marginals(&columns, &boundary), alpha);

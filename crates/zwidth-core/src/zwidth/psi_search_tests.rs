@@ -139,3 +139,37 @@ fn a_psi_map_whose_trials_run_elsewhere_is_the_same_map_to_the_bit() {
     // The standard trial: 24 realizations at most (draft's cap is 10).
     assert!(here.points.iter().any(|p| p.realizations > Some(10)));
 }
+
+#[test]
+fn a_psi_map_s_k_width_is_made_of_each_column_s_own_trials() {
+    // Five columns: the first and the last searched knowing nothing, the
+    // middle one from a prior between them, the other two from priors
+    // between it and the ends (`levels`). The K-width and its interval,
+    // recomputed here from the stored trials alone (each column's trials
+    // told to a column that knows nothing, then `max_estimate`), are the
+    // map's to the bit: the priors steer the trials, and the K-width
+    // takes the columns as independent only because each is told its own.
+    use crate::zwidth::psi::{max_estimate, PsiColumn, PsiModel};
+    use crate::zwidth::settings::PAPER_K_STEP;
+    let bs = vec![300.0, 320.0, 340.0, 360.0, 380.0];
+    let spec = seed_device(bs.clone());
+    let r = map_observed(&spec, None, 0).unwrap();
+    // Draft's K step (PAPER_K_STEP / 0.5), the standard trial's horizon.
+    let model = PsiModel::new(PAPER_K_STEP / 0.5, spec.k_max, 24);
+    let marginals: Vec<_> = bs
+        .iter()
+        .map(|&b| {
+            let history: Vec<_> = r
+                .points
+                .iter()
+                .filter(|p| p.b == b)
+                .map(|p| (model.lattice(p.k), super::outcome(p)))
+                .collect();
+            assert!(!history.is_empty(), "B = {b}");
+            PsiColumn::from_history(&model, None, &history).marginal_of()
+        })
+        .collect();
+    let e = max_estimate(&model, &marginals, 1.0 - spec.scene.probe.confidence);
+    assert_eq!(r.k_width, e.k_mid);
+    assert_eq!(r.k_width_interval, Some([e.k_lo, e.k_hi]));
+}
