@@ -150,6 +150,28 @@ fn boundary_point(ev: &Classifier, model: &PsiModel, b: f64, psi: &PsiColumn) ->
     }
 }
 
+/// The share of a Psi map's progress its first pass reports.
+const FIRST_PASS: f64 = 0.6;
+
+/// (hi − lo)/(hi + lo): an interval's half-width relative to its centre
+/// (0 for an empty one).
+fn relative_width(lo: f64, hi: f64) -> f64 {
+    if hi + lo > 0.0 {
+        (hi - lo) / (hi + lo)
+    } else {
+        0.0
+    }
+}
+
+/// How far the K-width's interval has come from `w0` to the resolution
+/// `tol`, 0 to 1, on a log scale (each halving of the width counts alike).
+fn narrowed(w0: f64, w: f64, tol: f64) -> f64 {
+    if w <= tol || w0 <= tol {
+        return 1.0;
+    }
+    ((w0 / w).ln() / (w0 / tol).ln()).clamp(0.0, 1.0)
+}
+
 /// Positions of the columns searched first, knowing nothing, among `n` in
 /// B order: every fourth and the last.
 fn seed_positions(n: usize) -> Vec<usize> {
@@ -171,6 +193,7 @@ fn levels(
     seeds: &[usize],
     columns: &Mutex<HashMap<u64, Column>>,
     first: &(dyn Fn(f64, Option<Prior>) -> BoundaryPoint + Sync),
+    report: &dyn Fn(f64),
 ) -> Vec<BoundaryPoint> {
     let mut done = vec![false; bs.len()];
     for &i in seeds {
@@ -201,6 +224,7 @@ fn levels(
         for i in level {
             done[i] = true;
         }
+        report(done.iter().filter(|&&d| d).count() as f64 / bs.len().max(1) as f64);
     }
     let cols = columns.lock().unwrap_or_else(|e| e.into_inner());
     bs.iter()
@@ -247,6 +271,11 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
             .insert(b.to_bits(), c);
         bp
     };
+    // Progress: the first pass to FIRST_PASS by columns located (the seed
+    // columns of the automatic range report their own share through
+    // `in_order`), the second from there by the K-width interval's
+    // narrowing (`narrowed`).
+    let first_pass = |done: f64| ev.report(FIRST_PASS * done);
     let mut boundary: Vec<BoundaryPoint> = match &spec.b {
         Some(bs) => {
             // Each column's neighbours are the next B on either side.
@@ -257,7 +286,8 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
             seeds.par_iter().for_each(|&i| {
                 first(sorted[i], None);
             });
-            let by_b = levels(&model, &sorted, &seeds, &columns, &first);
+            first_pass(seeds.len() as f64 / sorted.len().max(1) as f64);
+            let by_b = levels(&model, &sorted, &seeds, &columns, &first, &first_pass);
             bs.iter()
                 .map(|b| by_b[sorted.partition_point(|s| s < b)])
                 .collect()
@@ -270,11 +300,17 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
             let done = super::columns::in_order(ev, &seed_b, &|b| (first(b, None), Vec::new()));
             let reach = done.len().checked_sub(1).map_or(0, |last| seeds[last] + 1);
             let seeds: Vec<usize> = seeds[..done.len()].to_vec();
-            let mut all: Vec<(BoundaryPoint, Vec<Point>)> =
-                levels(&model, &b_auto[..reach], &seeds, &columns, &first)
-                    .into_iter()
-                    .map(|bp| (bp, Vec::new()))
-                    .collect();
+            let mut all: Vec<(BoundaryPoint, Vec<Point>)> = levels(
+                &model,
+                &b_auto[..reach],
+                &seeds,
+                &columns,
+                &first,
+                &first_pass,
+            )
+            .into_iter()
+            .map(|bp| (bp, Vec::new()))
+            .collect();
             let cancelled = ev.observer.as_ref().is_some_and(|o| o.cancelled());
             if let Some(end) =
                 super::columns::end_of_auto_range(&all, 0, ev.res.k_step).filter(|_| !cancelled)
@@ -303,6 +339,7 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
                 .filter_map(|bp| columns.get(&bp.b.to_bits()).and_then(|c| c.own.clone()))
                 .collect()
         };
+    let mut width0: Option<f64> = None;
     for _ in 0..ROUNDS {
         // The K-width's interval is the largest K*'s: within ±tol once
         // P(max K* > upper) ≤ α, upper = lead·(1 + tol)/(1 − tol) for its
@@ -310,6 +347,9 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
         // takes trials until P(K*_c > upper) ≤ α/N (so the sum over them
         // is at most α), or until it leads itself (the next round).
         let max = max_estimate(&model, &marginals(&columns, &boundary), alpha);
+        let width = relative_width(max.k_lo, max.k_hi);
+        let w0 = *width0.get_or_insert(width);
+        ev.report(FIRST_PASS + (1.0 - FIRST_PASS) * narrowed(w0, width, tol));
         let lead = max.k_lo;
         let upper = lead * (1.0 + tol) / (1.0 - tol);
         let m_lead = model.lattice(lead);

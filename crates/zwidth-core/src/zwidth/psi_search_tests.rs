@@ -173,3 +173,21 @@ fn a_psi_map_s_k_width_is_made_of_each_column_s_own_trials() {
     assert_eq!(r.k_width, e.k_mid);
     assert_eq!(r.k_width_interval, Some([e.k_lo, e.k_hi]));
 }
+
+#[test]
+fn the_second_pass_reports_its_progress_by_the_interval_s_narrowing_on_a_log_scale() {
+    use super::{narrowed, relative_width};
+    // [90, 110]: half-width 10 around 100.
+    assert_eq!(relative_width(90.0, 110.0), 0.1);
+    assert_eq!(relative_width(0.0, 0.0), 0.0);
+    // From ±8 % to ±1 %: ±4 % is one halving of three, ±2 % two.
+    assert!((narrowed(0.08, 0.04, 0.01) - 1.0 / 3.0).abs() < 1e-12);
+    assert!((narrowed(0.08, 0.02, 0.01) - 2.0 / 3.0).abs() < 1e-12);
+    assert_eq!(narrowed(0.08, 0.08, 0.01), 0.0);
+    assert_eq!(narrowed(0.08, 0.01, 0.01), 1.0);
+    assert_eq!(narrowed(0.08, 0.005, 0.01), 1.0);
+    // Already resolved when the pass starts, or wider than it started.
+    assert_eq!(narrowed(0.01, 0.01, 0.01), 1.0);
+    assert_eq!(narrowed(0.04, 0.05, 0.01), 0.0);
+}
+
