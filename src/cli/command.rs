@@ -104,7 +104,7 @@ pub enum Command {
         /// stability | impedance | strict_passivity
         #[arg(long, default_value = "impedance")]
         criterion: String,
-        /// trace | bisect | robust_bisect | grid | psi (noisy scenes: a posterior per column, docs/zwidth.md)
+        /// trace | bisect | robust_bisect | grid | psi (BLA-probed scenes with friction or quantization: a posterior per column, docs/zwidth.md; elsewhere bisection)
         #[arg(long, default_value = "bisect")]
         search: String,
         /// Only these damping values (N·s/m), comma-separated.

@@ -186,5 +186,5 @@ impl Classifier {
 /// Psi search: its second pass depends on every column's first), not one
 /// per column.
 pub(super) fn whole_map_unit(spec: &MapSpec, ev: &Evaluator) -> bool {
-    matches!(spec.search, SearchKind::Trace | SearchKind::Psi) || ev.model.is_some()
+    spec.search == SearchKind::Trace || ev.runs_psi(spec.search) || ev.model.is_some()
 }

@@ -8,17 +8,27 @@ use super::hit::{replicated_hits, wall_hit, NoTrace};
 use super::point::Point;
 use super::probe::{probe_seeded, ProbeSetup};
 use super::scene::{ProbeMethod, Scene, SceneSpec};
-use super::settings::{Criterion, Method, Resolved};
+use super::settings::{Criterion, Method, Resolved, SearchKind};
 use crate::error::SpecError;
+
+/// Whether a verdict of engine `method` on `scene` is a random draw: the
+/// BLA probe of a scene with friction or quantization, each trial with
+/// random phases of its own (`bla::trial_seed`). The Psi search needs it
+/// (a failure probability rising with K); a replicated wall hit is noisy
+/// but the same K gives the same verdict, so Psi falls back to bisection
+/// there (docs/zwidth.md, "Not for the rig's wall hits yet").
+pub fn random_verdicts(scene: &SceneSpec, method: Method) -> bool {
+    let d = &scene.device;
+    method == Method::Frequency
+        && (d.coulomb > 0.0 || d.quantization > 0.0)
+        && scene.probe.method == ProbeMethod::Bla
+}
 
 /// Whether engine `method` gives verdicts with a confidence on `scene`:
 /// the BLA probe of a scene with friction or quantization (a nonlinear
 /// frequency-domain probe), or replicated wall hits.
 pub fn noisy_verdicts(scene: &SceneSpec, method: Method) -> bool {
-    let d = &scene.device;
-    let nonlinear_probe = method == Method::Frequency && (d.coulomb > 0.0 || d.quantization > 0.0);
-    (nonlinear_probe && scene.probe.method == ProbeMethod::Bla)
-        || (method == Method::Time && scene.hit.replicates > 1)
+    random_verdicts(scene, method) || (method == Method::Time && scene.hit.replicates > 1)
 }
 
 /// The chosen engine for one scene and criterion.
@@ -265,6 +275,12 @@ impl Evaluator {
     /// probe of a nonlinear scene, or replicated wall hits.
     pub fn noisy(&self) -> bool {
         noisy_verdicts(&self.scene.spec, self.method)
+    }
+
+    /// Whether a map with `search` runs the Psi search here: asked for,
+    /// on verdicts that are random draws (`random_verdicts`).
+    pub fn runs_psi(&self, search: SearchKind) -> bool {
+        search == SearchKind::Psi && random_verdicts(&self.scene.spec, self.method)
     }
 }
 

@@ -191,3 +191,31 @@ fn the_second_pass_reports_its_progress_by_the_interval_s_narrowing_on_a_log_sca
     assert_eq!(narrowed(0.04, 0.05, 0.01), 0.0);
 }
 
+#[test]
+fn psi_on_replicated_wall_hits_is_bisection() {
+    // Three replicate hits a verdict: noisy (the replicates may disagree)
+    // but not random (the same K gives the same verdict), so the Psi
+    // search has nothing to average and the map is the bisection's, bit
+    // for bit, and says so (docs/zwidth.md, "Not for the rig's wall hits
+    // yet": Psi took 3x the hits there).
+    let mut spec = seed_device(vec![200.0]);
+    spec.scene.hit.replicates = 3;
+    spec.method = Method::Time;
+    spec.criterion = Criterion::Stability;
+    let psi = map_observed(&spec, None, 0).unwrap();
+    let bisect = map_observed(
+        &MapSpec {
+            search: SearchKind::Bisect,
+            ..spec.clone()
+        },
+        None,
+        0,
+    )
+    .unwrap();
+    assert!(psi.resolution.contains("bisection"), "{}", psi.resolution);
+    assert_eq!(psi.points, bisect.points);
+    assert_eq!(
+        serde_json::to_string(&psi.boundary).unwrap(),
+        serde_json::to_string(&bisect.boundary).unwrap()
+    );
+}

@@ -141,9 +141,9 @@ fn prepare(spec: &MapSpec) -> Result<(Evaluator, Cost), SpecError> {
 }
 
 /// Whether the map's boundary is defined by its trial (the Psi search on
-/// noisy verdicts): every preset then runs the standard preset's trial.
+/// random verdicts): every preset then runs the standard preset's trial.
 fn defined_by_its_trial(spec: &MapSpec, ev: &Evaluator) -> bool {
-    spec.search == SearchKind::Psi && ev.noisy()
+    ev.runs_psi(spec.search)
 }
 
 /// Which trials the force limit clipped, and how many boundary points such
@@ -213,7 +213,7 @@ pub fn map_observed(
             }
             (boundary, points)
         }
-        (SearchKind::Psi, _, _) if ev.noisy() => {
+        (SearchKind::Psi, _, _) if ev.runs_psi(spec.search) => {
             let m = super::psi_search::psi_all(&ev, spec, &b_auto);
             psi_width = Some((m.k_width, m.k_width_interval));
             (m.boundary, m.points)
@@ -248,7 +248,9 @@ pub fn map_observed(
         (_, Criterion::StrictPassivity, _) => {
             "exact per B (θ grid of 8192 points, refined)".to_string()
         }
-        (SearchKind::Psi, _, _) if ev.noisy() => super::psi_search::resolution(&ev),
+        (SearchKind::Psi, _, _) if ev.runs_psi(spec.search) => {
+            super::psi_search::resolution(&ev)
+        }
         (SearchKind::Bisect | SearchKind::Psi, _, _) => {
             format!("K to {:.2} % (bisection)", 100.0 * res.k_rel_tol)
         }

@@ -52,8 +52,10 @@ pub enum SearchKind {
     /// Noisy scenes: every trial of a column informs one posterior of its
     /// boundary (the Psi method, `psi.rs`), each trial with realizations
     /// of its own; the next K is where a verdict narrows it most. Columns
-    /// are first located coarsely, then those that may set the K-width to
-    /// the resolution. On a scene without noise, bisection.
+    /// are first located coarsely, every fourth from nothing and the rest
+    /// from their neighbours, then those that may set the K-width to the
+    /// resolution. Where verdicts are not random draws (a scene without
+    /// noise, replicated wall hits), bisection.
     Psi,
 }
 
