@@ -213,6 +213,20 @@ fn psi_on_replicated_wall_hits_is_bisection() {
     )
     .unwrap();
     assert!(psi.resolution.contains("bisection"), "{}", psi.resolution);
+    // And it is planned as one: the bisection's cost, not Psi's budget.
+    use crate::zwidth::search::validate;
+    let planned = |search| {
+        validate(&MapSpec {
+            search,
+            ..spec.clone()
+        })
+        .unwrap()
+        .trials
+    };
+    assert_eq!(planned(SearchKind::Psi), planned(SearchKind::Bisect));
+    // On the BLA probe it is Psi's: its budget a column.
+    let probe = seed_device(vec![200.0]);
+    assert_eq!(validate(&probe).unwrap().trials, super::BUDGET as u64);
     assert_eq!(psi.points, bisect.points);
     assert_eq!(
         serde_json::to_string(&psi.boundary).unwrap(),

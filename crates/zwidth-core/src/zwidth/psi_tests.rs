@@ -377,3 +377,79 @@ fn a_jump_between_neighbours_is_still_found() {
     }
     assert!(covered >= 48, "{covered} of 60 ({trials} trials)");
 }
+
+/// A marginal uniform over the lattice points lo..lo + n.
+fn uniform_marginal(lo: usize, n: usize) -> PsiMarginal {
+    PsiMarginal {
+        lo,
+        p: vec![1.0 / n as f64; n],
+        beta: [1.0 / BETAS.len() as f64; BETAS.len()],
+    }
+}
+
+#[test]
+fn a_prior_s_spread_adds_each_neighbour_s_own_in_quadrature() {
+    // Two neighbours uniform over 331 lattice points from 1000: their
+    // quantiles by hand (the first point where the running sum reaches q,
+    // k + 1 ≥ 331q): 5 % at 1016, ½ at 1165, 95 % at 1314, so each σ is
+    // (1314 − 1016)/(2·1.645) = 90.58 steps; no gap, so the smooth part
+    // is PRIOR_SPREAD/STEP = 25 steps: σ = √(25² + 2·90.58²) = 130.52.
+    let model = PsiModel::new(1488.24, 1e7, 24);
+    let a = uniform_marginal(1000, 331);
+    assert_eq!(
+        (a.quantile(0.05), a.quantile(0.5), a.quantile(0.95)),
+        (1016, 1165, 1314)
+    );
+    let p = Prior::between(&model, &a, &a);
+    let sd: f64 = 298.0 / 3.29;
+    assert!(
+        (p.sigma - (625.0 + 2.0 * sd * sd).sqrt()).abs() < 1e-9,
+        "{p:?}"
+    );
+    assert_eq!(p.centre, 1165.0);
+    // A neighbour 400 steps above: the gap's half (200) replaces the
+    // smooth part and the centre lies halfway.
+    let b = uniform_marginal(1400, 331);
+    let p = Prior::between(&model, &a, &b);
+    assert!(
+        (p.sigma - (200.0f64.powi(2) + 2.0 * sd * sd).sqrt()).abs() < 1e-9,
+        "{p:?}"
+    );
+    assert_eq!(p.centre, 1365.0);
+}
+
+#[test]
+fn a_quantile_past_the_mass_is_the_last_point() {
+    // Half the mass on 10 points (a marginal cut at its ends): every
+    // quantile above ½ is the last point, 20 + 9.
+    let mut m = uniform_marginal(20, 10);
+    for p in &mut m.p {
+        *p /= 2.0;
+    }
+    assert_eq!(m.quantile(0.9), 29);
+    assert_eq!(m.quantile(0.04), 20);
+}
+
+#[test]
+fn a_prior_s_beta_is_the_neighbours_averaged_with_a_little_of_the_uniform() {
+    // One neighbour sure of the smallest β, the other of the largest: the
+    // prior halves them and gives every β PRIOR_UNIFORM/9 besides.
+    let model = PsiModel::new(1488.24, 1e7, 24);
+    let (mut a, mut b) = (uniform_marginal(1000, 331), uniform_marginal(1000, 331));
+    a.beta = [0.0; BETAS.len()];
+    a.beta[0] = 1.0;
+    b.beta = [0.0; BETAS.len()];
+    b.beta[BETAS.len() - 1] = 1.0;
+    let p = Prior::between(&model, &a, &b);
+    let floor = PRIOR_UNIFORM / 9.0;
+    let half = (1.0 - PRIOR_UNIFORM) / 2.0 + floor;
+    for (j, &w) in p.beta.iter().enumerate() {
+        let want = if j == 0 || j == BETAS.len() - 1 {
+            half
+        } else {
+            floor
+        };
+        assert!((w - want).abs() < 1e-15, "β index {j}: {w}");
+    }
+    assert!((p.beta.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+}

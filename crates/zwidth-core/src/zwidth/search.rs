@@ -136,7 +136,17 @@ fn prepare(spec: &MapSpec) -> Result<(Evaluator, Cost), SpecError> {
         (ev.res.probe, ev.res.hit) = (trial.probe, trial.hit);
     }
     let exact = ev.criterion == Criterion::StrictPassivity && ev.model.is_some();
-    let cost = super::cost::of_map(spec, &ev.res, exact)?;
+    // Planned as the search that runs: Psi where verdicts are random
+    // draws, the bisection for a Psi map elsewhere (`Evaluator::runs_psi`).
+    let cost = if spec.search == SearchKind::Psi && !ev.runs_psi(spec.search) {
+        let runs = MapSpec {
+            search: SearchKind::Bisect,
+            ..spec.clone()
+        };
+        super::cost::of_map(&runs, &ev.res, exact)?
+    } else {
+        super::cost::of_map(spec, &ev.res, exact)?
+    };
     Ok((ev, cost))
 }
 
