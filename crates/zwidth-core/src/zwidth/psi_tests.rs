@@ -453,3 +453,38 @@ fn a_prior_s_beta_is_the_neighbours_averaged_with_a_little_of_the_uniform() {
     }
     assert!((p.beta.iter().sum::<f64>() - 1.0).abs() < 1e-12);
 }
+
+#[test]
+fn a_column_from_a_prior_starts_as_its_mixture() {
+    // Told nothing, a column from the prior (centre 2000, σ 50 lattice
+    // steps) has the prior as its posterior: at the centre the normal's
+    // peak (1 − w)/(σ√(2π)) plus the uniform's w/n, far from it the
+    // uniform's alone; its β marginal is the prior's β.
+    let model = PsiModel::new(1488.24, 1e7, 24);
+    let mut beta = [0.0; BETAS.len()];
+    for (j, b) in beta.iter_mut().enumerate() {
+        *b = (j + 1) as f64 / 45.0;
+    }
+    let prior = Prior {
+        centre: 2000.0,
+        sigma: 50.0,
+        beta,
+    };
+    let m = PsiColumn::with_prior(&model, Some(prior)).marginal_of();
+    let w = PRIOR_UNIFORM;
+    let uniform = w / model.n as f64;
+    let peak = (1.0 - w) / (50.0 * (2.0 * std::f64::consts::PI).sqrt()) + uniform;
+    let at = |i: usize| m.p[i - m.lo];
+    assert!((at(2000) / at(100) - peak / uniform).abs() < 1e-6 * peak / uniform);
+    // One σ out: e^{-1/2} of the normal's peak.
+    let one = (1.0 - w) / (50.0 * (2.0 * std::f64::consts::PI).sqrt()) * (-0.5f64).exp() + uniform;
+    assert!((at(2050) / at(100) - one / uniform).abs() < 1e-6 * one / uniform);
+    for (j, b) in m.beta.iter().enumerate() {
+        assert!((b - beta[j]).abs() < 1e-12, "β index {j}");
+    }
+    // Without a prior: the column knowing nothing.
+    assert_eq!(
+        PsiColumn::with_prior(&model, None).marginal_of(),
+        PsiColumn::new(&model).marginal_of()
+    );
+}
