@@ -233,3 +233,78 @@ fn psi_on_replicated_wall_hits_is_bisection() {
         serde_json::to_string(&bisect.boundary).unwrap()
     );
 }
+
+#[test]
+fn every_fourth_column_and_the_last_are_searched_first() {
+    use super::seed_positions;
+    assert_eq!(seed_positions(0), Vec::<usize>::new());
+    assert_eq!(seed_positions(1), [0]);
+    assert_eq!(seed_positions(3), [0, 2]);
+    assert_eq!(seed_positions(5), [0, 4]);
+    assert_eq!(seed_positions(6), [0, 4, 5]);
+    assert_eq!(seed_positions(9), [0, 4, 8]);
+}
+
+#[test]
+fn the_columns_between_come_in_two_levels_each_from_its_neighbours() {
+    // Nine columns, seeds 0, 4 and 8 done: first 2 and 6 (halfway), then
+    // 1, 3, 5 and 7, every one of them from a prior; the progress after
+    // each level is the share of columns done.
+    use super::{levels, seed_positions, Column};
+    use crate::zwidth::psi::{PsiColumn, PsiModel};
+    use std::collections::HashMap;
+    use std::sync::Mutex;
+    let model = PsiModel::new(1488.24, 1e7, 24);
+    let bs: Vec<f64> = (0..9).map(|i| 10.0 * i as f64).collect();
+    let seeds = seed_positions(bs.len());
+    let columns: Mutex<HashMap<u64, Column>> = Mutex::default();
+    let located = |b: f64, with_prior: bool| {
+        let c = Column {
+            marginal: Some(PsiColumn::new(&model).marginal_of()),
+            point: Some(crate::zwidth::point::BoundaryPoint {
+                b,
+                k_max: b,
+                k_lo: None,
+                k_hi: None,
+            }),
+            own: None,
+            prior: with_prior.then_some(crate::zwidth::psi::Prior {
+                centre: 0.0,
+                sigma: 1.0,
+                beta: [0.0; 9],
+            }),
+            ..Column::default()
+        };
+        columns.lock().unwrap().insert(b.to_bits(), c);
+    };
+    for &i in &seeds {
+        located(bs[i], false);
+    }
+    let calls: Mutex<Vec<(f64, bool)>> = Mutex::default();
+    let first = |b: f64, prior: Option<crate::zwidth::psi::Prior>| {
+        calls.lock().unwrap().push((b, prior.is_some()));
+        located(b, prior.is_some());
+        crate::zwidth::point::BoundaryPoint {
+            b,
+            k_max: b,
+            k_lo: None,
+            k_hi: None,
+        }
+    };
+    let reports: Mutex<Vec<f64>> = Mutex::default();
+    let boundary = levels(&model, &bs, &seeds, &columns, &first, &|f| {
+        reports.lock().unwrap().push(f)
+    });
+    let calls = calls.into_inner().unwrap();
+    let mut level1: Vec<f64> = calls[..2].iter().map(|c| c.0).collect();
+    level1.sort_by(f64::total_cmp);
+    assert_eq!(level1, [20.0, 60.0]);
+    let mut level2: Vec<f64> = calls[2..].iter().map(|c| c.0).collect();
+    level2.sort_by(f64::total_cmp);
+    assert_eq!(level2, [10.0, 30.0, 50.0, 70.0]);
+    assert!(calls.iter().all(|c| c.1), "{calls:?}");
+    assert_eq!(reports.into_inner().unwrap(), [5.0 / 9.0, 1.0]);
+    // Every column's point, in the order of bs.
+    let ks: Vec<f64> = boundary.iter().map(|p| p.k_max).collect();
+    assert_eq!(ks, bs);
+}
