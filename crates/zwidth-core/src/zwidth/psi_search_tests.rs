@@ -313,7 +313,7 @@ fn the_columns_between_come_in_two_levels_each_from_its_neighbours() {
             between(
                 b,
                 p,
-                if (b / 10.0) as usize % 2 == 0 {
+                if ((b / 10.0) as usize).is_multiple_of(2) {
                     2.0
                 } else {
                     1.0
