@@ -354,14 +354,7 @@ impl PsiMarginal {
 
     /// The lattice point at quantile q.
     pub fn quantile(&self, q: f64) -> usize {
-        let mut acc = 0.0;
-        for (i, p) in self.p.iter().enumerate() {
-            acc += p;
-            if acc >= q {
-                return self.lo + i;
-            }
-        }
-        self.lo + self.p.len().saturating_sub(1)
+        PsiColumn::quantile(&self.p, self.lo, q)
     }
 }
 
@@ -477,9 +470,8 @@ impl PsiColumn {
         }
     }
 
-    /// A column starting from `prior` (its neighbours' estimate), or
-    /// knowing nothing. β stays uniform: the neighbours' steepness may
-    /// differ.
+    /// A column starting from `prior` (its neighbours' estimate of K* and
+    /// of β), or knowing nothing.
     pub fn with_prior(model: &PsiModel, prior: Option<Prior>) -> Self {
         let mut c = Self::new(model);
         if let Some(p) = prior {
@@ -586,7 +578,7 @@ impl PsiColumn {
                 return lo + i;
             }
         }
-        lo + marginal.len() - 1
+        lo + marginal.len().saturating_sub(1)
     }
 
     /// Posterior probability that K* lies below the lattice point `m`.

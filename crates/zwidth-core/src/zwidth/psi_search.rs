@@ -279,9 +279,8 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
     let mut boundary: Vec<BoundaryPoint> = match &spec.b {
         Some(bs) => {
             // Each column's neighbours are the next B on either side.
-            let mut order: Vec<usize> = (0..bs.len()).collect();
-            order.sort_by(|&i, &j| bs[i].total_cmp(&bs[j]));
-            let sorted: Vec<f64> = order.iter().map(|&i| bs[i]).collect();
+            let mut sorted = bs.clone();
+            sorted.sort_by(f64::total_cmp);
             let seeds = seed_positions(sorted.len());
             seeds.par_iter().for_each(|&i| {
                 first(sorted[i], None);

@@ -23,6 +23,19 @@ fn seed_device(b: Vec<f64>) -> MapSpec {
     }
 }
 
+/// The same map by bisection.
+fn bisected(spec: &MapSpec) -> crate::zwidth::search::MapResult {
+    map_observed(
+        &MapSpec {
+            search: SearchKind::Bisect,
+            ..spec.clone()
+        },
+        None,
+        0,
+    )
+    .unwrap()
+}
+
 #[test]
 fn a_psi_map_is_the_same_on_any_thread_count_and_replays_from_its_trials() {
     let spec = seed_device(vec![0.0, 200.0, 400.0]);
@@ -93,15 +106,7 @@ fn a_psi_map_brackets_each_boundary_and_states_its_resolution() {
     // shorter trial (10 realizations, not the standard 24) on one
     // excitation sequence per column; its interval still meets the Psi
     // interval.
-    let bisect = map_observed(
-        &MapSpec {
-            search: SearchKind::Bisect,
-            ..spec.clone()
-        },
-        None,
-        0,
-    )
-    .unwrap();
+    let bisect = bisected(&spec);
     for (p, q) in r.boundary.iter().zip(&bisect.boundary) {
         assert!(
             q.k_lo.unwrap() <= p.k_hi.unwrap() && p.k_lo.unwrap() <= q.k_hi.unwrap(),
@@ -211,15 +216,7 @@ fn psi_on_replicated_wall_hits_is_bisection() {
     spec.method = Method::Time;
     spec.criterion = Criterion::Stability;
     let psi = map_observed(&spec, None, 0).unwrap();
-    let bisect = map_observed(
-        &MapSpec {
-            search: SearchKind::Bisect,
-            ..spec.clone()
-        },
-        None,
-        0,
-    )
-    .unwrap();
+    let bisect = bisected(&spec);
     assert!(psi.resolution.contains("bisection"), "{}", psi.resolution);
     // And it is planned as one: the bisection's cost, not Psi's budget.
     use crate::zwidth::search::validate;
