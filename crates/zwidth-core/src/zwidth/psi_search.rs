@@ -30,6 +30,14 @@ use super::settings::MapSpec;
 /// Trials a column may take in all.
 pub const BUDGET: usize = 100;
 
+/// Trials a column may take in the first pass: about what a bisection
+/// spends on a column (13–25 on the example scenes). A column whose
+/// verdicts barely change with K (a shallow escape hazard, Re Z crossing
+/// zero slowly) would otherwise spend the whole budget on a resolution
+/// nothing needs; it keeps the wider interval its trials give, unless it
+/// may set the K-width (the second pass refines it then).
+pub const FIRST_BUDGET: usize = 24;
+
 /// The first pass's resolution, as a multiple of the preset's (at most
 /// ±25 %).
 const COARSE: f64 = 4.0;
@@ -73,7 +81,7 @@ fn coarse(ev: &Classifier) -> f64 {
 /// The map's resolution, in words.
 pub(super) fn resolution(ev: &Classifier) -> String {
     format!(
-        "K to ±{:.2} % where a column may set the K-width, ±{:.2} % elsewhere ({:.0} % credible intervals of a posterior told every trial of the column, the Psi method; at most {BUDGET} trials a column)",
+        "K to ±{:.2} % where a column may set the K-width, ±{:.2} % elsewhere or what {FIRST_BUDGET} trials give ({:.0} % credible intervals of a posterior told every trial of the column, the Psi method; at most {BUDGET} trials a column)",
         100.0 * ev.res.k_rel_tol,
         100.0 * coarse(ev),
         100.0 * (1.0 - 2.0 * alpha(ev)),
@@ -85,6 +93,8 @@ pub(super) fn resolution(ev: &Classifier) -> String {
 struct Stop {
     /// Resolved at this half-width (relative).
     rel_tol: f64,
+    /// Or the column has this many trials.
+    budget: usize,
     /// Or: P(K* > K at this lattice point) at most `tail`, unless the
     /// column's own lower end passes `lead` (N/m): it then leads.
     above: Option<(usize, f64, f64)>,
@@ -109,7 +119,7 @@ fn run(
     let mut psi = PsiColumn::from_history(model, prior, &c.history);
     let alpha = alpha(ev);
     let stopped = |psi: &PsiColumn| {
-        psi.state(model, alpha, stop.rel_tol, BUDGET) != PsiState::Open
+        psi.state(model, alpha, stop.rel_tol, stop.budget) != PsiState::Open
             || stop.above.is_some_and(|(m, tail, lead)| {
                 psi.marginal_of().tail(m) <= tail || psi.estimate(model, alpha).k_lo > lead
             })
@@ -170,6 +180,35 @@ fn narrowed(w0: f64, w: f64, tol: f64) -> f64 {
         return 1.0;
     }
     ((w0 / w).ln() / (w0 / tol).ln()).clamp(0.0, 1.0)
+}
+
+/// The level τ that columns' tails above it are brought down to, so that
+/// the tails sum to `alpha`: Σ_c min(t_c, τ) = α over the columns that may
+/// still take trials, the others' tails counted as they are. Columns
+/// already below τ need no trial: α is shared among those above it alone
+/// (water-filling; never below α/N for N columns, the equal share). Where
+/// the columns that cannot take trials hold α already, the equal share
+/// over all.
+fn water_level(tails: &[(f64, bool)], alpha: f64) -> f64 {
+    let fixed: f64 = tails.iter().filter(|t| !t.1).map(|t| t.0).sum();
+    let mut open: Vec<f64> = tails.iter().filter(|t| t.1).map(|t| t.0).collect();
+    let budget = alpha - fixed;
+    if open.is_empty() || budget <= 0.0 {
+        return alpha / tails.len().max(1) as f64;
+    }
+    open.sort_by(|a, b| b.total_cmp(a));
+    // The k largest brought to τ = (budget − the rest's sum)/k, the first k
+    // for which τ is at least the next one's tail; all of them at last.
+    let n = open.len();
+    let mut rest: f64 = open.iter().sum();
+    for k in 1..n {
+        rest -= open[k - 1];
+        let level = (budget - rest) / k as f64;
+        if level >= open[k] {
+            return level;
+        }
+    }
+    budget / n as f64
 }
 
 /// Positions of the columns searched first, knowing nothing, among `n` in
@@ -256,6 +295,7 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
     let columns: Mutex<HashMap<u64, Column>> = Mutex::default();
     let coarse = Stop {
         rel_tol: coarse(ev),
+        budget: FIRST_BUDGET,
         above: None,
     };
     let first = |b: f64, prior: Option<Prior>| {
@@ -342,28 +382,28 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
     for _ in 0..ROUNDS {
         // The K-width's interval is the largest K*'s: within ±tol once
         // P(max K* > upper) ≤ α, upper = lead·(1 + tol)/(1 − tol) for its
-        // lower end `lead`. Each of the N columns that may exceed the lead
-        // takes trials until P(K*_c > upper) ≤ α/N (so the sum over them
-        // is at most α), or until it leads itself (the next round).
+        // lower end `lead`; by the union bound, once Σ_c P(K*_c > upper)
+        // ≤ α. The columns whose tail passes the water level (`water_level`)
+        // take trials until it is at the level, or until they lead
+        // themselves (the next round).
         let max = max_estimate(&model, &marginals(&columns, &boundary), alpha);
         let width = relative_width(max.k_lo, max.k_hi);
         let w0 = *width0.get_or_insert(width);
         ev.report(FIRST_PASS + (1.0 - FIRST_PASS) * narrowed(w0, width, tol));
         let lead = max.k_lo;
         let upper = lead * (1.0 + tol) / (1.0 - tol);
-        let m_lead = model.lattice(lead);
         let m_upper = model.lattice(upper);
-        let rivals = boundary
+        // P(K*_c > upper) per column, and whether more trials may lower it.
+        let tails: Vec<(f64, bool)> = boundary
             .iter()
-            .filter(|bp| {
-                columns
-                    .get(&bp.b.to_bits())
-                    .and_then(|c| c.own.as_ref())
-                    .is_some_and(|mg| mg.tail(m_lead) > 1e-3)
+            .filter_map(|bp| columns.get(&bp.b.to_bits()))
+            .filter_map(|c| {
+                c.own
+                    .as_ref()
+                    .map(|mg| (mg.tail(m_upper), c.history.len() < BUDGET))
             })
-            .count()
-            .max(1);
-        let tail = alpha / rivals as f64;
+            .collect();
+        let tail = water_level(&tails, alpha);
         let todo: Vec<usize> = (0..boundary.len())
             .filter(|&i| {
                 columns.get(&boundary[i].b.to_bits()).is_some_and(|c| {
@@ -377,6 +417,7 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
         }
         let stop = Stop {
             rel_tol: tol / 4.0,
+            budget: BUDGET,
             above: Some((m_upper, tail, lead)),
         };
         let mut taken: Vec<(usize, Column)> = todo

@@ -361,15 +361,52 @@ fn a_psi_map_over_the_automatic_range_takes_every_column() {
         assert!(r.points.iter().any(|p| p.b == bp.b), "column {i}");
     }
     assert_eq!(r.boundary.len(), 34);
-    // Pinned (recorded 2026-12-07, this commit): the map's trials and its
-    // K-width to the bit, so a change of the search's rules (which columns
-    // compete for the K-width, its rounds) shows here. Re-record only with
-    // a change that says why (docs/zwidth.md's figures re-measured).
+    // Pinned (recorded 2026-12-07; re-recorded 2026-12-07 for the first
+    // pass's budget of FIRST_BUDGET trials a column and the second pass's
+    // water level, the same K-width to the bit, 566 trials before): the
+    // map's trials and its K-width to the bit, so a change of the search's
+    // rules (which columns compete for the K-width, its rounds) shows here.
+    // Re-record only with a change that says why (docs/zwidth.md's figures
+    // re-measured).
     assert_eq!(
         (r.points.len(), r.k_width.to_bits()),
-        (566, 4690075366122498127),
+        (590, 4690075366122498127),
         "{} trials, K-width {}",
         r.points.len(),
         r.k_width
     );
+}
+
+#[test]
+fn the_water_level_shares_alpha_among_the_tails_above_it() {
+    // Its definition: Σ_c min(t_c, τ) = α, the tails of columns that
+    // cannot take trials (false) counted whole. Each case is worked by hand
+    // in the comment beside it.
+    let sum = |t: &[(f64, bool)], level: f64| -> f64 {
+        t.iter()
+            .map(|&(x, open)| if open { x.min(level) } else { x })
+            .sum()
+    };
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+    use super::water_level;
+    // Two large tails share what the two small ones leave: (0.05 − 0.0015)/2.
+    let t = [(0.04, true), (0.001, true), (0.03, true), (0.0005, true)];
+    let level = water_level(&t, 0.05);
+    assert!(close(level, 0.02425), "{level}");
+    assert!(close(sum(&t, level), 0.05));
+    // A spent column's 0.02 is taken off first: 0.03 left, the 0.01 tail
+    // stays as it is, the 0.04 one is brought to 0.02.
+    let t = [(0.02, false), (0.04, true), (0.01, true)];
+    assert!(close(water_level(&t, 0.05), 0.02));
+    // Equal tails above the equal share: the equal share α/N.
+    let t = [(0.1, true); 4];
+    assert!(close(water_level(&t, 0.05), 0.0125));
+    // Tails already small: the level lies above every one (no trial).
+    let t = [(0.001, true), (0.002, true)];
+    let level = water_level(&t, 0.05);
+    assert!(close(level, 0.049), "{level}");
+    // Spent columns over α already: the equal share over all.
+    let t = [(0.06, false), (0.01, true)];
+    assert!(close(water_level(&t, 0.05), 0.025));
+    assert!(close(water_level(&[], 0.05), 0.05));
 }
