@@ -68,6 +68,13 @@ struct Column {
     point: Option<BoundaryPoint>,
 }
 
+impl Column {
+    /// Whether it has trials of its budget left.
+    fn may_take_trials(&self) -> bool {
+        self.history.len() < BUDGET
+    }
+}
+
 /// Each end of a column's interval is wrong with posterior probability α,
 /// the scene's per-verdict error rate.
 fn alpha(ev: &Classifier) -> f64 {
@@ -400,15 +407,14 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
             .filter_map(|c| {
                 c.own
                     .as_ref()
-                    .map(|mg| (mg.tail(m_upper), c.history.len() < BUDGET))
+                    .map(|mg| (mg.tail(m_upper), c.may_take_trials()))
             })
             .collect();
         let tail = water_level(&tails, alpha);
         let todo: Vec<usize> = (0..boundary.len())
             .filter(|&i| {
                 columns.get(&boundary[i].b.to_bits()).is_some_and(|c| {
-                    c.own.as_ref().is_some_and(|mg| mg.tail(m_upper) > tail)
-                        && c.history.len() < BUDGET
+                    c.own.as_ref().is_some_and(|mg| mg.tail(m_upper) > tail) && c.may_take_trials()
                 })
             })
             .collect();

@@ -410,3 +410,17 @@ fn the_water_level_shares_alpha_among_the_tails_above_it() {
     assert!(close(water_level(&t, 0.05), 0.025));
     assert!(close(water_level(&[], 0.05), 0.05));
 }
+
+#[test]
+fn a_column_takes_trials_until_its_budget_of_100() {
+    // BUDGET (the resolution's "at most 100 trials a column"): a column
+    // with 99 trials may take one more, with 100 none; the water level
+    // counts the latter's tail as it is.
+    let with = |n: usize| super::Column {
+        history: vec![(0, crate::zwidth::psi::Outcome::Failed); n],
+        ..super::Column::default()
+    };
+    assert!(with(0).may_take_trials());
+    assert!(with(99).may_take_trials());
+    assert!(!with(100).may_take_trials());
+}
