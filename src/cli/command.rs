@@ -603,6 +603,10 @@ pub enum BenchCommand {
         /// `mode_lag`: its reference map alone takes minutes).
         #[arg(long)]
         scene: Option<String>,
+        /// bisect | robust_bisect | trace | grid | psi: how every map searches
+        /// (each preset against the same search's reference).
+        #[arg(long, default_value = "bisect")]
+        search: String,
         #[arg(long)]
         json: bool,
     },

@@ -445,9 +445,15 @@ pub(super) fn run(
             write_either(stdout, json, &r, || r.table())
         }
         Command::Bench {
-            what: BenchCommand::Tradeoff { scene, json },
+            what:
+                BenchCommand::Tradeoff {
+                    scene,
+                    search,
+                    json,
+                },
         } => {
-            let rows = tradeoff::run(scene.as_deref())?;
+            let search = parse_choice::<SearchKind>("search", &search)?;
+            let rows = tradeoff::run(scene.as_deref(), search)?;
             write_either(stdout, json, &rows, || tradeoff::table(&rows))
         }
         Command::Bench {

@@ -876,6 +876,20 @@ fn compare_tuned_rejects_bad_input() {
     );
 }
 
+/// `bench tradeoff --search` takes the map's own searches: anything else
+/// exits 2 naming the flag and the value before any map runs (serde's list
+/// of the variants is the allowed set).
+#[test]
+fn bench_tradeoff_refuses_an_unknown_search() {
+    rejects(
+        &[
+            "bench", "tradeoff", "--scene", "linear", "--search", "newton",
+        ],
+        "",
+        "--search = \"newton\" is not allowed: unknown variant `newton`, expected one of",
+    );
+}
+
 /// `bench scale` measures PostgreSQL with counts it can run: anything else
 /// exits 2 naming the flag, the value and what is allowed, before it
 /// connects to anything (the URL below is never reached).

@@ -190,18 +190,20 @@ fn narrowed(w0: f64, w: f64, tol: f64) -> f64 {
 }
 
 /// The level τ that columns' tails above it are brought down to, so that
-/// the tails sum to `alpha`: Σ_c min(t_c, τ) = α over the columns that may
-/// still take trials, the others' tails counted as they are. Columns
-/// already below τ need no trial: α is shared among those above it alone
-/// (water-filling; never below α/N for N columns, the equal share). Where
-/// the columns that cannot take trials hold α already, the equal share
-/// over all.
+/// the tails sum to at most `alpha`: Σ_c min(t_c, τ) = α over the columns
+/// that may still take trials, the others' tails counted as they are.
+/// Columns already below τ need no trial: α is shared among those above it
+/// alone (water-filling). Never below α/N for N columns, the equal share:
+/// where spent columns hold most of α the sum cannot reach it without
+/// every open column spending its budget, and the K-width's interval is
+/// left wider than the resolution instead (`max_estimate` says how wide).
 fn water_level(tails: &[(f64, bool)], alpha: f64) -> f64 {
+    let equal = alpha / tails.len().max(1) as f64;
     let fixed: f64 = tails.iter().filter(|t| !t.1).map(|t| t.0).sum();
     let mut open: Vec<f64> = tails.iter().filter(|t| t.1).map(|t| t.0).collect();
     let budget = alpha - fixed;
     if open.is_empty() || budget <= 0.0 {
-        return alpha / tails.len().max(1) as f64;
+        return equal;
     }
     open.sort_by(|a, b| b.total_cmp(a));
     // The k largest brought to τ = (budget − the rest's sum)/k, the first k
@@ -212,10 +214,10 @@ fn water_level(tails: &[(f64, bool)], alpha: f64) -> f64 {
         rest -= open[k - 1];
         let level = (budget - rest) / k as f64;
         if level >= open[k] {
-            return level;
+            return level.max(equal);
         }
     }
-    budget / n as f64
+    (budget / n as f64).max(equal)
 }
 
 /// Positions of the columns searched first, knowing nothing, among `n` in
@@ -400,7 +402,10 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
         let lead = max.k_lo;
         let upper = lead * (1.0 + tol) / (1.0 - tol);
         let m_upper = model.lattice(upper);
-        // P(K*_c > upper) per column, and whether more trials may lower it.
+        // P(K*_c > upper) per column, and whether it has trials left (a
+        // column that cannot lower its tail otherwise, above the cap or
+        // resolved, ends the pass through the rounds' `after == before`,
+        // its interval as its trials left it).
         let tails: Vec<(f64, bool)> = boundary
             .iter()
             .filter_map(|bp| columns.get(&bp.b.to_bits()))

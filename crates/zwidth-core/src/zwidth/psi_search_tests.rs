@@ -380,8 +380,9 @@ fn a_psi_map_over_the_automatic_range_takes_every_column() {
 #[test]
 fn the_water_level_shares_alpha_among_the_tails_above_it() {
     // Its definition: Σ_c min(t_c, τ) = α, the tails of columns that
-    // cannot take trials (false) counted whole. Each case is worked by hand
-    // in the comment beside it.
+    // cannot take trials (false) counted whole, and never below α/N (the
+    // equal share). Each case is worked by hand in the comment beside it;
+    // the first two are checked against the definition's sum too.
     let sum = |t: &[(f64, bool)], level: f64| -> f64 {
         t.iter()
             .map(|&(x, open)| if open { x.min(level) } else { x })
@@ -398,10 +399,16 @@ fn the_water_level_shares_alpha_among_the_tails_above_it() {
     // stays as it is, the 0.04 one is brought to 0.02.
     let t = [(0.02, false), (0.04, true), (0.01, true)];
     assert!(close(water_level(&t, 0.05), 0.02));
+    assert!(close(sum(&t, 0.02), 0.05));
+    // Spent columns holding most of α: the sum would need τ = 0.001; the
+    // equal share α/2 = 0.025 instead (no jump as the spent tails near α).
+    let t = [(0.049, false), (0.1, true)];
+    assert!(close(water_level(&t, 0.05), 0.025));
     // Equal tails above the equal share: the equal share α/N.
     let t = [(0.1, true); 4];
     assert!(close(water_level(&t, 0.05), 0.0125));
-    // Tails already small: the level lies above every one (no trial).
+    // Tails already small: the level lies above every one (no trial); the
+    // water-filling's 0.049 is above the equal share 0.025.
     let t = [(0.001, true), (0.002, true)];
     let level = water_level(&t, 0.05);
     assert!(close(level, 0.049), "{level}");

@@ -45,6 +45,9 @@ pub const EXAMPLES: [(&str, &str, Criterion); 5] = [
 #[derive(Debug, Clone, Serialize)]
 pub struct TradeoffRow {
     pub scene: String,
+    /// How the maps searched (each row against the same search's
+    /// reference).
+    pub search: SearchKind,
     pub preset: Preset,
     pub wall_s: f64,
     pub trials: usize,
@@ -67,10 +70,10 @@ pub struct TradeoffRow {
     pub overlaps_reference: Option<bool>,
 }
 
-/// Every preset on every example scene whose name contains `filter`
-/// (`zwidth bench tradeoff [--scene FILTER]`); an error names the choices
-/// when none does.
-pub fn run(filter: Option<&str>) -> Result<Vec<TradeoffRow>, SpecError> {
+/// Every preset on every example scene whose name contains `filter`, each
+/// map searched by `search` (`zwidth bench tradeoff [--scene FILTER]
+/// [--search S]`); an error names the choices when none does.
+pub fn run(filter: Option<&str>, search: SearchKind) -> Result<Vec<TradeoffRow>, SpecError> {
     let chosen: Vec<_> = EXAMPLES
         .iter()
         .filter(|(name, _, _)| filter.is_none_or(|f| name.contains(f)))
@@ -84,7 +87,7 @@ pub fn run(filter: Option<&str>) -> Result<Vec<TradeoffRow>, SpecError> {
             format!("must be part of an example's name: {}", names.join(", ")),
         ));
     }
-    run_on(&chosen)
+    run_on(&chosen, search)
 }
 
 /// Realizations a map simulated (see [`TradeoffRow::realizations`]).
@@ -95,8 +98,12 @@ fn realizations(points: &[Point]) -> u64 {
         .sum()
 }
 
-/// Every preset on the given scenes, each against its own reference.
-fn run_on(examples: &[(&str, &str, Criterion)]) -> Result<Vec<TradeoffRow>, SpecError> {
+/// Every preset on the given scenes, each against its own reference (of
+/// the same search).
+fn run_on(
+    examples: &[(&str, &str, Criterion)],
+    search: SearchKind,
+) -> Result<Vec<TradeoffRow>, SpecError> {
     let mut rows = Vec::new();
     for &(name, json, criterion) in examples {
         let scene = SceneSpec::from_json(json)?;
@@ -111,7 +118,7 @@ fn run_on(examples: &[(&str, &str, Criterion)]) -> Result<Vec<TradeoffRow>, Spec
                 scene: scene.clone(),
                 method,
                 criterion,
-                search: SearchKind::Bisect,
+                search,
                 accuracy: Accuracy::Preset(preset),
                 b: None,
                 b_max: 1000.0,
@@ -127,6 +134,7 @@ fn run_on(examples: &[(&str, &str, Criterion)]) -> Result<Vec<TradeoffRow>, Spec
             let realizations = realizations(&r.points);
             rows.push(TradeoffRow {
                 scene: name.to_string(),
+                search,
                 preset,
                 wall_s,
                 trials: r.trials,
@@ -159,8 +167,9 @@ fn relative_error(x: f64, r: f64) -> f64 {
 
 pub fn table(rows: &[TradeoffRow]) -> String {
     let mut s = format!(
-        "{:<26} {:<10} {:>9} {:>7} {:>8} {:>10} {:>12} {:>10} {:>9} {:>9} {:>27} {:>8}\n",
+        "{:<26} {:<13} {:<10} {:>9} {:>7} {:>8} {:>10} {:>12} {:>10} {:>9} {:>9} {:>27} {:>8}\n",
         "scene",
+        "search",
         "preset",
         "wall (s)",
         "trials",
@@ -179,8 +188,9 @@ pub fn table(rows: &[TradeoffRow]) -> String {
             .overlaps_reference
             .map_or("-", |o| if o { "yes" } else { "no" });
         s.push_str(&format!(
-            "{:<26} {:<10} {:>9.3} {:>7} {:>8} {:>10.0} {:>12.1} {:>10.2} {:>8.2}% {:>8.2}% {:>27} {:>8}\n",
+            "{:<26} {:<13} {:<10} {:>9.3} {:>7} {:>8} {:>10.0} {:>12.1} {:>10.2} {:>8.2}% {:>8.2}% {:>27} {:>8}\n",
             r.scene,
+            r.search.name(),
             format!("{:?}", r.preset).to_lowercase(),
             r.wall_s,
             r.trials,
@@ -225,7 +235,9 @@ mod tests {
 
     #[test]
     fn an_unknown_scene_filter_names_the_examples() {
-        let e = run(Some("no such scene")).unwrap_err().to_string();
+        let e = run(Some("no such scene"), SearchKind::Bisect)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("scene") && e.contains("no such scene"), "{e}");
         assert!(e.contains("mode_lag_2011 (frequency)"), "{e}");
     }
@@ -245,7 +257,7 @@ mod tests {
         // (Colgate & Schenkel's bound does not depend on the search's
         // steps beyond its bisection tolerance), so every error is within
         // the presets' k_rel_tol and B-width is the same column count.
-        let rows = run_on(&EXAMPLES[..1]).unwrap();
+        let rows = run_on(&EXAMPLES[..1], SearchKind::Bisect).unwrap();
         let presets: Vec<_> = rows.iter().map(|r| r.preset).collect();
         assert_eq!(
             presets,
@@ -254,6 +266,7 @@ mod tests {
         assert_eq!((rows[0].k_width_error, rows[0].b_width_error), (0.0, 0.0));
         for r in &rows {
             assert_eq!(r.scene, "linear_1khz (analytic)");
+            assert_eq!(r.search, SearchKind::Bisect);
             assert!(r.k_width > 0.0 && r.trials > 0, "{r:?}");
             // A closed form has no realizations: one per trial, and the
             // speed is their count over the wall time.
@@ -268,13 +281,18 @@ mod tests {
         let t = table(&rows);
         assert_eq!(t.lines().count(), 4, "{t}");
         let last: Vec<&str> = t.lines().nth(3).unwrap().split_whitespace().collect();
-        assert_eq!(last[..3], ["linear_1khz", "(analytic)", "draft"], "{t}");
+        assert_eq!(
+            last[..4],
+            ["linear_1khz", "(analytic)", "bisect", "draft"],
+            "{t}"
+        );
     }
 
     #[test]
     fn the_table_shows_errors_in_percent_and_the_interval_s_half_width() {
         let row = TradeoffRow {
             scene: "s".into(),
+            search: SearchKind::Psi,
             preset: Preset::Draft,
             wall_s: 1.5,
             trials: 7,
@@ -291,6 +309,7 @@ mod tests {
         let last = t.lines().nth(1).unwrap();
         // 84 realizations in 1.5 s: 56 a second.
         for want in [
+            " psi ",
             "draft",
             " 84 ",
             " 56 ",
