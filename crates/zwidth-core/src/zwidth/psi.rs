@@ -271,11 +271,21 @@ impl PsiModel {
 
     /// The same at table index `d` (offset + n − 1), from the tables of the
     /// common outcomes where there is one.
+    #[cfg(test)]
     fn ln_like_at(&self, outcome: Outcome, j: usize, d: usize) -> f64 {
-        if let Some((_, t)) = self.common.iter().find(|(o, _)| *o == outcome) {
-            return t[j][d];
+        match self.table(outcome) {
+            Some(t) => t[j][d],
+            None => self.ln_like_computed(outcome, self.hazard[j][d]),
         }
-        self.ln_like_computed(outcome, self.hazard[j][d])
+    }
+
+    /// The table of ln-likelihoods of `outcome` (per β, at offset d + n −
+    /// 1), if it is one of the common outcomes.
+    fn table(&self, outcome: Outcome) -> Option<&[Vec<f64>]> {
+        self.common
+            .iter()
+            .find(|(o, _)| *o == outcome)
+            .map(|(_, t)| t.as_slice())
     }
 
     /// ln(2ε·L + (1 − 2ε)·P(outcome)) for a hazard over the horizon λH =
@@ -327,6 +337,10 @@ pub struct PsiColumn {
     history: Vec<(usize, Outcome)>,
     /// The marginal posterior of K* on lo..hi (kept from the last tell).
     mg: Vec<f64>,
+    /// The live cells' weights relative to the largest, and their sum
+    /// (kept from the last tell: planning and the marginals read them).
+    w: Vec<f64>,
+    total: f64,
 }
 
 /// The posterior of one column's K* on the lattice.
@@ -467,6 +481,8 @@ impl PsiColumn {
             hi: model.n,
             history: Vec::new(),
             mg: vec![1.0 / model.n as f64; model.n],
+            w: vec![1.0; model.n * BETAS.len()],
+            total: (model.n * BETAS.len()) as f64,
         }
     }
 
@@ -519,10 +535,22 @@ impl PsiColumn {
     /// Tell the outcome of a trial at lattice point `m`.
     pub fn tell(&mut self, model: &PsiModel, m: usize, outcome: Outcome) {
         let nb = BETAS.len();
+        // The outcome's table looked up once, not per cell.
+        let table = model.table(outcome);
         for i in self.lo..self.hi {
             let d = m + model.n - 1 - i;
-            for j in 0..nb {
-                self.ln_post[i * nb + j] += model.ln_like_at(outcome, j, d);
+            let cells = &mut self.ln_post[i * nb..(i + 1) * nb];
+            match table {
+                Some(t) => {
+                    for (j, c) in cells.iter_mut().enumerate() {
+                        *c += t[j][d];
+                    }
+                }
+                None => {
+                    for (j, c) in cells.iter_mut().enumerate() {
+                        *c += model.ln_like_computed(outcome, model.hazard[j][d]);
+                    }
+                }
             }
         }
         self.history.push((m, outcome));
@@ -546,22 +574,23 @@ impl PsiColumn {
         while self.hi > self.lo + 1 && !alive(self.hi - 1) {
             self.hi -= 1;
         }
-        let (w, total) = self.weights();
-        self.mg = w
+        // The weights relative to the largest cell (alive, so within lo..hi).
+        let cells = &self.ln_post[self.lo * nb..self.hi * nb];
+        self.w.clear();
+        self.w.extend(cells.iter().map(|&v| (v - top).exp()));
+        self.total = self.w.iter().sum();
+        let total = self.total;
+        self.mg = self
+            .w
             .chunks(nb)
             .map(|c| c.iter().sum::<f64>() / total)
             .collect();
     }
 
     /// The weights of the live cells (relative to the largest) and their
-    /// sum.
-    fn weights(&self) -> (Vec<f64>, f64) {
-        let nb = BETAS.len();
-        let cells = &self.ln_post[self.lo * nb..self.hi * nb];
-        let top = cells.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b));
-        let w: Vec<f64> = cells.iter().map(|&v| (v - top).exp()).collect();
-        let total = w.iter().sum();
-        (w, total)
+    /// sum, as the last tell left them.
+    fn weights(&self) -> (&[f64], f64) {
+        (&self.w, self.total)
     }
 
     /// The marginal posterior of K* on the live lattice points lo..hi.
