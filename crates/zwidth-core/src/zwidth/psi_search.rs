@@ -30,13 +30,16 @@ use super::settings::MapSpec;
 /// Trials a column may take in all.
 pub const BUDGET: usize = 100;
 
-/// Trials a column may take in the first pass: about what a bisection
-/// spends on a column (13–25 on the example scenes). A column whose
-/// verdicts barely change with K (a shallow escape hazard, Re Z crossing
-/// zero slowly) would otherwise spend the whole budget on a resolution
-/// nothing needs; it keeps the wider interval its trials give, unless it
-/// may set the K-width (the second pass refines it then).
+/// Trials a column may take in the first pass, and realizations: about
+/// what a bisection spends on a column at standard (13–25 trials, 180–210
+/// realizations on average over the seed device's and the mode-and-lag
+/// scene's columns). A column whose verdicts barely change with K (a
+/// shallow escape hazard, Re Z crossing zero slowly, each trial then its
+/// full 24 realizations) would otherwise spend the whole budget on a
+/// resolution nothing needs; it keeps the wider interval its trials give,
+/// unless it may set the K-width (the second pass refines it then).
 pub const FIRST_BUDGET: usize = 24;
+pub const FIRST_REALIZATIONS: u64 = 240;
 
 /// The first pass's resolution, as a multiple of the preset's (at most
 /// ±25 %).
@@ -88,7 +91,7 @@ fn coarse(ev: &Classifier) -> f64 {
 /// The map's resolution, in words.
 pub(super) fn resolution(ev: &Classifier) -> String {
     format!(
-        "K to ±{:.2} % where a column may set the K-width, ±{:.2} % elsewhere or what {FIRST_BUDGET} trials give ({:.0} % credible intervals of a posterior told every trial of the column, the Psi method; at most {BUDGET} trials a column)",
+        "K to ±{:.2} % where a column may set the K-width, ±{:.2} % elsewhere or what {FIRST_BUDGET} trials or {FIRST_REALIZATIONS} realizations give ({:.0} % credible intervals of a posterior told every trial of the column, the Psi method; at most {BUDGET} trials a column)",
         100.0 * ev.res.k_rel_tol,
         100.0 * coarse(ev),
         100.0 * (1.0 - 2.0 * alpha(ev)),
@@ -100,8 +103,10 @@ pub(super) fn resolution(ev: &Classifier) -> String {
 struct Stop {
     /// Resolved at this half-width (relative).
     rel_tol: f64,
-    /// Or the column has this many trials.
+    /// Or the column has this many trials, or has run this many
+    /// realizations.
     budget: usize,
+    realizations: u64,
     /// Or: P(K* > K at this lattice point) at most `tail`, unless the
     /// column's own lower end passes `lead` (N/m): it then leads.
     above: Option<(usize, f64, f64)>,
@@ -125,18 +130,21 @@ fn run(
     let prior = if refining { None } else { c.prior };
     let mut psi = PsiColumn::from_history(model, prior, &c.history);
     let alpha = alpha(ev);
-    let stopped = |psi: &PsiColumn| {
-        psi.state(model, alpha, stop.rel_tol, stop.budget) != PsiState::Open
+    let mut spent: u64 = c.points.iter().map(realizations).sum();
+    let stopped = |psi: &PsiColumn, spent: u64| {
+        spent >= stop.realizations
+            || psi.state(model, alpha, stop.rel_tol, stop.budget) != PsiState::Open
             || stop.above.is_some_and(|(m, tail, lead)| {
                 psi.marginal_of().tail(m) <= tail || psi.estimate(model, alpha).k_lo > lead
             })
     };
-    while !stopped(&psi) && !cancelled() {
+    while !stopped(&psi, spent) && !cancelled() {
         let m = psi.ask(model);
         let k = repeat_k(model.k(m).min(spec.k_max), psi.repeats(m));
         let index = u32::try_from(psi.trials()).unwrap_or(u32::MAX);
         let p = ev.classify_seeded(k, b, trial_seed(ev.scene.spec.probe.seed, column, index));
         psi.tell(model, m, outcome(&p));
+        spent += realizations(&p);
         c.points.push(p);
     }
     c.history = psi.history().to_vec();
@@ -145,6 +153,11 @@ fn run(
         c.own = c.marginal.clone();
     }
     boundary_point(ev, model, b, &psi)
+}
+
+/// The realizations a trial ran (one for a verdict without).
+fn realizations(p: &Point) -> u64 {
+    u64::from(p.realizations.unwrap_or(1))
 }
 
 /// What a trial's verdict tells the posterior.
@@ -305,6 +318,7 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
     let coarse = Stop {
         rel_tol: coarse(ev),
         budget: FIRST_BUDGET,
+        realizations: FIRST_REALIZATIONS,
         above: None,
     };
     let first = |b: f64, prior: Option<Prior>| {
@@ -429,6 +443,7 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
         let stop = Stop {
             rel_tol: tol / 4.0,
             budget: BUDGET,
+            realizations: u64::MAX,
             above: Some((m_upper, tail, lead)),
         };
         let mut taken: Vec<(usize, Column)> = todo
