@@ -488,3 +488,28 @@ fn a_column_from_a_prior_starts_as_its_mixture() {
         PsiColumn::new(&model).marginal_of()
     );
 }
+
+#[test]
+fn one_failure_tells_each_lattice_point_its_own_offset() {
+    // A column knowing nothing (uniform over K* and β), told one failure
+    // without an escape at lattice point m: the posterior of K* at i is
+    // ∝ Σ_j P(β_j, h·(m − i)) (Bayes over a uniform prior; P is
+    // Kontsevich & Tyler's Weibull, `fail_probability`, checked by hand in
+    // the first test). Two points' ratio checks the offset to the lattice
+    // step: one step off is 0.2 % in K and moves the ratio by ~8 %.
+    let model = PsiModel::new(1000.0, 1e6, 24);
+    let m = model.floor + 500;
+    let mut c = PsiColumn::new(&model);
+    c.tell(&model, m, Outcome::Failed);
+    let summed = |d: f64| -> f64 { BETAS.iter().map(|&b| fail_probability(b, STEP * d)).sum() };
+    let mg = c.marginal_of();
+    let at = |i: usize| mg.p[i - mg.lo];
+    for (a, b) in [(m, m - 3), (m - 1, m + 2), (m + 5, m - 5)] {
+        let want = summed((m as f64) - (a as f64)) / summed((m as f64) - (b as f64));
+        let got = at(a) / at(b);
+        assert!(
+            (got / want - 1.0).abs() < 1e-9,
+            "{a} {b}: {got} against {want}"
+        );
+    }
+}
