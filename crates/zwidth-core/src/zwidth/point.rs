@@ -37,6 +37,12 @@ pub struct Point {
 }
 
 impl Point {
+    /// The realizations (or replicate hits) the trial ran: one for a
+    /// verdict without (a deterministic simulation, a closed form).
+    pub fn realizations_run(&self) -> u32 {
+        self.realizations.unwrap_or(1)
+    }
+
     /// Decided passive (or stable): certain at the stated confidence.
     pub fn surely_ok(&self) -> bool {
         self.ok() && self.decided != Some(false)

@@ -130,7 +130,11 @@ fn run(
     let prior = if refining { None } else { c.prior };
     let mut psi = PsiColumn::from_history(model, prior, &c.history);
     let alpha = alpha(ev);
-    let mut spent: u64 = c.points.iter().map(realizations).sum();
+    let mut spent: u64 = c
+        .points
+        .iter()
+        .map(|p| u64::from(p.realizations_run()))
+        .sum();
     let stopped = |psi: &PsiColumn, spent: u64| {
         spent >= stop.realizations
             || psi.state(model, alpha, stop.rel_tol, stop.budget) != PsiState::Open
@@ -144,7 +148,7 @@ fn run(
         let index = u32::try_from(psi.trials()).unwrap_or(u32::MAX);
         let p = ev.classify_seeded(k, b, trial_seed(ev.scene.spec.probe.seed, column, index));
         psi.tell(model, m, outcome(&p));
-        spent += realizations(&p);
+        spent += u64::from(p.realizations_run());
         c.points.push(p);
     }
     c.history = psi.history().to_vec();
@@ -155,14 +159,9 @@ fn run(
     boundary_point(ev, model, b, &psi)
 }
 
-/// The realizations a trial ran (one for a verdict without).
-fn realizations(p: &Point) -> u64 {
-    u64::from(p.realizations.unwrap_or(1))
-}
-
 /// What a trial's verdict tells the posterior.
 fn outcome(p: &Point) -> Outcome {
-    let realizations = p.realizations.unwrap_or(1);
+    let realizations = p.realizations_run();
     match (p.diverged(), p.ok()) {
         (true, _) => Outcome::Escaped { at: realizations },
         (_, true) => Outcome::Survived { realizations },
@@ -420,22 +419,21 @@ pub(super) fn psi_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> PsiMap
         // column that cannot lower its tail otherwise, above the cap or
         // resolved, ends the pass through the rounds' `after == before`,
         // its interval as its trials left it).
-        let tails: Vec<(f64, bool)> = boundary
+        let tails: Vec<(usize, f64, bool)> = boundary
             .iter()
-            .filter_map(|bp| columns.get(&bp.b.to_bits()))
-            .filter_map(|c| {
-                c.own
-                    .as_ref()
-                    .map(|mg| (mg.tail(m_upper), c.may_take_trials()))
+            .enumerate()
+            .filter_map(|(i, bp)| {
+                let c = columns.get(&bp.b.to_bits())?;
+                let mg = c.own.as_ref()?;
+                Some((i, mg.tail(m_upper), c.may_take_trials()))
             })
             .collect();
-        let tail = water_level(&tails, alpha);
-        let todo: Vec<usize> = (0..boundary.len())
-            .filter(|&i| {
-                columns.get(&boundary[i].b.to_bits()).is_some_and(|c| {
-                    c.own.as_ref().is_some_and(|mg| mg.tail(m_upper) > tail) && c.may_take_trials()
-                })
-            })
+        let level: Vec<(f64, bool)> = tails.iter().map(|&(_, t, open)| (t, open)).collect();
+        let tail = water_level(&level, alpha);
+        let todo: Vec<usize> = tails
+            .iter()
+            .filter(|&&(_, t, open)| open && t > tail)
+            .map(|&(i, _, _)| i)
             .collect();
         if todo.is_empty() || ev.observer.as_ref().is_some_and(|o| o.cancelled()) {
             break;

@@ -92,10 +92,7 @@ pub fn run(filter: Option<&str>, search: SearchKind) -> Result<Vec<TradeoffRow>,
 
 /// Realizations a map simulated (see [`TradeoffRow::realizations`]).
 fn realizations(points: &[Point]) -> u64 {
-    points
-        .iter()
-        .map(|p| u64::from(p.realizations.unwrap_or(1)))
-        .sum()
+    points.iter().map(|p| u64::from(p.realizations_run())).sum()
 }
 
 /// Every preset on the given scenes, each against its own reference (of
