@@ -48,6 +48,23 @@ pub struct CompareSpec {
     /// paper's wall hit: the time engine on a nonlinear scene).
     #[serde(default, skip_serializing_if = "is_impedance")]
     pub criterion: Criterion,
+    /// Rounds that map the rows of unresolved K-width orders again, each
+    /// at half the K resolution before (0–3; default 0, and 2 for a tuned
+    /// comparison). The result says which pairs stayed open.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resolve_rounds: Option<u32>,
+}
+
+impl CompareSpec {
+    /// The refinement rounds this comparison takes (`resolve_rounds` or
+    /// its default).
+    pub fn rounds(&self) -> u32 {
+        self.resolve_rounds.unwrap_or(if self.tuned.is_some() {
+            compare::TUNED_RESOLVE_ROUNDS
+        } else {
+            0
+        })
+    }
 }
 
 fn is_impedance(c: &Criterion) -> bool {
@@ -103,11 +120,18 @@ impl ExperimentSpec {
                             "tunes the paper's four estimators: leave `estimators` out, or tune a list with one `tune` experiment each",
                         ));
                     }
-                    return t.cost(&scene, &c.accuracy, c.criterion)?.check("tuned");
+                    let refine =
+                        compare::refinement_cost(&scene, &c.accuracy, c.criterion, c.rounds(), 4)?;
+                    return t
+                        .cost(&scene, &c.accuracy, c.criterion)?
+                        .plus(refine)
+                        .check("tuned");
                 }
-                let one = search::validate(&compare::map_spec(scene, &c.accuracy, c.criterion))?;
                 let n = c.estimators.as_ref().map_or(4, Vec::len) as u64;
-                one.times(n).check("estimators")
+                let refine =
+                    compare::refinement_cost(&scene, &c.accuracy, c.criterion, c.rounds(), n)?;
+                let one = search::validate(&compare::map_spec(scene, &c.accuracy, c.criterion))?;
+                one.times(n).plus(refine).check("estimators")
             }
             ExperimentSpec::Sweep(s) => s.checked().map(|(_, cost)| cost),
             ExperimentSpec::Tune(t) => t.validate().map(|t| t.cost),
@@ -128,6 +152,7 @@ impl ExperimentSpec {
                         &c.accuracy,
                         c.criterion,
                         t,
+                        c.rounds(),
                         Some(observer),
                     ),
                     None => compare::compare_observed(
@@ -135,6 +160,7 @@ impl ExperimentSpec {
                         &c.accuracy,
                         c.criterion,
                         c.estimators.as_deref(),
+                        c.rounds(),
                         Some(observer),
                     ),
                 }

@@ -132,14 +132,28 @@ pub fn tune_json(
 /// specs) on one scene (JSON text; None: the paper's simulated device),
 /// `zwidth compare --json` out.
 #[pyfunction]
-#[pyo3(signature = (scene, accuracy, criterion, estimators))]
+#[pyo3(signature = (scene, accuracy, criterion, estimators, resolve_rounds = 0))]
 pub fn compare_json(
     py: Python<'_>,
     scene: Option<&str>,
     accuracy: &str,
     criterion: &str,
     estimators: Option<&str>,
+    resolve_rounds: i64,
 ) -> PyResult<String> {
+    let rounds = u32::try_from(resolve_rounds)
+        .map_err(|_| {
+            SpecError::new(
+                "resolve_rounds",
+                resolve_rounds,
+                format!(
+                    "must be 0 to {}",
+                    zwidth_core::zwidth::compare::MAX_RESOLVE_ROUNDS
+                ),
+            )
+        })
+        .and_then(|r| zwidth_core::zwidth::compare::check_rounds(r).map(|()| r))
+        .map_err(value_error)?;
     let scene = match scene {
         Some(s) => SceneSpec::from_json(s).map_err(value_error)?,
         None => zwidth_core::zwidth::compare::seed_2018_scene(),
@@ -154,7 +168,14 @@ pub fn compare_json(
         .map_err(value_error)?;
     scene.validate().map_err(value_error)?;
     let r = cancellable(py, |o| {
-        compare_observed(&scene, &accuracy, criterion, estimators.as_deref(), Some(o))
+        compare_observed(
+            &scene,
+            &accuracy,
+            criterion,
+            estimators.as_deref(),
+            rounds,
+            Some(o),
+        )
     })?;
     to_json(&r)
 }

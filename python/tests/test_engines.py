@@ -335,6 +335,11 @@ def test_compare_takes_the_api_s_number_of_estimators():
     for n in (0, 21):
         with pytest.raises(ValueError, match=rf"^estimators = {n} is not allowed: give 1 to 20"):
             zwidth.compare(EX / "linear_1khz.json", accuracy="draft", estimators=[{"kind": "fdm"}] * n)
+    # Refinement rounds: 0 to 3, as the CLI's --resolve-rounds and the API's
+    # resolve_rounds (compare::MAX_RESOLVE_ROUNDS).
+    for bad in (-1, 4, 10**30, 1.5, True, "2"):
+        with pytest.raises(ValueError, match=r"^resolve_rounds = .* is not allowed: must be an integer 0 to 3"):
+            zwidth.compare(EX / "linear_1khz.json", accuracy="draft", resolve_rounds=bad)
     with pytest.raises(ValueError, match=r"^estimators\[1\]\.cutoff_hz = "):
         zwidth.compare(EX / "linear_1khz.json", accuracy="draft",
                        estimators=[{"kind": "fdm"}, {"kind": "butterworth", "cutoff_hz": -1}])

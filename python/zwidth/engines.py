@@ -341,13 +341,21 @@ def compare(
     accuracy: AccuracyLike = "standard",
     criterion: str = "impedance",
     estimators: Optional[Sequence[Dict[str, Any]]] = None,
+    resolve_rounds: int = 0,
 ) -> CompareResult:
     """Every estimator of the 2018 paper on `scene` (None: the paper's
     simulated device), each mapped with the paper's parameters; or the
-    `estimators` given (API estimator specs, `[{"kind": "fdm"}, …]`)."""
+    `estimators` given (API estimator specs, `[{"kind": "fdm"}, …]`).
+    `resolve_rounds` (0–3) maps the rows of unresolved K-width orders again,
+    each round at half the K resolution before, as `zwidth compare
+    --resolve-rounds`."""
     text = None if scene is None else _scene_text(scene)
     est = None if estimators is None else _zwidth.dumps(list(estimators), "estimators")
-    raw = _zwidth.loads(_zwidth.compare_json(text, _accuracy(accuracy), _word("criterion", criterion), est))
+    if isinstance(resolve_rounds, bool) or not isinstance(resolve_rounds, int) or not 0 <= resolve_rounds <= 3:
+        raise ValueError(f"resolve_rounds = {resolve_rounds!r} is not allowed: must be an integer 0 to 3")
+    raw = _zwidth.loads(
+        _zwidth.compare_json(text, _accuracy(accuracy), _word("criterion", criterion), est, resolve_rounds)
+    )
     maps: Dict[str, MapResult] = {}
     for row in raw["rows"]:
         # An estimator given twice keeps both rows: "name (2)" for the second.

@@ -206,6 +206,11 @@ pub enum Command {
         /// strict_passivity (linear scenes)
         #[arg(long, default_value = "impedance")]
         criterion: String,
+        /// Rounds that map the rows of unresolved K-width orders again,
+        /// each at half the K resolution before (0–3; default 0, with
+        /// --tuned 2).
+        #[arg(long)]
+        resolve_rounds: Option<u32>,
     },
     /// Record an open-loop identification trace from the scene's simulated
     /// device: a Schroeder multisine force, CSV t_s,force_n,position_m.

@@ -247,6 +247,7 @@ pub(super) fn run(
             max_evaluations,
             seed,
             criterion,
+            resolve_rounds,
         } => {
             let criterion: Criterion = parse_choice("criterion", &criterion)?;
             let spec = match &scene {
@@ -271,6 +272,15 @@ pub(super) fn run(
                     Ok(t)
                 })
                 .transpose()?;
+            let rounds = resolve_rounds.unwrap_or(if tuned.is_some() {
+                compare::TUNED_RESOLVE_ROUNDS
+            } else {
+                0
+            });
+            compare::check_rounds(rounds).map_err(|mut e| {
+                e.field = "--resolve-rounds".into();
+                CliError::from(e)
+            })?;
             spec.validate()?;
             let observer = std::sync::Arc::new(Observer::default());
             let r = with_progress(&observer, || match &tuned {
@@ -279,11 +289,17 @@ pub(super) fn run(
                     &acc,
                     criterion,
                     t,
+                    rounds,
                     Some(observer.clone()),
                 ),
-                None => {
-                    compare::compare_observed(&spec, &acc, criterion, None, Some(observer.clone()))
-                }
+                None => compare::compare_observed(
+                    &spec,
+                    &acc,
+                    criterion,
+                    None,
+                    rounds,
+                    Some(observer.clone()),
+                ),
             })?;
             if let Some(dir) = svg_dir {
                 std::fs::create_dir_all(&dir).map_err(|e| {

@@ -874,6 +874,12 @@ fn compare_tuned_rejects_bad_input() {
         "",
         "--criterion = \"passivity\"",
     );
+    // Refinement rounds: 0 to 3 (compare::MAX_RESOLVE_ROUNDS).
+    rejects(
+        &["compare", scene, "--resolve-rounds", "4"],
+        "",
+        "--resolve-rounds = 4 is not allowed: must be 0 to 3",
+    );
 }
 
 /// `bench tradeoff --search` takes the map's own searches: anything else

@@ -69,6 +69,14 @@ fn bad_inputs_are_problems_naming_the_field() {
             "estimators[1].cutoff_hz",
         ),
         (r#"{"kind":"compare","estimators":[]}"#, "estimators"),
+        (
+            r#"{"kind":"compare","resolve_rounds":4}"#,
+            "resolve_rounds = 4 is not allowed: must be 0 to 3",
+        ),
+        (
+            r#"{"kind":"compare","resolve_rounds":-1}"#,
+            "not a valid experiment",
+        ),
         (r#"not json"#, "not a valid experiment"),
         (
             r#"{"kind":"compare","accuracy":"fast"}"#,

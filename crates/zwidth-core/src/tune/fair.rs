@@ -215,32 +215,36 @@ fn describe(e: &EstimatorSpec, c: f64) -> String {
     }
 }
 
-/// Progress scopes of a tuned comparison of `list`: one per map, and one
-/// per tune (the estimators with something to tune).
-fn scopes(list: &[(String, String, EstimatorSpec)], sample_hz: f64) -> usize {
+/// Progress scopes of a tuned comparison of `list`: one per map (the
+/// first maps and each refinement round's, `compare::compare_rows`), and
+/// one per tune (the estimators with something to tune).
+fn scopes(list: &[(String, String, EstimatorSpec)], sample_hz: f64, rounds: u32) -> usize {
     let tunes = list
         .iter()
         .filter(|(_, _, e)| tunable(e, sample_hz).is_some())
         .count();
-    list.len() + tunes
+    list.len() * (1 + rounds as usize) + tunes
 }
 
 /// The paper's estimators on `scene`, each tuned for `tuned.objective`
-/// first, then mapped at `accuracy` side by side. Progress: one scope per
-/// tune, then one per map.
+/// first, then mapped at `accuracy` side by side, the rows of unresolved
+/// orders refined for up to `rounds` rounds. Progress: one scope per tune,
+/// then one per map.
 pub fn compare_tuned(
     scene: &SceneSpec,
     accuracy: &Accuracy,
     criterion: Criterion,
     tuned: &TunedCompare,
+    rounds: u32,
     observer: Option<Arc<Observer>>,
 ) -> Result<CompareResult, SpecError> {
     tuned.validate()?;
+    compare::check_rounds(rounds)?;
     let start = Instant::now();
     let c = compare::estimate_c(scene)?;
     let list = compare::paper_estimators(scene, c.estimate.lipschitz);
     if let Some(o) = &observer {
-        o.set_scopes(scopes(&list, scene.control.sample_hz));
+        o.set_scopes(scopes(&list, scene.control.sample_hz, rounds));
     }
     let mut rows = Vec::with_capacity(list.len());
     let mut tunings = Vec::with_capacity(list.len());
@@ -273,7 +277,7 @@ pub fn compare_tuned(
             }
         }
     }
-    let mut result = compare::compare_rows(scene, accuracy, criterion, c, rows, observer)?;
+    let mut result = compare::compare_rows(scene, accuracy, criterion, c, rows, rounds, observer)?;
     for (row, tuning) in result.rows.iter_mut().zip(tunings) {
         row.tuning = tuning;
     }
@@ -293,7 +297,9 @@ mod tests {
         let scene = compare::seed_2018_scene();
         let list = compare::paper_estimators(&scene, 1.1);
         assert_eq!(list.len(), 4);
-        assert_eq!(scopes(&list, scene.control.sample_hz), 7);
+        assert_eq!(scopes(&list, scene.control.sample_hz, 0), 7);
+        // Each refinement round adds a scope per map: 4·(1 + 2) + 3.
+        assert_eq!(scopes(&list, scene.control.sample_hz, 2), 15);
     }
 
     #[test]

@@ -92,6 +92,26 @@ pub struct CompareRow {
     /// they are the paper's fixed values.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tuning: Option<RowTuning>,
+    /// Absent: one map. Present: the row was mapped again, finer, to
+    /// resolve its K-width orders (`resolve_orders`); `map` is the last.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refined: Option<Refined>,
+}
+
+/// A row's refinement maps (`resolve_orders`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Refined {
+    /// Maps after the first.
+    pub maps: u32,
+    /// The last map's K resolution (relative) and per-verdict confidence.
+    pub k_rel_tol: f64,
+    pub confidence: f64,
+    /// The most realizations its verdicts could take.
+    pub realizations: u32,
+    /// Σ α over every map of the row (1 − its confidence each): the chance
+    /// that any of the row's intervals missed on one side, by the union
+    /// bound over the looks.
+    pub alpha_spent: f64,
 }
 
 /// A row's tune: what it tuned, what it found, what it cost.
@@ -118,27 +138,58 @@ pub struct PairOrder {
     /// upper bound is, each with probability at most α = 1 − the scene's
     /// confidence (docs/zwidth.md, "Boundaries with intervals").
     pub resolved: bool,
-    /// That probability's bound, 2α (a resolved order); the measured
+    /// Not resolved, but the two K-widths differ by less than the
+    /// accuracy's resolution: both intervals lie within one interval of
+    /// relative half-width `k_rel_tol` (`equal_within`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub equal: bool,
+    /// The bound on that verdict's error: a resolved order is wrong only
+    /// if the wider row's lower bound or the narrower's upper bound is
+    /// (α each, summed over each row's maps when it was refined); an
+    /// "equal" only if one of the four bounds is (twice that). The measured
     /// coverage of one standard map's interval is in docs/zwidth.md.
     pub error_at_most: f64,
 }
 
 /// Every pair of rows whose maps have K-width intervals (noisy scenes), in
 /// the rows' order: which is wider and whether the intervals say so.
-pub fn pair_orders(rows: &[CompareRow], confidence: f64) -> Vec<PairOrder> {
-    let widths: Vec<(f64, Option<[f64; 2]>)> = rows
-        .iter()
-        .map(|r| (r.map.k_width, r.map.k_width_interval))
-        .collect();
+pub fn pair_orders(rows: &[CompareRow], confidence: f64, k_rel_tol: f64) -> Vec<PairOrder> {
+    let widths = widths(rows);
+    let alpha = |r: &CompareRow| r.refined.map_or(1.0 - confidence, |f| f.alpha_spent);
     orders(&widths)
         .into_iter()
-        .map(|o| PairOrder {
-            wider: rows[o.wider].name.clone(),
-            narrower: rows[o.narrower].name.clone(),
-            resolved: o.resolved,
-            error_at_most: 2.0 * (1.0 - confidence),
+        .map(|o| {
+            let (w, n) = (&rows[o.wider], &rows[o.narrower]);
+            let equal =
+                !o.resolved && equal_within(&widths[o.wider], &widths[o.narrower], k_rel_tol);
+            let one_side = alpha(w) + alpha(n);
+            PairOrder {
+                wider: w.name.clone(),
+                narrower: n.name.clone(),
+                resolved: o.resolved,
+                equal,
+                error_at_most: if equal { 2.0 * one_side } else { one_side },
+            }
         })
         .collect()
+}
+
+/// Whether two K-widths (estimate, interval) differ by less than the
+/// resolution `k_rel_tol`: the smallest interval holding both intervals has
+/// a relative half-width (hi − lo)/(hi + lo) of at most `k_rel_tol`, so
+/// both true widths lie in it and differ by at most 2·k_rel_tol of its
+/// centre, the width of one resolved interval.
+pub fn equal_within(
+    a: &(f64, Option<[f64; 2]>),
+    b: &(f64, Option<[f64; 2]>),
+    k_rel_tol: f64,
+) -> bool {
+    let (Some(ia), Some(ib)) = (a.1, b.1) else {
+        return false;
+    };
+    let lo = ia[0].min(ib[0]);
+    let hi = ia[1].max(ib[1]);
+    lo > 0.0 && (hi - lo) <= k_rel_tol * (hi + lo)
 }
 
 /// Two widths in order, by their places in the list given to [`orders`].
@@ -190,7 +241,236 @@ pub struct CompareResult {
     /// parameters.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tuned_for: Option<String>,
+    /// What refining the rows of unresolved pairs did (`resolve_orders`),
+    /// or absent: no refinement rounds were allowed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub resolution: Option<Resolution>,
     pub elapsed_s: f64,
+}
+
+/// Most refinement rounds a comparison may take (`resolve_orders`): the
+/// third maps at an eighth of the accuracy's K resolution.
+pub const MAX_RESOLVE_ROUNDS: u32 = 3;
+
+/// Refinement rounds a tuned comparison takes unless told otherwise: its
+/// point is a ranking (issue 44's item 5).
+pub const TUNED_RESOLVE_ROUNDS: u32 = 2;
+
+/// What `resolve_orders` did.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Resolution {
+    /// Rounds allowed, and rounds that mapped rows.
+    pub rounds: u32,
+    pub rounds_run: u32,
+    /// Pairs neither resolved nor equal within the resolution at the end.
+    pub open_pairs: usize,
+    /// It ended because its rounds did (with pairs open), not because
+    /// every pair was decided.
+    pub budget_ended: bool,
+}
+
+/// `resolve_rounds` must be 0 to `MAX_RESOLVE_ROUNDS`.
+pub fn check_rounds(rounds: u32) -> Result<(), SpecError> {
+    if rounds > MAX_RESOLVE_ROUNDS {
+        return Err(SpecError::new(
+            "resolve_rounds",
+            rounds,
+            format!("must be 0 to {MAX_RESOLVE_ROUNDS} (each round halves the K resolution of the rows whose orders are open)"),
+        ));
+    }
+    Ok(())
+}
+
+/// What `rounds` refinement rounds of `n` rows may cost at most (every row
+/// mapped again each round).
+pub fn refinement_cost(
+    scene: &SceneSpec,
+    accuracy: &Accuracy,
+    criterion: Criterion,
+    rounds: u32,
+    n: u64,
+) -> Result<super::cost::Cost, SpecError> {
+    check_rounds(rounds)?;
+    let sc = scene.validate().map_err(|e| e.within("scene"))?;
+    let res = accuracy.resolve(&sc)?;
+    let mut total = super::cost::Cost::default();
+    for r in 1..=rounds {
+        let round = Round::new(accuracy, &res, scene.probe.confidence, r);
+        total = total.plus(super::search::validate(&round.map_spec(scene, criterion))?.times(n));
+    }
+    Ok(total)
+}
+
+/// Most realizations a refinement round gives a verdict (the accuracy's
+/// own limit, `settings::Accuracy::resolve`).
+const MAX_REALIZATIONS: u32 = 1000;
+
+/// Refinement round `r` (1, 2, …) of a comparison at `accuracy` (resolved
+/// to `res` on its scene) whose verdicts hold at `confidence`: the K
+/// resolution halved `r` times; 2^r times the realizations a verdict may
+/// take (replicates: a row's interval is often wide because verdicts near
+/// its boundary stay undecided at the cap, not because the bisection
+/// stopped); and the per-verdict error rate α halved `r` times, so that a
+/// row's error rates summed over all its maps stay below 2α (α + α/2 +
+/// α/4 + …: the union bound over the looks, since whether a row is mapped
+/// again depends on its earlier intervals).
+#[derive(Debug, Clone, PartialEq)]
+struct Round {
+    accuracy: Accuracy,
+    k_rel_tol: f64,
+    realizations: u32,
+    confidence: f64,
+}
+
+impl Round {
+    fn new(accuracy: &Accuracy, res: &super::settings::Resolved, confidence: f64, r: u32) -> Self {
+        let scale = 0.5_f64.powi(r as i32);
+        let mut knobs = match accuracy {
+            Accuracy::Preset(p) => super::settings::AccuracyKnobs {
+                preset: *p,
+                ..Default::default()
+            },
+            Accuracy::Knobs(k) => k.clone(),
+        };
+        let realizations = res
+            .probe
+            .realizations
+            .saturating_mul(1 << r.min(16))
+            .min(MAX_REALIZATIONS);
+        knobs.k_rel_tol = Some(res.k_rel_tol * scale);
+        knobs.realizations = Some(realizations);
+        Round {
+            accuracy: Accuracy::Knobs(knobs),
+            k_rel_tol: res.k_rel_tol * scale,
+            realizations,
+            confidence: 1.0 - (1.0 - confidence) * scale,
+        }
+    }
+
+    /// The map of `scene` (with its estimator) this round makes.
+    fn map_spec(&self, scene: &SceneSpec, criterion: Criterion) -> MapSpec {
+        let mut scene = scene.clone();
+        scene.probe.confidence = self.confidence;
+        map_spec(scene, &self.accuracy, criterion)
+    }
+}
+
+/// (hi − lo)/(hi + lo), or infinity without an interval.
+fn relative_width(w: &(f64, Option<[f64; 2]>)) -> f64 {
+    match w.1 {
+        Some([lo, hi]) if hi + lo > 0.0 => (hi - lo) / (hi + lo),
+        _ => f64::INFINITY,
+    }
+}
+
+/// The rows a round at resolution `round_tol` maps again: of each pair
+/// neither resolved nor equal within `k_rel_tol`, the rows whose interval
+/// is wider than `round_tol` (a row already narrower gains little from a
+/// finer map), or both when neither is.
+fn open_rows(rows: &[CompareRow], k_rel_tol: f64, round_tol: f64) -> Vec<usize> {
+    let widths = widths(rows);
+    let mut open = vec![false; rows.len()];
+    for o in orders(&widths) {
+        if o.resolved || equal_within(&widths[o.wider], &widths[o.narrower], k_rel_tol) {
+            continue;
+        }
+        let wide: Vec<usize> = [o.wider, o.narrower]
+            .into_iter()
+            .filter(|&i| relative_width(&widths[i]) > round_tol)
+            .collect();
+        if wide.is_empty() {
+            open[o.wider] = true;
+            open[o.narrower] = true;
+        }
+        for i in wide {
+            open[i] = true;
+        }
+    }
+    (0..rows.len()).filter(|&i| open[i]).collect()
+}
+
+fn widths(rows: &[CompareRow]) -> Vec<(f64, Option<[f64; 2]>)> {
+    rows.iter()
+        .map(|r| (r.map.k_width, r.map.k_width_interval))
+        .collect()
+}
+
+/// Map the rows of open pairs again, finer (`Round`, `open_rows`), round after
+/// round until every pair is resolved or equal within the first map's
+/// resolution, or `rounds` have run. Round r maps row i as scope
+/// r·n + i of `observer` (n rows), so a resumed run replays each map;
+/// scopes a round does not map are reported done.
+fn resolve_orders(
+    ctx: &RowsContext<'_>,
+    rows: &mut [CompareRow],
+    rounds: u32,
+) -> Result<(Vec<PairOrder>, Option<Resolution>), SpecError> {
+    let confidence = ctx.scene.probe.confidence;
+    let alpha = 1.0 - confidence;
+    let tol = ctx.res.k_rel_tol;
+    let n = rows.len() as u32;
+    let mut run = 0;
+    let mut mapped = vec![vec![false; rows.len()]; rounds as usize];
+    let cancelled = || ctx.observer.as_ref().is_some_and(|o| o.cancelled());
+    for r in 1..=rounds {
+        let round = Round::new(ctx.accuracy, &ctx.res, confidence, r);
+        let open = open_rows(rows, tol, round.k_rel_tol);
+        if open.is_empty() || cancelled() {
+            break;
+        }
+        let maps = open
+            .par_iter()
+            .map(|&i| {
+                let scene = SceneSpec {
+                    estimator: rows[i].estimator.clone(),
+                    ..ctx.scene.clone()
+                };
+                let spec = round.map_spec(&scene, ctx.criterion);
+                map_observed(&spec, ctx.observer.clone(), r * n + i as u32).map(|m| (i, m))
+            })
+            .collect::<Result<Vec<_>, SpecError>>()?;
+        for (i, map) in maps {
+            let before = rows[i].refined;
+            rows[i].map = map;
+            rows[i].refined = Some(Refined {
+                maps: before.map_or(0, |f| f.maps) + 1,
+                k_rel_tol: round.k_rel_tol,
+                confidence: round.confidence,
+                realizations: round.realizations,
+                alpha_spent: before.map_or(alpha, |f| f.alpha_spent) + (1.0 - round.confidence),
+            });
+            mapped[r as usize - 1][i] = true;
+        }
+        run = r;
+    }
+    if let Some(o) = &ctx.observer {
+        for (r, round) in mapped.iter().enumerate() {
+            for (i, &m) in round.iter().enumerate() {
+                if !m {
+                    o.report((r as u32 + 1) * n + i as u32, 1.0);
+                }
+            }
+        }
+    }
+    let order = pair_orders(rows, confidence, tol);
+    let open_pairs = order.iter().filter(|p| !p.resolved && !p.equal).count();
+    let resolution = (rounds > 0).then_some(Resolution {
+        rounds,
+        rounds_run: run,
+        open_pairs,
+        budget_ended: open_pairs > 0 && run == rounds,
+    });
+    Ok((order, resolution))
+}
+
+/// What every row of one comparison shares.
+struct RowsContext<'a> {
+    scene: &'a SceneSpec,
+    accuracy: &'a Accuracy,
+    criterion: Criterion,
+    /// The accuracy resolved on the scene.
+    res: super::settings::Resolved,
+    observer: Option<std::sync::Arc<Observer>>,
 }
 
 /// The paper's four estimators with its tuned parameters.
@@ -262,18 +542,22 @@ pub fn map_spec(scene: SceneSpec, accuracy: &Accuracy, criterion: Criterion) -> 
 }
 
 pub fn compare(scene: &SceneSpec, accuracy: &Accuracy) -> Result<CompareResult, SpecError> {
-    compare_observed(scene, accuracy, Criterion::Impedance, None, None)
+    compare_observed(scene, accuracy, Criterion::Impedance, None, 0, None)
 }
 
-/// The same, each estimator's map reporting to `observer` as scope 0, 1, …;
-/// `estimators` replaces the paper's four (named by their labels).
+/// The same, each estimator's map reporting to `observer` as scope 0, 1, …
+/// (its refinement maps after them, `resolve_orders`); `estimators`
+/// replaces the paper's four (named by their labels); up to `rounds`
+/// refinement rounds resolve the K-width orders.
 pub fn compare_observed(
     scene: &SceneSpec,
     accuracy: &Accuracy,
     criterion: Criterion,
     estimators: Option<&[EstimatorSpec]>,
+    rounds: u32,
     observer: Option<std::sync::Arc<Observer>>,
 ) -> Result<CompareResult, SpecError> {
+    check_rounds(rounds)?;
     if let Some(list) = estimators {
         check_estimators(scene, list)?;
     }
@@ -286,9 +570,9 @@ pub fn compare_observed(
         None => paper_estimators(scene, c.estimate.lipschitz),
     };
     if let Some(o) = &observer {
-        o.set_scopes(estimators.len());
+        o.set_scopes(estimators.len() * (1 + rounds as usize));
     }
-    compare_rows(scene, accuracy, criterion, c, estimators, observer)
+    compare_rows(scene, accuracy, criterion, c, estimators, rounds, observer)
 }
 
 /// Most estimators one compare takes: the same limit in the API, the CLI
@@ -325,10 +609,20 @@ pub fn compare_rows(
     criterion: Criterion,
     c: CEstimate,
     estimators: Vec<(String, String, EstimatorSpec)>,
+    rounds: u32,
     observer: Option<std::sync::Arc<Observer>>,
 ) -> Result<CompareResult, SpecError> {
+    check_rounds(rounds)?;
     let start = std::time::Instant::now();
-    let rows = estimators
+    let sc = scene.validate().map_err(|e| e.within("scene"))?;
+    let ctx = RowsContext {
+        scene,
+        accuracy,
+        criterion,
+        res: accuracy.resolve(&sc)?,
+        observer,
+    };
+    let mut rows = estimators
         .into_par_iter()
         .enumerate()
         .map(|(scope, (name, parameters, estimator))| {
@@ -344,311 +638,23 @@ pub fn compare_rows(
                 name,
                 parameters,
                 estimator,
-                map: map_observed(&spec, observer.clone(), scope as u32)?,
+                map: map_observed(&spec, ctx.observer.clone(), scope as u32)?,
                 tuning: None,
+                refined: None,
             })
         })
         .collect::<Result<Vec<_>, SpecError>>()?;
+    let (order, resolution) = resolve_orders(&ctx, &mut rows, rounds)?;
     Ok(CompareResult {
         lipschitz: c,
-        order: pair_orders(&rows, scene.probe.confidence),
+        order,
         rows,
         tuned_for: None,
+        resolution,
         elapsed_s: start.elapsed().as_secs_f64(),
     })
 }
 
-impl CompareResult {
-    /// Shaped like the 2018 paper's Table I.
-    pub fn table(&self) -> String {
-        let w = 14;
-        let mut s = format!("{:<28}", "");
-        for r in &self.rows {
-            s.push_str(&format!("{:>w$}", r.name));
-        }
-        s.push('\n');
-        let mut row = |label: &str, f: &dyn Fn(&CompareRow) -> String| {
-            s.push_str(&format!("{label:<28}"));
-            for r in &self.rows {
-                s.push_str(&format!("{:>w$}", f(r)));
-            }
-            s.push('\n');
-        };
-        row("K-width (N/m)", &|r| format!("{:.3e}", r.map.k_width));
-        if self.rows.iter().any(|r| r.map.k_width_interval.is_some()) {
-            row("  interval low", &|r| {
-                r.map
-                    .k_width_interval
-                    .map_or("-".into(), |i| format!("{:.3e}", i[0]))
-            });
-            row("  interval high", &|r| {
-                r.map
-                    .k_width_interval
-                    .map_or("-".into(), |i| format!("{:.3e}", i[1]))
-            });
-        }
-        row("B-width (N·s/m)", &|r| format!("{:.1}", r.map.b_width));
-        row("Max. fidelity error (N·s/m)", &|r| {
-            r.map
-                .max_fidelity_error
-                .map(|f| format!("{f:.2}"))
-                .unwrap_or("-".into())
-        });
-        row("Trials", &|r| r.map.trials.to_string());
-        if let Some(p) = self.order.first() {
-            s.push_str(&format!(
-                "K-width order (resolved: the intervals do not overlap, wrong with probability at most {:.0} %):\n",
-                100.0 * p.error_at_most
-            ));
-            for p in &self.order {
-                let verdict = if p.resolved {
-                    "resolved"
-                } else {
-                    "not resolved (the intervals overlap)"
-                };
-                s.push_str(&format!(
-                    "  {:<12} > {:<12} {verdict}\n",
-                    p.wider, p.narrower
-                ));
-            }
-        }
-        match &self.tuned_for {
-            Some(objective) => s.push_str(&format!(
-                "Tunable parameters, each tuned for {objective} (argmin, draft search, finalists re-mapped):\n"
-            )),
-            None => s.push_str(
-                "Tunable parameters (the 2018 paper's fixed values; `compare --tuned OBJECTIVE` tunes each first):\n",
-            ),
-        }
-        for r in &self.rows {
-            s.push_str(&format!("  {:<12} {}\n", r.name, r.parameters));
-            if let Some(t) = &r.tuning {
-                s.push_str(&format!(
-                    "  {:<12} tuned over {} in {} maps, {:.1} s\n",
-                    "", t.bounds, t.evaluations, t.elapsed_s
-                ));
-            }
-            if let EstimatorKind::Levant(l) = &r.estimator.kind {
-                if let Ok(g) = l.gains() {
-                    s.push_str(&format!("  {:<12} {}\n", "", g.report()));
-                }
-            }
-        }
-        let e = &self.lipschitz;
-        s.push_str(&format!(
-            "C = {:.3} m/s² from a wall hit at K = {:.1} N/m, B = {:.2} N·s/m with {} (local quadratic fit over {} samples)\n",
-            e.estimate.lipschitz,
-            e.wall_k,
-            e.wall_b,
-            e.estimator.label(),
-            2 * e.estimate.half_window + 1
-        ));
-        if let Some(r) = self.rows.first() {
-            let criterion = match r.map.criterion {
-                Criterion::Impedance => "impedance (Re Z ≥ 0 over the probe band)",
-                Criterion::Stability => {
-                    "stability (the wall hit's RMS below its threshold; eigenvalues on a linear scene)"
-                }
-                Criterion::StrictPassivity => "strict passivity (Colgate & Schenkel)",
-            };
-            s.push_str(&format!(
-                "model: {}\ncriterion: {criterion}, {}\n",
-                r.map.model, r.map.resolution
-            ));
-        }
-        s.push_str(&format!("elapsed: {:.2} s\n", self.elapsed_s));
-        s
-    }
-}
-
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// An explicit list takes 1 to MAX_ESTIMATORS (20, the API's limit),
-    /// each valid on the scene and named by its place when not.
-    #[test]
-    fn a_list_takes_one_to_twenty_valid_estimators_named_by_place() {
-        let scene = seed_2018_scene();
-        let fdm = EstimatorSpec::from_json(r#"{"kind":"fdm"}"#).unwrap();
-        assert_eq!(MAX_ESTIMATORS, 20);
-        for n in [1, 20] {
-            assert_eq!(
-                check_estimators(&scene, &vec![fdm.clone(); n]),
-                Ok(()),
-                "{n}"
-            );
-        }
-        for n in [0, 21] {
-            let e = check_estimators(&scene, &vec![fdm.clone(); n]).unwrap_err();
-            assert_eq!(
-                (e.field.as_str(), e.value.clone()),
-                ("estimators", n.to_string())
-            );
-            assert!(e.allowed.starts_with("give 1 to 20 estimators"), "{e}");
-        }
-        // The seed device samples at 1 kHz: a 600 Hz cutoff is past Nyquist.
-        let bad = EstimatorSpec::from_json(r#"{"kind":"butterworth","cutoff_hz":600}"#).unwrap();
-        let e = check_estimators(&scene, &[fdm.clone(), bad]).unwrap_err();
-        assert_eq!(e.field, "estimators[1].cutoff_hz", "{e}");
-    }
-
-    #[test]
-    fn a_stability_comparison_runs_the_time_engine_on_a_nonlinear_scene() {
-        // The seed device at 1 kHz with short hits: `auto` answers the
-        // stability criterion with the wall hit (the impedance criterion
-        // with the multisine probe), every row's map says so, and the
-        // table names the criterion the maps used.
-        let scene = SceneSpec::from_json(
-            r#"{"loop":{"sample_hz":1000,"render_hz":1000},"hit":{"home_distance":0.001,"settle_s":0.2,"measure_s":0.1}}"#,
-        )
-        .unwrap();
-        let fdm: EstimatorSpec = EstimatorKind::Fdm {}.into();
-        let r = compare_observed(
-            &scene,
-            &Accuracy::Preset(crate::zwidth::settings::Preset::Draft),
-            Criterion::Stability,
-            Some(&[fdm]),
-            None,
-        )
-        .unwrap();
-        let map = &r.rows[0].map;
-        assert_eq!(map.criterion, Criterion::Stability);
-        assert!(
-            map.model.starts_with("time-domain wall-hit simulation"),
-            "{}",
-            map.model
-        );
-        assert!(map.k_width > 0.0);
-        assert!(r
-            .table()
-            .contains("criterion: stability (the wall hit's RMS below its threshold"));
-        let spec = map_spec(scene, &Accuracy::default(), Criterion::Impedance);
-        assert_eq!(spec.criterion, Criterion::Impedance);
-    }
-
-    #[test]
-    fn pairs_are_ordered_by_estimate_and_resolved_only_by_disjoint_intervals() {
-        // One quick map (a linear scene, B = 0) to carry made-up widths.
-        let spec = MapSpec {
-            b: Some(vec![0.0]),
-            ..map_spec(
-                SceneSpec::from_json(r#"{"device":{"coulomb":0,"quantization":0}}"#).unwrap(),
-                &Accuracy::Preset(crate::zwidth::settings::Preset::Draft),
-                Criterion::Impedance,
-            )
-        };
-        let base = map_observed(&spec, None, 0).unwrap();
-        let row = |name: &str, k: f64, interval: Option<[f64; 2]>| CompareRow {
-            name: name.into(),
-            parameters: String::new(),
-            estimator: EstimatorKind::Fdm {}.into(),
-            map: MapResult {
-                k_width: k,
-                k_width_interval: interval,
-                ..base.clone()
-            },
-            tuning: None,
-        };
-        let rows = [
-            row("A", 100.0, Some([90.0, 110.0])),
-            row("B", 120.0, Some([111.0, 130.0])),
-            row("C", 105.0, Some([95.0, 125.0])),
-            row("D", 50.0, None),
-            row("E", 200.0, Some([110.0, 210.0])),
-        ];
-        let o = pair_orders(&rows, 0.95);
-        let got: Vec<(&str, &str, bool)> = o
-            .iter()
-            .map(|p| (p.wider.as_str(), p.narrower.as_str(), p.resolved))
-            .collect();
-        // D has no interval; B's [111, 130] lies above A's [90, 110]; C's
-        // overlaps both; E's [110, 210] only touches A's upper end.
-        assert_eq!(
-            got,
-            [
-                ("B", "A", true),
-                ("C", "A", false),
-                ("E", "A", false),
-                ("B", "C", false),
-                ("E", "B", false),
-                ("E", "C", false),
-            ]
-        );
-        // Equal estimates: the earlier row is named first.
-        let tie = pair_orders(
-            &[
-                row("P", 1.0, Some([0.5, 2.0])),
-                row("Q", 1.0, Some([0.9, 1.1])),
-            ],
-            0.95,
-        );
-        assert_eq!(
-            (tie[0].wider.as_str(), tie[0].narrower.as_str()),
-            ("P", "Q")
-        );
-        // Each of the two facing bounds wrong with probability ≤ α = 5 %.
-        assert!(o.iter().all(|p| (p.error_at_most - 0.10).abs() < 1e-12));
-        let t = CompareResult {
-            lipschitz: estimate_c(&seed_2018_scene()).unwrap(),
-            rows: rows.to_vec(),
-            order: o,
-            tuned_for: None,
-            elapsed_s: 0.0,
-        }
-        .table();
-        assert!(t.contains("K-width order (resolved: the intervals do not overlap, wrong with probability at most 10 %)"), "{t}");
-        assert!(
-            t.contains("  B            > A            resolved\n"),
-            "{t}"
-        );
-        assert!(
-            t.contains("  C            > A            not resolved (the intervals overlap)\n"),
-            "{t}"
-        );
-    }
-
-    #[test]
-    fn the_paper_cutoff_stays_below_nyquist() {
-        assert_eq!(paper_cutoff_hz(1000.0), 499.0);
-        assert_eq!(paper_cutoff_hz(10_000.0), 499.0);
-        assert_eq!(paper_cutoff_hz(500.0), 249.5);
-    }
-
-    #[test]
-    fn c_comes_from_the_wall_contact() {
-        // docs/zwidth.md records C = 1.098 m/s² for the 2018 device at
-        // 1 kHz, from the FDM + Butterworth hit at K = 7 441.2 N/m,
-        // B = 29.76 N·s/m (also pinned through the CLI in tests/it/cli.rs).
-        // The window starts at first contact: the free flight before it
-        // accelerates at only push/m = 0.3572/0.52 = 0.69 m/s².
-        let c = estimate_c(&seed_2018_scene()).unwrap();
-        assert!((c.estimate.lipschitz / 1.098 - 1.0).abs() < 0.005, "{c:?}");
-        assert_eq!((c.wall_k, c.wall_b), (C_WALL_K, C_WALL_B));
-        // The window opens 0.1 s (a tenth of its 1 s) before the contact,
-        // and the largest |ẍ| is the impact, just after it.
-        assert!(
-            (0.1..0.15).contains(&c.estimate.at_s),
-            "{}",
-            c.estimate.at_s
-        );
-        // The table states where C came from: 5 and 2 of the 2011 paper's
-        // steps (1488.24 N/m, 14.88 N·s/m) and the fit's window.
-        let t = CompareResult {
-            lipschitz: c.clone(),
-            rows: Vec::new(),
-            order: Vec::new(),
-            tuned_for: None,
-            elapsed_s: 0.0,
-        }
-        .table();
-        let window = 2 * c.estimate.half_window + 1;
-        assert!(
-            t.contains(&format!(
-                "from a wall hit at K = 7441.2 N/m, B = 29.76 N·s/m with butterworth(499 Hz, order 2) (local quadratic fit over {window} samples)"
-            )),
-            "{t}"
-        );
-        assert!(t.contains("the 2018 paper's fixed values"), "{t}");
-    }
-}
+#[path = "compare_tests.rs"]
+mod tests;

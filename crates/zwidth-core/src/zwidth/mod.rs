@@ -7,6 +7,7 @@ pub mod bla;
 pub mod classify;
 mod columns;
 pub mod compare;
+mod compare_table;
 pub mod control;
 pub mod controller;
 pub mod cost;
