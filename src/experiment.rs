@@ -242,4 +242,39 @@ mod tests {
         )
         .is_err());
     }
+
+    /// Refinement rounds: 0 by default, 2 for a tuned compare
+    /// (compare::TUNED_RESOLVE_ROUNDS), each planning every row once more
+    /// (the estimate bounds the run's runaway limit, `Cost::trial_limit`).
+    #[test]
+    fn a_compare_plans_its_refinement_rounds() {
+        let spec = |json: &str| match serde_json::from_str::<ExperimentSpec>(json).unwrap() {
+            ExperimentSpec::Compare(c) => c,
+            _ => unreachable!("a compare"),
+        };
+        let cost = |c: &CompareSpec| ExperimentSpec::Compare(c.clone()).validate().unwrap();
+        let plain = spec(r#"{"kind":"compare","accuracy":"draft"}"#);
+        let two = spec(r#"{"kind":"compare","accuracy":"draft","resolve_rounds":2}"#);
+        assert_eq!((plain.rounds(), two.rounds()), (0, 2));
+        // 4 rows, then 4 more maps a round.
+        assert_eq!((cost(&plain).maps, cost(&two).maps), (4, 12));
+        // Each round's maps take twice the realizations and half the K
+        // resolution: more trials than the first maps.
+        assert!(
+            cost(&two).trials > 3 * cost(&plain).trials,
+            "{:?} vs {:?}",
+            cost(&two),
+            cost(&plain)
+        );
+        let tuned = spec(r#"{"kind":"compare","accuracy":"draft","tuned":{"objective":"k_width","max_evaluations":6}}"#);
+        assert_eq!(tuned.rounds(), 2);
+        let mut untuned_rounds = tuned.clone();
+        untuned_rounds.resolve_rounds = Some(0);
+        assert_eq!(untuned_rounds.rounds(), 0);
+        assert_eq!(cost(&tuned).maps, cost(&untuned_rounds).maps + 8);
+        let e = ExperimentSpec::Compare(spec(r#"{"kind":"compare","resolve_rounds":4}"#))
+            .validate()
+            .unwrap_err();
+        assert_eq!(e.field, "resolve_rounds");
+    }
 }
