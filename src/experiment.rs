@@ -52,6 +52,7 @@ pub struct CompareSpec {
     /// at half the K resolution before (0–3; default 0, and 2 for a tuned
     /// comparison). The result says which pairs stayed open.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(minimum = 0, maximum = 3)]
     pub resolve_rounds: Option<u32>,
 }
 
@@ -120,18 +121,20 @@ impl ExperimentSpec {
                             "tunes the paper's four estimators: leave `estimators` out, or tune a list with one `tune` experiment each",
                         ));
                     }
+                    // The rounds' own share of the plan is named apart.
+                    let first = t.cost(&scene, &c.accuracy, c.criterion)?.check("tuned")?;
                     let refine =
                         compare::refinement_cost(&scene, &c.accuracy, c.criterion, c.rounds(), 4)?;
-                    return t
-                        .cost(&scene, &c.accuracy, c.criterion)?
-                        .plus(refine)
-                        .check("tuned");
+                    return first.plus(refine).check("resolve_rounds");
                 }
                 let n = c.estimators.as_ref().map_or(4, Vec::len) as u64;
                 let refine =
                     compare::refinement_cost(&scene, &c.accuracy, c.criterion, c.rounds(), n)?;
                 let one = search::validate(&compare::map_spec(scene, &c.accuracy, c.criterion))?;
-                one.times(n).plus(refine).check("estimators")
+                one.times(n)
+                    .check("estimators")?
+                    .plus(refine)
+                    .check("resolve_rounds")
             }
             ExperimentSpec::Sweep(s) => s.checked().map(|(_, cost)| cost),
             ExperimentSpec::Tune(t) => t.validate().map(|t| t.cost),
@@ -266,7 +269,9 @@ mod tests {
             cost(&two),
             cost(&plain)
         );
-        let tuned = spec(r#"{"kind":"compare","accuracy":"draft","tuned":{"objective":"k_width","max_evaluations":6}}"#);
+        let tuned = spec(
+            r#"{"kind":"compare","accuracy":"draft","tuned":{"objective":"k_width","max_evaluations":6}}"#,
+        );
         assert_eq!(tuned.rounds(), 2);
         let mut untuned_rounds = tuned.clone();
         untuned_rounds.resolve_rounds = Some(0);

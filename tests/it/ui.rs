@@ -518,3 +518,62 @@ async fn bad_queries_are_problems_naming_the_field() {
         }
     }
 }
+
+/// A compare's refinement rounds store row i's later maps as scope
+/// r·n + i (`compare::scopes`): the run page draws one panel a row, with
+/// the row's latest map's trials (here 2 rows: scopes 0, 1, then round 1's
+/// 2 and 3, with 3 and 2 trials, against 5 and 4 in the first maps).
+#[tokio::test]
+async fn a_refined_compare_draws_each_row_once_with_its_latest_map() {
+    use zwidth::store::{Lease, NewExperiment};
+    use zwidth::zwidth::point::{Point, StoredTrial};
+    let d = std::env::temp_dir().join(format!("zwidth-ui-refined-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    let store = Store::connect(&Location::Sqlite(d.join("z.db")))
+        .await
+        .unwrap();
+    store
+        .insert(NewExperiment {
+            id: "c1",
+            kind: "compare",
+            spec: r#"{"kind":"compare","accuracy":"draft","estimators":[{"kind":"fdm"},{"kind":"fdm"}],"resolve_rounds":1}"#,
+            priority: 0,
+            key: None,
+            not_before_ms: None,
+            rig: "sim",
+        })
+        .await
+        .unwrap();
+    let row = store.claim("sim", "w1", 60_000).await.unwrap().unwrap();
+    let run = Lease::of(row.id, row.attempt);
+    let trials: Vec<StoredTrial> = [(0, 5), (1, 4), (2, 3), (3, 2)]
+        .into_iter()
+        .flat_map(|(scope, n)| {
+            (0..n).map(move |i| StoredTrial {
+                scope,
+                column: 0,
+                index: i,
+                point: Point {
+                    k: 1000.0 * (i + 1) as f64,
+                    b: 0.0,
+                    passive: Some(i % 2 == 0),
+                    ..Point::default()
+                },
+            })
+        })
+        .collect();
+    store
+        .add_trials(&run, &trials, &[], (0, 0.0))
+        .await
+        .unwrap();
+    let mut st = AppState::reader(store.clone()).unwrap();
+    st.tokens = std::sync::Arc::new(vec![TOKEN.to_string()]);
+    let app = router(st, std::time::Duration::from_secs(30));
+    let (code, _, html) = get(&app, "/runs/c1").await;
+    assert_eq!(code, StatusCode::OK, "{html}");
+    // 3 + 2 trials drawn (round 1's), not 5 + 4 + 3 + 2; no third panel.
+    assert_eq!(html.matches("class=\"pt ").count(), 5, "{html}");
+    assert!(!html.contains("map 2"), "{html}");
+    let _ = std::fs::remove_dir_all(&d);
+}

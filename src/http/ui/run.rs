@@ -258,6 +258,17 @@ async fn maps_markup(
         .into_iter()
         .map(|(scope, points)| (scope, points.iter().map(MapPlotPoint::of).collect()))
         .collect();
+    // A compare's refinement rounds map row i again as scope r·n + i
+    // (`compare::scopes`): each row's panel shows its latest map, the one
+    // its result row reports.
+    if let ExperimentSpec::Compare(c) = spec {
+        let rows = c.estimators.as_ref().map_or(4, Vec::len).max(1) as u32;
+        let mut latest: BTreeMap<u32, Vec<MapPlotPoint>> = BTreeMap::new();
+        for (scope, points) in std::mem::take(&mut scopes) {
+            latest.insert(scope % rows, points);
+        }
+        scopes = latest;
+    }
     let finished: Vec<MapSummary> = match (result, r.state) {
         (Some(res), ExperimentState::Succeeded) => report::maps(&r.id, spec, res),
         _ => Vec::new(),

@@ -223,7 +223,7 @@ fn scopes(list: &[(String, String, EstimatorSpec)], sample_hz: f64, rounds: u32)
         .iter()
         .filter(|(_, _, e)| tunable(e, sample_hz).is_some())
         .count();
-    list.len() * (1 + rounds as usize) + tunes
+    compare::scopes(list.len(), rounds) + tunes
 }
 
 /// The paper's estimators on `scene`, each tuned for `tuned.objective`

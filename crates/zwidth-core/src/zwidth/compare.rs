@@ -175,10 +175,10 @@ pub fn pair_orders(rows: &[CompareRow], confidence: f64, k_rel_tol: f64) -> Vec<
 }
 
 /// Whether two K-widths (estimate, interval) differ by less than the
-/// resolution `k_rel_tol`: the smallest interval holding both intervals has
-/// a relative half-width (hi − lo)/(hi + lo) of at most `k_rel_tol`, so
-/// both true widths lie in it and differ by at most 2·k_rel_tol of its
-/// centre, the width of one resolved interval.
+/// resolution `k_rel_tol`: the smallest interval holding both intervals is
+/// no wider than one a bisection stops at, hi − lo ≤ k_rel_tol·hi
+/// (`bisect.rs`), so both true widths lie in it and differ by at most one
+/// resolved interval's width.
 pub fn equal_within(
     a: &(f64, Option<[f64; 2]>),
     b: &(f64, Option<[f64; 2]>),
@@ -187,9 +187,7 @@ pub fn equal_within(
     let (Some(ia), Some(ib)) = (a.1, b.1) else {
         return false;
     };
-    let lo = ia[0].min(ib[0]);
-    let hi = ia[1].max(ib[1]);
-    lo > 0.0 && (hi - lo) <= k_rel_tol * (hi + lo)
+    relative_width(&(0.0, Some([ia[0].min(ib[0]), ia[1].max(ib[1])]))) <= k_rel_tol
 }
 
 /// Two widths in order, by their places in the list given to [`orders`].
@@ -264,9 +262,13 @@ pub struct Resolution {
     pub rounds_run: u32,
     /// Pairs neither resolved nor equal within the resolution at the end.
     pub open_pairs: usize,
-    /// It ended because its rounds did (with pairs open), not because
-    /// every pair was decided.
+    /// It ended with pairs open because its rounds did (or because no
+    /// finer round could part them), not because it was cancelled.
     pub budget_ended: bool,
+    /// Every decided order (resolved or equal) at once is wrong with
+    /// probability at most this: both bounds of every row with an
+    /// interval, α spent over its maps each (the union bound), at most 1.
+    pub joint_error_at_most: f64,
 }
 
 /// `resolve_rounds` must be 0 to `MAX_RESOLVE_ROUNDS`.
@@ -304,11 +306,13 @@ pub fn refinement_cost(
 /// Most realizations a refinement round gives a verdict (the accuracy's
 /// own limit, `settings::Accuracy::resolve`).
 const MAX_REALIZATIONS: u32 = 1000;
+/// Most probe periods one noisy-scene trial may run (the same limit).
+const MAX_TRIAL_PERIODS: u64 = 100_000;
 
 /// Refinement round `r` (1, 2, …) of a comparison at `accuracy` (resolved
 /// to `res` on its scene) whose verdicts hold at `confidence`: the K
 /// resolution halved `r` times; 2^r times the realizations a verdict may
-/// take (replicates: a row's interval is often wide because verdicts near
+/// take, within the accuracy's limits (replicates: a row's interval is often wide because verdicts near
 /// its boundary stay undecided at the cap, not because the bisection
 /// stopped); and the per-verdict error rate α halved `r` times, so that a
 /// row's error rates summed over all its maps stay below 2α (α + α/2 +
@@ -332,11 +336,17 @@ impl Round {
             },
             Accuracy::Knobs(k) => k.clone(),
         };
+        // At most MAX_REALIZATIONS, and within the accuracy's limit on a
+        // trial's probe periods, realizations × (1 + periods) ≤ 100 000.
+        let by_periods = u32::try_from(MAX_TRIAL_PERIODS / (1 + u64::from(res.probe.periods)))
+            .unwrap_or(u32::MAX);
         let realizations = res
             .probe
             .realizations
             .saturating_mul(1 << r.min(16))
-            .min(MAX_REALIZATIONS);
+            .min(MAX_REALIZATIONS)
+            .min(by_periods)
+            .max(res.probe.realizations);
         knobs.k_rel_tol = Some(res.k_rel_tol * scale);
         knobs.realizations = Some(realizations);
         Round {
@@ -355,10 +365,11 @@ impl Round {
     }
 }
 
-/// (hi − lo)/(hi + lo), or infinity without an interval.
+/// (hi − lo)/hi, bisection's measure of an interval's width (`bisect.rs`
+/// stops at hi − lo ≤ k_rel_tol·hi), or infinity without an interval.
 fn relative_width(w: &(f64, Option<[f64; 2]>)) -> f64 {
     match w.1 {
-        Some([lo, hi]) if hi + lo > 0.0 => (hi - lo) / (hi + lo),
+        Some([lo, hi]) if hi > 0.0 => (hi - lo) / hi,
         _ => f64::INFINITY,
     }
 }
@@ -395,11 +406,32 @@ fn widths(rows: &[CompareRow]) -> Vec<(f64, Option<[f64; 2]>)> {
         .collect()
 }
 
+/// Progress scopes of a comparison of `n` rows with `rounds` refinement
+/// rounds: the first maps 0…n−1, then round r's map of row i at r·n + i.
+pub fn scopes(n: usize, rounds: u32) -> usize {
+    n * (1 + rounds as usize)
+}
+
+impl Resolution {
+    /// After `run` of `rounds` rounds, `open_pairs` left, `cancelled` or not.
+    fn new(rounds: u32, run: u32, open_pairs: usize, cancelled: bool) -> Self {
+        Resolution {
+            rounds,
+            rounds_run: run,
+            open_pairs,
+            budget_ended: open_pairs > 0 && !cancelled,
+            joint_error_at_most: 0.0,
+        }
+    }
+}
+
 /// Map the rows of open pairs again, finer (`Round`, `open_rows`), round after
 /// round until every pair is resolved or equal within the first map's
 /// resolution, or `rounds` have run. Round r maps row i as scope
-/// r·n + i of `observer` (n rows), so a resumed run replays each map;
-/// scopes a round does not map are reported done.
+/// r·n + i of `observer` (n rows, `scopes`), so a resumed run replays each
+/// map; scopes a round does not map are reported done as the round starts
+/// (those of rounds not run at the end, unless cancelled). A round cut
+/// short by a cancel keeps the rows' earlier maps.
 fn resolve_orders(
     ctx: &RowsContext<'_>,
     rows: &mut [CompareRow],
@@ -408,16 +440,24 @@ fn resolve_orders(
     let confidence = ctx.scene.probe.confidence;
     let alpha = 1.0 - confidence;
     let tol = ctx.res.k_rel_tol;
-    let n = rows.len() as u32;
+    let n = rows.len();
     let mut run = 0;
-    let mut mapped = vec![vec![false; rows.len()]; rounds as usize];
     let cancelled = || ctx.observer.as_ref().is_some_and(|o| o.cancelled());
+    let skip = |r: u32, rows: &[usize]| {
+        if let Some(o) = &ctx.observer {
+            for &i in rows {
+                o.report(r * n as u32 + i as u32, 1.0);
+            }
+        }
+    };
     for r in 1..=rounds {
         let round = Round::new(ctx.accuracy, &ctx.res, confidence, r);
         let open = open_rows(rows, tol, round.k_rel_tol);
         if open.is_empty() || cancelled() {
             break;
         }
+        let idle: Vec<usize> = (0..n).filter(|i| !open.contains(i)).collect();
+        skip(r, &idle);
         let maps = open
             .par_iter()
             .map(|&i| {
@@ -426,9 +466,12 @@ fn resolve_orders(
                     ..ctx.scene.clone()
                 };
                 let spec = round.map_spec(&scene, ctx.criterion);
-                map_observed(&spec, ctx.observer.clone(), r * n + i as u32).map(|m| (i, m))
+                map_observed(&spec, ctx.observer.clone(), r * n as u32 + i as u32).map(|m| (i, m))
             })
             .collect::<Result<Vec<_>, SpecError>>()?;
+        if cancelled() {
+            break;
+        }
         for (i, map) in maps {
             let before = rows[i].refined;
             rows[i].map = map;
@@ -439,26 +482,25 @@ fn resolve_orders(
                 realizations: round.realizations,
                 alpha_spent: before.map_or(alpha, |f| f.alpha_spent) + (1.0 - round.confidence),
             });
-            mapped[r as usize - 1][i] = true;
         }
         run = r;
     }
-    if let Some(o) = &ctx.observer {
-        for (r, round) in mapped.iter().enumerate() {
-            for (i, &m) in round.iter().enumerate() {
-                if !m {
-                    o.report((r as u32 + 1) * n + i as u32, 1.0);
-                }
-            }
+    if !cancelled() {
+        let all: Vec<usize> = (0..n).collect();
+        for r in run + 1..=rounds {
+            skip(r, &all);
         }
     }
     let order = pair_orders(rows, confidence, tol);
     let open_pairs = order.iter().filter(|p| !p.resolved && !p.equal).count();
-    let resolution = (rounds > 0).then_some(Resolution {
-        rounds,
-        rounds_run: run,
-        open_pairs,
-        budget_ended: open_pairs > 0 && run == rounds,
+    let joint: f64 = rows
+        .iter()
+        .filter(|r| r.map.k_width_interval.is_some())
+        .map(|r| 2.0 * r.refined.map_or(alpha, |f| f.alpha_spent))
+        .sum();
+    let resolution = (rounds > 0).then(|| Resolution {
+        joint_error_at_most: joint.min(1.0),
+        ..Resolution::new(rounds, run, open_pairs, cancelled())
     });
     Ok((order, resolution))
 }
@@ -570,7 +612,7 @@ pub fn compare_observed(
         None => paper_estimators(scene, c.estimate.lipschitz),
     };
     if let Some(o) = &observer {
-        o.set_scopes(estimators.len() * (1 + rounds as usize));
+        o.set_scopes(scopes(estimators.len(), rounds));
     }
     compare_rows(scene, accuracy, criterion, c, estimators, rounds, observer)
 }

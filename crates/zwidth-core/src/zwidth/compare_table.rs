@@ -45,9 +45,12 @@ impl CompareResult {
         });
         row("Trials", &|r| r.map.trials.to_string());
         if let Some(p) = self.order.first() {
-            let refined = self.rows.iter().any(|r| r.refined.is_some());
-            if refined {
-                s.push_str("K-width order (resolved: the intervals do not overlap; equal: both inside one interval of the resolution; each with its error bound):\n");
+            // One bound for every line only when all lines share it: no row
+            // refined and no pair called equal (whose bound is twice).
+            let per_line =
+                self.rows.iter().any(|r| r.refined.is_some()) || self.order.iter().any(|p| p.equal);
+            if per_line {
+                s.push_str("K-width order (resolved: the intervals do not overlap; equal: one interval of the resolution holds both; each with its error bound):\n");
             } else {
                 s.push_str(&format!(
                     "K-width order (resolved: the intervals do not overlap, wrong with probability at most {:.0} %):\n",
@@ -62,7 +65,7 @@ impl CompareResult {
                 } else {
                     "not resolved (the intervals overlap)".to_string()
                 };
-                if refined && (p.resolved || p.equal) {
+                if per_line && (p.resolved || p.equal) {
                     verdict.push_str(&format!(
                         " (wrong with probability at most {:.0} %)",
                         100.0 * p.error_at_most
@@ -76,7 +79,7 @@ impl CompareResult {
         }
         if let Some(r) = &self.resolution {
             s.push_str(&format!(
-                "Refinement: {} of {} rounds run{}\n",
+                "Refinement: {} of {} rounds run{}; every decided order at once wrong with probability at most {:.0} %\n",
                 r.rounds_run,
                 r.rounds,
                 if r.budget_ended {
@@ -88,7 +91,8 @@ impl CompareResult {
                     format!(", {} pair orders still open (cancelled)", r.open_pairs)
                 } else {
                     ", every pair order decided".to_string()
-                }
+                },
+                100.0 * r.joint_error_at_most
             ));
             for row in self.rows.iter().filter(|r| r.refined.is_some()) {
                 if let Some(f) = row.refined {
