@@ -412,6 +412,11 @@ pub fn scopes(n: usize, rounds: u32) -> usize {
     n * (1 + rounds as usize)
 }
 
+/// The scope of round `r`'s map of row `i` of `n` (round 0: the first maps).
+fn scope_of(n: usize, r: u32, i: usize) -> u32 {
+    r * n as u32 + i as u32
+}
+
 impl Resolution {
     /// After `run` of `rounds` rounds, `open_pairs` left, `cancelled` or not.
     fn new(rounds: u32, run: u32, open_pairs: usize, cancelled: bool) -> Self {
@@ -446,7 +451,7 @@ fn resolve_orders(
     let skip = |r: u32, rows: &[usize]| {
         if let Some(o) = &ctx.observer {
             for &i in rows {
-                o.report(r * n as u32 + i as u32, 1.0);
+                o.report(scope_of(n, r, i), 1.0);
             }
         }
     };
@@ -466,7 +471,7 @@ fn resolve_orders(
                     ..ctx.scene.clone()
                 };
                 let spec = round.map_spec(&scene, ctx.criterion);
-                map_observed(&spec, ctx.observer.clone(), r * n as u32 + i as u32).map(|m| (i, m))
+                map_observed(&spec, ctx.observer.clone(), scope_of(n, r, i)).map(|m| (i, m))
             })
             .collect::<Result<Vec<_>, SpecError>>()?;
         if cancelled() {

@@ -51,6 +51,8 @@ fn a_stability_comparison_runs_the_time_engine_on_a_nonlinear_scene() {
     )
     .unwrap();
     let map = &r.rows[0].map;
+    // No rounds allowed: no refinement reported.
+    assert!(r.resolution.is_none());
     assert_eq!(map.criterion, Criterion::Stability);
     assert!(
         map.model.starts_with("time-domain wall-hit simulation"),
@@ -310,6 +312,10 @@ fn refined_rows_carry_their_spent_error_into_each_pair_bound() {
 fn a_refinement_says_whether_its_rounds_were_spent_and_counts_its_scopes() {
     // Scopes: n first maps, then n a round (r·n + i).
     assert_eq!((scopes(4, 0), scopes(3, 2), scopes(2, 3)), (4, 9, 8));
+    assert_eq!(
+        (scope_of(3, 0, 2), scope_of(3, 1, 0), scope_of(3, 2, 1)),
+        (2, 3, 7)
+    );
     let r = |run, open, cancelled| Resolution::new(2, run, open, cancelled);
     assert!(!r(2, 0, false).budget_ended);
     assert!(r(2, 1, false).budget_ended);
@@ -403,7 +409,7 @@ fn a_comparison_refines_the_rows_of_an_open_order_and_reports_every_scope() {
         &Accuracy::Preset(crate::zwidth::settings::Preset::Draft),
         Criterion::Impedance,
         Some(&[bw.clone(), bw, EstimatorKind::Fdm {}.into()]),
-        1,
+        2,
         Some(o.clone()),
     )
     .unwrap();
@@ -432,17 +438,19 @@ fn a_comparison_refines_the_rows_of_an_open_order_and_reports_every_scope() {
     );
     assert!(p.equal);
     assert!((p.error_at_most - 0.3).abs() < 1e-12, "{p:?}");
-    assert_eq!((res.rounds, res.rounds_run, res.open_pairs), (1, 1, 0));
+    // Round 2 has nothing left to map: its scopes are reported done.
+    assert_eq!((res.rounds, res.rounds_run, res.open_pairs), (2, 1, 0));
     assert!(!res.budget_ended);
     // Both bounds of every row, α spent each: 2·(0.075 + 0.075 + 0.05).
     assert!((res.joint_error_at_most - 0.4).abs() < 1e-12, "{res:?}");
     // Trials stored under the first maps' scopes 0–2 and round 1's of rows
-    // 0 and 1 (3·1 + 0, 3·1 + 1); row 2's scope 5 reported done unmapped.
+    // 0 and 1 (3·1 + 0, 3·1 + 1); row 2's scope 5 and round 2's 6–8
+    // reported done unmapped.
     let stored: std::collections::BTreeSet<u32> = o.take_new().iter().map(|t| t.scope).collect();
     assert_eq!(stored.into_iter().collect::<Vec<_>>(), [0, 1, 2, 3, 4]);
     assert!((o.fraction() - 1.0).abs() < 1e-12, "{}", o.fraction());
     assert!(
-        r.table().contains("Refinement: 1 of 1 rounds run, every pair order decided; every decided order at once wrong with probability at most 40 %"),
+        r.table().contains("Refinement: 1 of 2 rounds run, every pair order decided; every decided order at once wrong with probability at most 40 %"),
         "{}",
         r.table()
     );
