@@ -60,11 +60,7 @@ impl CompareSpec {
     /// The refinement rounds this comparison takes (`resolve_rounds` or
     /// its default).
     pub fn rounds(&self) -> u32 {
-        self.resolve_rounds.unwrap_or(if self.tuned.is_some() {
-            compare::TUNED_RESOLVE_ROUNDS
-        } else {
-            0
-        })
+        compare::rounds_or_default(self.resolve_rounds, self.tuned.is_some())
     }
 }
 

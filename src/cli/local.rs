@@ -272,11 +272,7 @@ pub(super) fn run(
                     Ok(t)
                 })
                 .transpose()?;
-            let rounds = resolve_rounds.unwrap_or(if tuned.is_some() {
-                compare::TUNED_RESOLVE_ROUNDS
-            } else {
-                0
-            });
+            let rounds = compare::rounds_or_default(resolve_rounds, tuned.is_some());
             compare::check_rounds(rounds).map_err(|mut e| {
                 e.field = "--resolve-rounds".into();
                 CliError::from(e)

@@ -261,8 +261,8 @@ async fn maps_markup(
     // A compare's refinement rounds map row i again as scope r·n + i
     // (`compare::scopes`): each row's panel shows its latest map, the one
     // its result row reports.
-    if let ExperimentSpec::Compare(c) = spec {
-        let rows = c.estimators.as_ref().map_or(4, Vec::len).max(1) as u32;
+    if let ExperimentSpec::Compare(_) = spec {
+        let rows = labels(spec, &[], 0).len().max(1) as u32;
         let mut latest: BTreeMap<u32, Vec<MapPlotPoint>> = BTreeMap::new();
         for (scope, points) in std::mem::take(&mut scopes) {
             latest.insert(scope % rows, points);

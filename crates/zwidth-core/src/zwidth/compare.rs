@@ -14,7 +14,8 @@ use super::hit::{wall_hit, HitKnobs, TraceRow};
 use super::scene::SceneSpec;
 use super::search::{map_observed, MapResult, Observer};
 use super::settings::{
-    Accuracy, Criterion, MapSpec, Method, SearchKind, PAPER_B_STEP, PAPER_K_STEP,
+    Accuracy, Criterion, MapSpec, Method, SearchKind, MAX_REALIZATIONS, MAX_TRIAL_PERIODS,
+    PAPER_B_STEP, PAPER_K_STEP,
 };
 use crate::error::SpecError;
 use crate::estimators::{EstimatorKind, EstimatorSpec, FoawFit, FoawSpec, LevantSpec, QModel};
@@ -139,8 +140,8 @@ pub struct PairOrder {
     /// confidence (docs/zwidth.md, "Boundaries with intervals").
     pub resolved: bool,
     /// Not resolved, but the two K-widths differ by less than the
-    /// accuracy's resolution: both intervals lie within one interval of
-    /// relative half-width `k_rel_tol` (`equal_within`).
+    /// accuracy's resolution: the smallest interval holding both is no
+    /// wider than one a bisection stops at (`equal_within`).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub equal: bool,
     /// The bound on that verdict's error: a resolved order is wrong only
@@ -271,6 +272,12 @@ pub struct Resolution {
     pub joint_error_at_most: f64,
 }
 
+/// The refinement rounds a comparison takes: `given`, or 0 (a tuned one
+/// `TUNED_RESOLVE_ROUNDS`).
+pub fn rounds_or_default(given: Option<u32>, tuned: bool) -> u32 {
+    given.unwrap_or(if tuned { TUNED_RESOLVE_ROUNDS } else { 0 })
+}
+
 /// `resolve_rounds` must be 0 to `MAX_RESOLVE_ROUNDS`.
 pub fn check_rounds(rounds: u32) -> Result<(), SpecError> {
     if rounds > MAX_RESOLVE_ROUNDS {
@@ -303,18 +310,12 @@ pub fn refinement_cost(
     Ok(total)
 }
 
-/// Most realizations a refinement round gives a verdict (the accuracy's
-/// own limit, `settings::Accuracy::resolve`).
-const MAX_REALIZATIONS: u32 = 1000;
-/// Most probe periods one noisy-scene trial may run (the same limit).
-const MAX_TRIAL_PERIODS: u64 = 100_000;
-
 /// Refinement round `r` (1, 2, …) of a comparison at `accuracy` (resolved
 /// to `res` on its scene) whose verdicts hold at `confidence`: the K
 /// resolution halved `r` times; 2^r times the realizations a verdict may
-/// take, within the accuracy's limits (replicates: a row's interval is often wide because verdicts near
-/// its boundary stay undecided at the cap, not because the bisection
-/// stopped); and the per-verdict error rate α halved `r` times, so that a
+/// take, within the accuracy's limits (replicates: a row's interval is
+/// often wide because verdicts near its boundary stay undecided at the
+/// cap, not because the bisection stopped); and the per-verdict error rate α halved `r` times, so that a
 /// row's error rates summed over all its maps stay below 2α (α + α/2 +
 /// α/4 + …: the union bound over the looks, since whether a row is mapped
 /// again depends on its earlier intervals).
@@ -329,15 +330,8 @@ struct Round {
 impl Round {
     fn new(accuracy: &Accuracy, res: &super::settings::Resolved, confidence: f64, r: u32) -> Self {
         let scale = 0.5_f64.powi(r as i32);
-        let mut knobs = match accuracy {
-            Accuracy::Preset(p) => super::settings::AccuracyKnobs {
-                preset: *p,
-                ..Default::default()
-            },
-            Accuracy::Knobs(k) => k.clone(),
-        };
-        // At most MAX_REALIZATIONS, and within the accuracy's limit on a
-        // trial's probe periods, realizations × (1 + periods) ≤ 100 000.
+        let mut knobs = accuracy.knobs();
+        // Within the accuracy's limits (`Accuracy::resolve`).
         let by_periods = u32::try_from(MAX_TRIAL_PERIODS / (1 + u64::from(res.probe.periods)))
             .unwrap_or(u32::MAX);
         let realizations = res

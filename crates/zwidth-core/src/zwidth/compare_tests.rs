@@ -69,28 +69,7 @@ fn a_stability_comparison_runs_the_time_engine_on_a_nonlinear_scene() {
 
 #[test]
 fn pairs_are_ordered_by_estimate_and_resolved_only_by_disjoint_intervals() {
-    // One quick map (a linear scene, B = 0) to carry made-up widths.
-    let spec = MapSpec {
-        b: Some(vec![0.0]),
-        ..map_spec(
-            SceneSpec::from_json(r#"{"device":{"coulomb":0,"quantization":0}}"#).unwrap(),
-            &Accuracy::Preset(crate::zwidth::settings::Preset::Draft),
-            Criterion::Impedance,
-        )
-    };
-    let base = map_observed(&spec, None, 0).unwrap();
-    let row = |name: &str, k: f64, interval: Option<[f64; 2]>| CompareRow {
-        name: name.into(),
-        parameters: String::new(),
-        estimator: EstimatorKind::Fdm {}.into(),
-        map: MapResult {
-            k_width: k,
-            k_width_interval: interval,
-            ..base.clone()
-        },
-        tuning: None,
-        refined: None,
-    };
+    let row = |name: &str, k: f64, interval: Option<[f64; 2]>| made_up_row(name, k, interval, None);
     let rows = [
         row("A", 100.0, Some([90.0, 110.0])),
         row("B", 120.0, Some([111.0, 130.0])),
@@ -197,7 +176,12 @@ fn c_comes_from_the_wall_contact() {
 }
 
 /// A row carrying made-up K-widths (on one quick linear map), refined or not.
-fn made_up_row(name: &str, k: f64, interval: [f64; 2], refined: Option<Refined>) -> CompareRow {
+fn made_up_row(
+    name: &str,
+    k: f64,
+    interval: Option<[f64; 2]>,
+    refined: Option<Refined>,
+) -> CompareRow {
     let spec = MapSpec {
         b: Some(vec![0.0]),
         ..map_spec(
@@ -212,7 +196,7 @@ fn made_up_row(name: &str, k: f64, interval: [f64; 2], refined: Option<Refined>)
         estimator: EstimatorKind::Fdm {}.into(),
         map: MapResult {
             k_width: k,
-            k_width_interval: Some(interval),
+            k_width_interval: interval,
             ..map_observed(&spec, None, 0).unwrap()
         },
         tuning: None,
@@ -260,9 +244,9 @@ fn refined_rows_carry_their_spent_error_into_each_pair_bound() {
         alpha_spent: 0.0875,
     };
     let rows = [
-        made_up_row("A", 120.0, [119.0, 121.0], Some(once)),
-        made_up_row("B", 100.0, [99.0, 101.0], None),
-        made_up_row("C", 100.5, [100.0, 101.5], Some(twice)),
+        made_up_row("A", 120.0, Some([119.0, 121.0]), Some(once)),
+        made_up_row("B", 100.0, Some([99.0, 101.0]), None),
+        made_up_row("C", 100.5, Some([100.0, 101.5]), Some(twice)),
     ];
     let o = pair_orders(&rows, 0.95, 0.0247);
     let got: Vec<(&str, &str, bool, bool)> = o

@@ -137,6 +137,13 @@ pub struct Resolved {
     pub b_step: f64,
 }
 
+/// Most random-phase realizations a noisy-scene verdict may take.
+pub const MAX_REALIZATIONS: u32 = 1000;
+/// Most probe periods one noisy-scene trial may run, realizations × (1 +
+/// periods): the same bound as `max_periods`, so no accepted trial runs
+/// for hours.
+pub const MAX_TRIAL_PERIODS: u64 = 100_000;
+
 /// The 2011 paper's steps (§2.4).
 pub const PAPER_K_STEP: f64 = 1488.24;
 pub const PAPER_B_STEP: f64 = 14.88;
@@ -148,24 +155,25 @@ impl Accuracy {
     /// only in how narrowly they locate it): the standard preset's trial
     /// knobs, with those the spec names.
     pub fn standard_trial(&self) -> Accuracy {
-        let knobs = match self {
-            Accuracy::Preset(_) => AccuracyKnobs::default(),
-            Accuracy::Knobs(k) => k.clone(),
-        };
         Accuracy::Knobs(AccuracyKnobs {
             preset: Preset::Standard,
-            ..knobs
+            ..self.knobs()
         })
     }
 
-    pub fn resolve(&self, scene: &Scene) -> Result<Resolved, SpecError> {
-        let knobs = match self {
+    /// The accuracy as knobs: a preset's with none of them set.
+    pub fn knobs(&self) -> AccuracyKnobs {
+        match self {
             Accuracy::Preset(p) => AccuracyKnobs {
                 preset: *p,
                 ..Default::default()
             },
             Accuracy::Knobs(k) => k.clone(),
-        };
+        }
+    }
+
+    pub fn resolve(&self, scene: &Scene) -> Result<Resolved, SpecError> {
+        let knobs = self.knobs();
         let h = &scene.spec.hit;
         let p = &scene.spec.probe;
         // (time scale, periods ×, settle_tol, max_periods, k_rel_tol, step ÷)
@@ -223,22 +231,22 @@ impl Accuracy {
                 "must be 1 to 1000",
             ));
         }
-        if !(1..=1000).contains(&r.probe.realizations) {
+        if !(1..=MAX_REALIZATIONS).contains(&r.probe.realizations) {
             return Err(SpecError::new(
                 "accuracy.realizations",
                 r.probe.realizations,
-                "must be 1 to 1000",
+                format!("must be 1 to {MAX_REALIZATIONS}"),
             ));
         }
         // A noisy-scene trial runs up to realizations × (1 + periods) periods:
         // the same bound as max_periods, so no accepted trial runs for hours.
         let bla_periods = u64::from(r.probe.realizations) * (1 + u64::from(r.probe.periods));
-        if bla_periods > 100_000 {
+        if bla_periods > MAX_TRIAL_PERIODS {
             return Err(SpecError::new(
                 "accuracy.realizations",
                 r.probe.realizations,
                 format!(
-                    "realizations × (1 + periods) = {bla_periods} probe periods per trial; at most 100000"
+                    "realizations × (1 + periods) = {bla_periods} probe periods per trial; at most {MAX_TRIAL_PERIODS}"
                 ),
             ));
         }
