@@ -121,6 +121,15 @@ pub enum Command {
         /// Write the Fig. 7-style plot here.
         #[arg(long)]
         svg: Option<PathBuf>,
+        /// Start each column's bisection from this scene's simulated
+        /// boundary (e.g. the device `zwidth identify` gave): where the
+        /// prediction is right, two trials bracket a column.
+        #[arg(long, conflicts_with = "prior_map")]
+        prior_scene: Option<PathBuf>,
+        /// Start each column's bisection from this map's boundary (the
+        /// JSON of `zwidth map --json`, or a list of {b, k_max, k_lo, k_hi}).
+        #[arg(long)]
+        prior_map: Option<PathBuf>,
     },
     /// Tune the scene's estimator parameters (argmin) for an objective.
     Tune {

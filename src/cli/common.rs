@@ -82,6 +82,33 @@ pub(super) fn check_server(server: &str) -> Result<(), CliError> {
     }
 }
 
+/// A predicted boundary from `path`: a map's JSON (`zwidth map --json`,
+/// its `boundary`) or the list of boundary points alone.
+pub(super) fn read_boundary(
+    path: &std::path::Path,
+) -> Result<Vec<crate::zwidth::search::BoundaryPoint>, CliError> {
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        CliError::Input(format!(
+            "--prior-map {} cannot be read: {e}",
+            path.display()
+        ))
+    })?;
+    let bad = |e: String| {
+        CliError::Input(format!(
+            "--prior-map {}: {e}; give the JSON of `zwidth map --json` or a list of {{\"b\", \"k_max\", \"k_lo\", \"k_hi\"}}",
+            path.display()
+        ))
+    };
+    let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    let list = match value {
+        serde_json::Value::Object(mut map) => map
+            .remove("boundary")
+            .ok_or_else(|| bad("an object without \"boundary\"".to_string()))?,
+        other => other,
+    };
+    serde_json::from_value(list).map_err(|e| bad(format!("boundary: {e}")))
+}
+
 pub(super) fn read_scene(path: &std::path::Path) -> Result<SceneSpec, CliError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| CliError::Input(format!("--scene {} cannot be read: {e}", path.display())))?;
@@ -259,6 +286,24 @@ criterion: {:?}, search: {:?}, resolution: {}
     ));
     if let Some(why) = &r.saturation {
         s.push_str(&format!("saturation: {why}\n"));
+    }
+    if let Some(p) = &r.prior {
+        s.push_str(&format!(
+            "prior ({}): {} of {} columns agree with the prediction",
+            p.source,
+            p.columns.len() - p.disagreements,
+            p.columns.len()
+        ));
+        let off: Vec<String> = p
+            .columns
+            .iter()
+            .filter(|c| !c.agrees)
+            .map(|c| format!("B = {:.2}: predicted {:.1} N/m", c.b, c.predicted_k_max))
+            .collect();
+        if !off.is_empty() {
+            s.push_str(&format!("; they disagree at {}", off.join(", ")));
+        }
+        s.push('\n');
     }
     s
 }

@@ -9,6 +9,7 @@ use crate::lipschitz;
 use crate::plot::{loglog_svg, FidelityScale, Series};
 use crate::zwidth::compare;
 use crate::zwidth::hit::{wall_hit, HitKnobs, NoTrace, TraceRow};
+use crate::zwidth::prior::Prior;
 use crate::zwidth::scene::validate_wall;
 use crate::zwidth::search::{map_observed, Evaluator, Observer};
 use crate::zwidth::settings::{
@@ -151,7 +152,14 @@ pub(super) fn run(
             accuracy,
             json,
             svg,
+            prior_scene,
+            prior_map,
         } => {
+            let prior = match (prior_scene, prior_map) {
+                (Some(path), _) => Some(Prior::Scene(Box::new(read_scene(&path)?))),
+                (None, Some(path)) => Some(Prior::Boundary(read_boundary(&path)?)),
+                (None, None) => None,
+            };
             let spec = MapSpec {
                 scene: read_scene(&scene)?,
                 method: parse_choice("method", &method)?,
@@ -165,6 +173,7 @@ pub(super) fn run(
                 b,
                 b_max: 1000.0,
                 k_max: 1e7,
+                prior,
             };
             let observer = std::sync::Arc::new(Observer::default());
             let r = with_progress(&observer, || map_observed(&spec, Some(observer.clone()), 0))?;

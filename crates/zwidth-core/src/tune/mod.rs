@@ -468,6 +468,7 @@ impl TuneSpec {
             b: self.b.clone(),
             b_max: self.b_max,
             k_max: self.k_max,
+            prior: None,
         }
     }
 }

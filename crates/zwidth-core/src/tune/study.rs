@@ -156,6 +156,7 @@ pub fn levant(acc: Preset, evals: usize) -> Result<LevantStudy, SpecError> {
         b: None,
         b_max: 1000.0,
         k_max: 1e7,
+        prior: None,
     })?;
     let gains = |s: &SceneSpec| match &s.estimator.kind {
         crate::estimators::EstimatorKind::Levant(l) => l

@@ -2,6 +2,7 @@
 //! only a verdict closure, so a scripted verdict can test it.
 
 use super::point::Point;
+use super::prior::Start;
 
 /// Where a bisection along K starts, how far it may go and how fine it ends.
 #[derive(Debug, Clone, Copy)]
@@ -12,7 +13,9 @@ pub(super) struct Bracket {
 }
 
 /// Largest K whose verdict (`classify`, at one B) renders: bracket from
-/// `k0` by doubling or halving, then bisect to `rel_tol`. With `robust`,
+/// `k0` by doubling or halving (or from a predicted `start`, widened until
+/// the verdicts bracket the boundary: `bisect_from`), then bisect to
+/// `rel_tol`. With `robust`,
 /// fractions of the result below it are checked, and a failure there moves
 /// the search below it: the result is the first failure from below, not
 /// whichever edge of a non-monotone verdict the bracket happened to find.
@@ -20,10 +23,14 @@ pub(super) fn bisect_k(
     mut classify: impl FnMut(f64) -> Point,
     bounds: Bracket,
     robust: bool,
+    start: Option<Start>,
     points: &mut Vec<Point>,
 ) -> Option<f64> {
     let k0 = bounds.k0;
-    let mut k = bisect_once(&mut classify, bounds, points)?;
+    let mut k = match start {
+        None => bisect_once(&mut classify, bounds, points)?,
+        Some(s) => bisect_from(&mut classify, bounds, s, points)?,
+    };
     if !robust {
         return Some(k);
     }
@@ -139,6 +146,114 @@ fn bisect_once(
     Some(bisect_between(classify, lo, hi, rel_tol, points))
 }
 
+/// The bisection from a predicted `start` (`prior.rs`): the verdicts at
+/// the bracket's ends first; where they do not bracket the boundary, the
+/// bracket moves out by galloping in ln K (steps of the bracket's own log
+/// width w, then 2w, 4w, …) until they do, then bisection to `rel_tol`. A
+/// prediction that is right costs two trials before the bisection; one that
+/// is off by a factor r costs about 2·log2(|ln r| / w) more. Nothing
+/// renders (None) when `k0 / 1024` does not, as from `k0` (`bisect_once`);
+/// a column predicted empty checks `k0` and then that floor directly.
+fn bisect_from(
+    classify: &mut impl FnMut(f64) -> Point,
+    bounds: Bracket,
+    start: Start,
+    points: &mut Vec<Point>,
+) -> Option<f64> {
+    let Bracket { k0, k_cap, rel_tol } = bounds;
+    let floor = k0.min(k_cap) / 1024.0;
+    let mut eval = |k: f64| {
+        let p = classify(k);
+        let ok = p.ok();
+        points.push(p);
+        ok
+    };
+    let (lo0, hi0) = match start {
+        Start::Bracket { lo, hi } => (lo.clamp(floor, k_cap), hi.min(k_cap)),
+        // Predicted empty: from the first step, as a search from k0 would.
+        Start::Empty => (k0.min(k_cap), k0.min(k_cap) * 2.0),
+    };
+    // The gallop's first step: the predicted bracket's log width, at least
+    // the resolution's.
+    let w = (hi0 / lo0).ln().max(rel_tol.ln_1p());
+    let (lo, hi);
+    if eval(lo0) {
+        // Up from lo0: hi0 first, then galloping.
+        let mut ok_k = lo0;
+        let mut k = if hi0 > lo0 {
+            hi0
+        } else {
+            (lo0 * w.exp()).min(k_cap)
+        };
+        let mut step = w;
+        loop {
+            if k <= ok_k {
+                return Some(ok_k); // the cap renders
+            }
+            if !eval(k) {
+                (lo, hi) = (ok_k, k);
+                break;
+            }
+            ok_k = k;
+            step *= 2.0;
+            k = (ok_k * step.exp()).min(k_cap);
+        }
+    } else {
+        // Down from lo0, galloping, never below the floor.
+        let mut fail_k = lo0;
+        let mut step = if matches!(start, Start::Empty) {
+            f64::INFINITY
+        } else {
+            w
+        };
+        loop {
+            if fail_k <= floor {
+                return None;
+            }
+            let k = (fail_k * (-step).exp()).max(floor);
+            if eval(k) {
+                (lo, hi) = (k, fail_k);
+                break;
+            }
+            fail_k = k;
+            step *= 2.0;
+        }
+    }
+    Some(bisect_between(classify, lo, hi, rel_tol, points))
+}
+
+/// Before `interval` on a search that started from a prediction: a search
+/// from `k0` has passed the low K where every verdict is decided passive,
+/// one from a bracket near the boundary may not have, and `interval` would
+/// then find no lower end (0). So when no K below the first decided
+/// failure is decided passive, halve from the lowest K tried until one is
+/// (or the floor `k0 / 1024` is passed, where the column stays without one).
+pub(super) fn anchor_below(
+    mut classify: impl FnMut(f64) -> Point,
+    bounds: Bracket,
+    points: &mut Vec<Point>,
+) {
+    let first_fail = points
+        .iter()
+        .filter(|p| p.surely_not_ok())
+        .map(|p| p.k)
+        .fold(f64::INFINITY, f64::min);
+    if points.iter().any(|p| p.surely_ok() && p.k < first_fail) {
+        return;
+    }
+    let floor = bounds.k0.min(bounds.k_cap) / 1024.0;
+    let mut k = points.iter().map(|p| p.k).fold(first_fail, f64::min);
+    while k / 2.0 >= floor {
+        k /= 2.0;
+        let p = classify(k);
+        let ok = p.surely_ok();
+        points.push(p);
+        if ok {
+            return;
+        }
+    }
+}
+
 /// A confidence interval around a boundary `k_est` found on a noisy
 /// verdict (`Point::decided`). Taking the margin to fall with K (the
 /// assumption bisection makes too), a K decided passive bounds the boundary
@@ -239,7 +354,7 @@ mod tests {
         };
         for robust in [false, true] {
             let mut pts = Vec::new();
-            let k = bisect_k(scripted, capped, robust, &mut pts).unwrap();
+            let k = bisect_k(scripted, capped, robust, None, &mut pts).unwrap();
             assert_eq!(k, 1000.0, "robust {robust}");
             assert!(pts.iter().all(|p| p.k <= 1000.0), "{pts:?}");
         }
@@ -251,13 +366,13 @@ mod tests {
         // 2560 in the second band) and fails at 5120, so it finds the upper
         // edge, 4000, to 0.1 %.
         let mut pts = Vec::new();
-        let plain = bisect_k(scripted, BRACKET, false, &mut pts).unwrap();
+        let plain = bisect_k(scripted, BRACKET, false, None, &mut pts).unwrap();
         assert!(plain < 4000.0 && plain > 4000.0 * (1.0 - 1e-3), "{plain}");
         // Robust: the check at 0.45 of that (≈ 1800) fails, so it bisects
         // between the highest pass below it (1280) and that failure, down to
         // the script's first failure, 1500; 0.3…0.9 of 1500 all render.
         let mut pts = Vec::new();
-        let robust = bisect_k(scripted, BRACKET, true, &mut pts).unwrap();
+        let robust = bisect_k(scripted, BRACKET, true, None, &mut pts).unwrap();
         assert!(
             robust < 1500.0 && robust > 1500.0 * (1.0 - 1e-3),
             "{robust}"
@@ -290,7 +405,7 @@ mod tests {
             ..BRACKET
         };
         let mut pts = Vec::new();
-        let k = bisect_k(below_70, b, false, &mut pts).unwrap();
+        let k = bisect_k(below_70, b, false, None, &mut pts).unwrap();
         assert!(k < 70.0 && k > 70.0 * (1.0 - 1e-3), "{k}");
         assert_eq!(
             pts[..5].iter().map(|p| p.k).collect::<Vec<_>>(),
@@ -303,7 +418,7 @@ mod tests {
             ..scripted(k)
         };
         let mut pts = Vec::new();
-        assert_eq!(bisect_k(never, b, false, &mut pts), None);
+        assert_eq!(bisect_k(never, b, false, None, &mut pts), None);
         assert_eq!(pts.len(), 11);
         // Everything renders: doubling stops at the cap, which is the result.
         let always = |k: f64| Point {
@@ -312,7 +427,7 @@ mod tests {
         };
         let capped = Bracket { k_cap: 3000.0, ..b };
         let mut pts = Vec::new();
-        assert_eq!(bisect_k(always, capped, true, &mut pts), Some(3000.0));
+        assert_eq!(bisect_k(always, capped, true, None, &mut pts), Some(3000.0));
         // 1000, 2000, 3000 (capped), then the robust checks at or above k0:
         // 0.45…0.9 of 3000 (0.3·3000 = 900 < k0 is not checked).
         assert_eq!(pts.len(), 3 + 4);
@@ -341,7 +456,7 @@ mod tests {
     fn interval_brackets_the_undecided_band() {
         let b = NOISY;
         let mut pts = Vec::new();
-        let est = bisect_k(three_way, b, false, &mut pts).unwrap();
+        let est = bisect_k(three_way, b, false, None, &mut pts).unwrap();
         assert!((est - 1100.0).abs() <= 1.1, "{est}");
         let (lo, hi) = interval(three_way, est, b, &mut pts);
         let hi = hi.unwrap();
@@ -370,7 +485,7 @@ mod tests {
             rel_tol: 0.01,
         };
         let mut pts = Vec::new();
-        let est = bisect_k(never_refuted, b, false, &mut pts).unwrap();
+        let est = bisect_k(never_refuted, b, false, None, &mut pts).unwrap();
         assert_eq!(est, 6400.0);
         let (lo, hi) = interval(never_refuted, est, b, &mut pts);
         assert_eq!(hi, None);
@@ -404,7 +519,7 @@ mod tests {
         let b = NOISY;
         // The search visits 400 (undecided) on its way up.
         let mut pts = Vec::new();
-        let est = bisect_k(ragged, b, false, &mut pts).unwrap();
+        let est = bisect_k(ragged, b, false, None, &mut pts).unwrap();
         assert!(pts.iter().any(|p| p.k == 400.0 && p.decided == Some(false)));
         let before = pts.len();
         let (lo, hi) = interval(ragged, est, b, &mut pts);
@@ -433,7 +548,7 @@ mod tests {
         };
         let b = NOISY;
         let mut pts = Vec::new();
-        let est = bisect_k(low, b, false, &mut pts).unwrap();
+        let est = bisect_k(low, b, false, None, &mut pts).unwrap();
         let (lo, hi) = interval(low, est, b, &mut pts);
         assert_eq!(lo, 0.0);
         assert!(pts.iter().all(|p| p.k >= 100.0), "nothing below k0");
@@ -454,7 +569,7 @@ mod tests {
         };
         let b = NOISY;
         let mut pts = Vec::new();
-        assert_eq!(bisect_k(none, b, false, &mut pts), None);
+        assert_eq!(bisect_k(none, b, false, None, &mut pts), None);
         let floor = pts.iter().map(|p| p.k).fold(f64::INFINITY, f64::min);
         assert_eq!((pts.len(), floor), (11, b.k0 / 1024.0));
         let (lo, hi) = interval(none, 0.0, b, &mut pts);
@@ -481,7 +596,7 @@ mod tests {
             rel_tol: 0.01,
         };
         let mut pts = Vec::new();
-        let est = bisect_k(v, b, false, &mut pts).unwrap();
+        let est = bisect_k(v, b, false, None, &mut pts).unwrap();
         let (_, hi) = interval(v, est, b, &mut pts);
         let hi = hi.unwrap();
         assert!((200.0..=202.0).contains(&hi), "{hi}");
@@ -564,5 +679,175 @@ mod resolution_tests {
             assert!(lo < t && hi >= t, "threshold {t}: [{lo}, {hi}]");
             assert_eq!(hi, f64::from_bits(lo.to_bits() + 1), "threshold {t}");
         }
+    }
+
+    /// Renders below `t` N/m only: a monotone verdict at one B.
+    fn below(t: f64) -> impl Fn(f64) -> Point {
+        move |k| Point {
+            k,
+            b: 0.0,
+            stable: Some(k < t),
+            ..Point::default()
+        }
+    }
+
+    /// K-values tried, in order.
+    fn ks(pts: &[Point]) -> Vec<f64> {
+        pts.iter().map(|p| p.k).collect()
+    }
+
+    const TOL: Bracket = Bracket {
+        k0: 10.0,
+        k_cap: 1e7,
+        rel_tol: 1e-2,
+    };
+
+    #[test]
+    fn a_right_prediction_is_confirmed_by_its_two_verdicts() {
+        // Boundary 1500; predicted [1490, 1505]: two trials, already
+        // narrower than 1 %, so no bisection step.
+        let start = Start::Bracket {
+            lo: 1490.0,
+            hi: 1505.0,
+        };
+        let mut pts = Vec::new();
+        let k = bisect_k(below(1500.0), TOL, false, Some(start), &mut pts);
+        assert_eq!((k, ks(&pts)), (Some(1490.0), vec![1490.0, 1505.0]));
+        // From k0 the same bisection takes nine trials to bracket (10, 20,
+        // …, 2560) and seven to bisect [1280, 2560] to 1 %.
+        let mut cold = Vec::new();
+        let k_cold = bisect_k(below(1500.0), TOL, false, None, &mut cold).unwrap();
+        assert!(k_cold < 1500.0 && k_cold >= 1500.0 * 0.99, "{k_cold}");
+        assert_eq!(cold.len(), 16);
+        // A predicted interval 4 % wide: the two ends, then bisection to
+        // 1 % (2 steps: 4 % → 2 % → 1 %).
+        let start = Start::Bracket {
+            lo: 1450.0,
+            hi: 1510.0,
+        };
+        let mut pts = Vec::new();
+        let k = bisect_k(below(1500.0), TOL, false, Some(start), &mut pts).unwrap();
+        assert_eq!(ks(&pts), vec![1450.0, 1510.0, 1480.0, 1495.0]);
+        assert_eq!(k, 1495.0);
+    }
+
+    #[test]
+    fn a_wrong_prediction_gallops_out_until_the_verdicts_bracket_the_boundary() {
+        // Predicted [1000, 1010] (w = ln 1.01) for a boundary at 1500: up by
+        // w, 2w, 4w, … in ln K from the last K that rendered.
+        let start = Start::Bracket {
+            lo: 1000.0,
+            hi: 1010.0,
+        };
+        let mut pts = Vec::new();
+        let k = bisect_k(below(1500.0), TOL, false, Some(start), &mut pts).unwrap();
+        assert!(k < 1500.0 && k >= 1500.0 * 0.99, "{k}");
+        let w = 1.01f64.ln();
+        let mut expect = vec![1000.0, 1010.0];
+        let (mut last, mut step) = (1010.0, w);
+        while last < 1500.0 {
+            step *= 2.0;
+            last *= step.exp();
+            expect.push(last);
+        }
+        assert_eq!(ks(&pts)[..expect.len()], expect[..]);
+        // 1000 → 1010 → 1030.4 → 1072.4 → 1161.5 → 1362.7 → 1875.7 (fails):
+        // seven trials to bracket, then bisection of [1362.7, 1875.7].
+        assert_eq!(expect.len(), 7);
+        // Predicted too high, [4000, 4040]: down from 4000 the same way.
+        let start = Start::Bracket {
+            lo: 4000.0,
+            hi: 4040.0,
+        };
+        let mut pts = Vec::new();
+        let k = bisect_k(below(1500.0), TOL, false, Some(start), &mut pts).unwrap();
+        assert!(k < 1500.0 && k >= 1500.0 * 0.99, "{k}");
+        let w = (4040.0f64 / 4000.0).ln();
+        assert_eq!(pts[1].k, 4000.0 * (-w).exp());
+        assert_eq!(pts[2].k, pts[1].k * (-2.0 * w).exp());
+        // Off by a factor of ~2.7 either way, it costs about what a search
+        // from k0 does (16 trials here), not more.
+        assert!(pts.len() <= 17, "{}", pts.len());
+    }
+
+    #[test]
+    fn a_column_predicted_empty_checks_k0_and_the_floor() {
+        // Nothing renders: k0, then k0/1024 directly: None after two.
+        let mut pts = Vec::new();
+        let never = below(0.0);
+        assert_eq!(
+            bisect_k(never, TOL, false, Some(Start::Empty), &mut pts),
+            None
+        );
+        assert_eq!(ks(&pts), vec![10.0, 10.0 / 1024.0]);
+        // Something renders below k0 after all: bisected between the floor
+        // and k0.
+        let mut pts = Vec::new();
+        let k = bisect_k(below(3.0), TOL, false, Some(Start::Empty), &mut pts).unwrap();
+        assert!(k < 3.0 && k >= 3.0 * 0.99, "{k}");
+        // And above k0: up from it by doubling, then faster.
+        let mut pts = Vec::new();
+        let k = bisect_k(below(50.0), TOL, false, Some(Start::Empty), &mut pts).unwrap();
+        assert!(k < 50.0 && k >= 50.0 * 0.99, "{k}");
+        assert_eq!(ks(&pts)[..3], [10.0, 20.0, 80.0]);
+    }
+
+    #[test]
+    fn a_prediction_is_held_to_the_cap_and_the_floor() {
+        // Everything renders, predicted above the cap: the cap is the result.
+        let capped = Bracket {
+            k_cap: 3000.0,
+            ..TOL
+        };
+        let start = Start::Bracket {
+            lo: 5000.0,
+            hi: 6000.0,
+        };
+        let mut pts = Vec::new();
+        let k = bisect_k(below(f64::INFINITY), capped, false, Some(start), &mut pts);
+        assert_eq!((k, ks(&pts)), (Some(3000.0), vec![3000.0]));
+        // Nothing renders, predicted at 100: galloping down ends at the
+        // floor k0/1024 (tried once), None.
+        let start = Start::Bracket {
+            lo: 100.0,
+            hi: 101.0,
+        };
+        let mut pts = Vec::new();
+        assert_eq!(
+            bisect_k(below(0.0), TOL, false, Some(start), &mut pts),
+            None
+        );
+        assert_eq!(*ks(&pts).last().unwrap(), 10.0 / 1024.0);
+        assert!(pts.iter().all(|p| p.k >= 10.0 / 1024.0));
+    }
+
+    #[test]
+    fn a_predicted_start_finds_a_lower_end_for_the_interval() {
+        // Decided verdicts from a bracket near the boundary, where nothing
+        // below the first failure is decided passive: halving from the
+        // lowest K tried until a K is.
+        let three = |k: f64| Point {
+            k,
+            b: 0.0,
+            stable: Some(k < 1500.0),
+            decided: Some(!(1000.0..2000.0).contains(&k)),
+            ..Point::default()
+        };
+        let mut pts: Vec<Point> = [1450.0, 1510.0].map(three).to_vec();
+        anchor_below(three, TOL, &mut pts);
+        // 1450 → 725 (decided passive).
+        assert_eq!(ks(&pts), vec![1450.0, 1510.0, 725.0]);
+        // Already one below the first failure: nothing more.
+        anchor_below(three, TOL, &mut pts);
+        assert_eq!(pts.len(), 3);
+        // Never below the floor: a column where nothing is decided passive.
+        let undecided = |k: f64| Point {
+            decided: Some(false),
+            ..three(k)
+        };
+        let mut pts = vec![undecided(40.0)];
+        anchor_below(undecided, TOL, &mut pts);
+        assert!(pts.iter().all(|p| p.k >= 10.0 / 1024.0));
+        assert_eq!(pts.len(), 1 + 12);
     }
 }

@@ -143,7 +143,8 @@ impl Classifier {
         }
     }
 
-    /// Largest K that renders at B: bracket from `k0`, then bisect. With
+    /// Largest K that renders at B: bracket from `k0` (or from a predicted
+    /// `start`), then bisect. With
     /// `robust`, K values below the result are checked as well (see
     /// `SearchKind::RobustBisect`).
     pub(super) fn bisect_k(
@@ -152,6 +153,7 @@ impl Classifier {
         k0: f64,
         k_cap: f64,
         robust: bool,
+        start: Option<super::prior::Start>,
         points: &mut Vec<Point>,
     ) -> Option<f64> {
         let bounds = Bracket {
@@ -159,15 +161,17 @@ impl Classifier {
             k_cap,
             rel_tol: self.res.k_rel_tol,
         };
-        bisect_k(|k| self.classify(k, b), bounds, robust, points)
+        bisect_k(|k| self.classify(k, b), bounds, robust, start, points)
     }
 
-    /// The confidence interval of a boundary point found by `bisect_k`.
+    /// The confidence interval of a boundary point found by `bisect_k`
+    /// (`predicted`: from a predicted start, `bisect::anchor_below` first).
     pub(super) fn interval(
         &self,
         bp: &mut BoundaryPoint,
         k0: f64,
         k_cap: f64,
+        predicted: bool,
         points: &mut Vec<Point>,
     ) {
         let bounds = Bracket {
@@ -175,6 +179,9 @@ impl Classifier {
             k_cap,
             rel_tol: self.res.k_rel_tol,
         };
+        if predicted {
+            super::bisect::anchor_below(|k| self.classify(k, bp.b), bounds, points);
+        }
         let (lo, hi) =
             super::bisect::interval(|k| self.classify(k, bp.b), bp.k_max, bounds, points);
         bp.k_lo = Some(lo.min(bp.k_max));

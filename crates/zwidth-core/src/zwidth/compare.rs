@@ -579,6 +579,7 @@ pub fn map_spec(scene: SceneSpec, accuracy: &Accuracy, criterion: Criterion) -> 
         b: None,
         b_max: 1000.0,
         k_max: 1e7,
+        prior: None,
     }
 }
 

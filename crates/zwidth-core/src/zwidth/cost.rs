@@ -215,6 +215,7 @@ mod tests {
             b: Some((0..n).map(|i| i as f64 * 0.01).collect()),
             b_max: 1000.0,
             k_max: 1e7,
+            prior: None,
         };
         let sc = spec(1).scene.validate().unwrap();
         let res = Accuracy::default().resolve(&sc).unwrap();
@@ -244,6 +245,7 @@ mod tests {
             b,
             b_max,
             k_max,
+            prior: None,
         }
     }
 

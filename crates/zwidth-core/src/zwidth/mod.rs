@@ -17,6 +17,7 @@ pub mod hit;
 pub mod observer;
 pub mod point;
 pub mod poly;
+pub mod prior;
 pub mod probe;
 pub mod psi;
 mod psi_search;

@@ -68,7 +68,10 @@ impl Point {
     }
 }
 
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
+#[serde(deny_unknown_fields)]
 pub struct BoundaryPoint {
     /// Wall damping B (N·s/m).
     pub b: f64,

@@ -20,6 +20,7 @@ fn seed_device(b: Vec<f64>) -> MapSpec {
         b: Some(b),
         b_max: 1000.0,
         k_max: 1e7,
+        prior: None,
     }
 }
 

@@ -22,6 +22,7 @@ pub use super::evaluator::{noisy_verdicts, Evaluator};
 use super::farm::Unit;
 pub use super::observer::{Observer, StoredEvaluation};
 pub use super::point::{BoundaryPoint, Point, StoredTrial};
+use super::prior::{Prediction, Prior, PriorReport};
 use super::scene::validate_wall;
 use super::settings::{Criterion, MapSpec, Method, Resolved, SearchKind};
 use crate::error::SpecError;
@@ -61,6 +62,10 @@ pub struct MapResult {
     /// When any trial saturated: which, in words.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub saturation: Option<String>,
+    /// With a `prior`: the prediction beside the map's boundary, column by
+    /// column, and where they disagree.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub prior: Option<PriorReport>,
     pub elapsed_s: f64,
 }
 
@@ -130,6 +135,7 @@ fn prepare(spec: &MapSpec) -> Result<(Evaluator, Cost), SpecError> {
             }
         }
     }
+    check_prior(spec)?;
     let mut ev = Evaluator::new(scene, spec.method, spec.criterion, res)?;
     if defined_by_its_trial(spec, &ev) {
         let trial = spec.accuracy.standard_trial().resolve(&ev.scene)?;
@@ -154,6 +160,70 @@ fn prepare(spec: &MapSpec) -> Result<(Evaluator, Cost), SpecError> {
 /// random verdicts): every preset then runs the standard preset's trial.
 fn defined_by_its_trial(spec: &MapSpec, ev: &Evaluator) -> bool {
     ev.runs_psi(spec.search)
+}
+
+/// A prior is for the bisection searches, and its scene or boundary must
+/// be valid; a run's id is the service's to read (`Prior::Run`).
+fn check_prior(spec: &MapSpec) -> Result<(), SpecError> {
+    let Some(prior) = &spec.prior else {
+        return Ok(());
+    };
+    if !matches!(spec.search, SearchKind::Bisect | SearchKind::RobustBisect) {
+        return Err(SpecError::new(
+            "prior",
+            spec.search.name(),
+            "a prior seeds the bisection searches (search bisect or robust_bisect)",
+        ));
+    }
+    match prior {
+        Prior::Scene(s) => s.validate().map(|_| ()).map_err(|e| e.within("prior.scene")),
+        Prior::Boundary(points) => Prediction::new(points.clone()).map(|_| ()),
+        Prior::Run(id) => Err(SpecError::new(
+            "prior.run",
+            id,
+            "a run's map is read by the service (POST /v1/experiments); here give its boundary (prior.boundary, or `zwidth map --prior-map FILE`)",
+        )),
+    }
+}
+
+/// `spec` with its prior's prediction at hand: a scene simulated now (in
+/// this process, never on the map's rig) and given to the columns as its
+/// boundary, so that a farm's workers and a resumed run search from the
+/// same bits without simulating again.
+fn with_prediction(
+    spec: &MapSpec,
+) -> Result<(std::borrow::Cow<'_, MapSpec>, Option<Prediction>), SpecError> {
+    let Some(prior) = &spec.prior else {
+        return Ok((std::borrow::Cow::Borrowed(spec), None));
+    };
+    check_prior(spec)?;
+    let points = match prior {
+        Prior::Scene(scene) => {
+            let predicted = map(&MapSpec {
+                scene: (**scene).clone(),
+                prior: None,
+                ..spec.clone()
+            })
+            .map_err(|e| e.within("prior.scene"))?;
+            predicted.boundary
+        }
+        Prior::Boundary(points) => points.clone(),
+        Prior::Run(_) => unreachable!("refused by check_prior"),
+    };
+    let prediction = Prediction::new(points.clone())?;
+    let resolved = MapSpec {
+        prior: Some(Prior::Boundary(points)),
+        ..spec.clone()
+    };
+    Ok((std::borrow::Cow::Owned(resolved), Some(prediction)))
+}
+
+/// The prediction of a spec whose prior is a boundary (`with_prediction`).
+fn prediction_of(spec: &MapSpec) -> Option<Prediction> {
+    match &spec.prior {
+        Some(Prior::Boundary(points)) => Prediction::new(points.clone()).ok(),
+        _ => None,
+    }
 }
 
 /// Which trials the force limit clipped, and how many boundary points such
@@ -195,6 +265,9 @@ pub fn map_observed(
     scope: u32,
 ) -> Result<MapResult, SpecError> {
     let start = Instant::now();
+    let source = spec.prior.as_ref().map(Prior::source);
+    let (spec, prediction) = with_prediction(spec)?;
+    let spec = spec.as_ref();
     let (ev, b_auto) = map_evaluator(spec, observer, scope)?;
     let res = ev.res;
     // A trace (each B starts from the last) and the analytic engine (closed
@@ -276,6 +349,10 @@ pub fn map_observed(
         ev.scene.spec.device.force_limit.unwrap_or(f64::INFINITY),
     );
     let saturated_trials = points.iter().filter(|p| p.saturated == Some(true)).count();
+    let prior = prediction
+        .as_ref()
+        .zip(source)
+        .map(|(p, source)| super::prior::report(source, p, &boundary, res.k_rel_tol, points.len()));
     Ok(MapResult {
         model: ev.model_description(),
         method: ev.method,
@@ -294,6 +371,7 @@ pub fn map_observed(
         saturated_trials,
         saturation,
         points,
+        prior,
         elapsed_s: start.elapsed().as_secs_f64(),
     })
 }
@@ -340,6 +418,8 @@ pub fn column_observed(
     observer: std::sync::Arc<Observer>,
     scope: u32,
 ) -> Result<(), SpecError> {
+    let (spec, _) = with_prediction(spec)?;
+    let spec = spec.as_ref();
     let (ev, b_auto) = map_evaluator(spec, Some(observer), scope)?;
     let in_map = spec.b.as_deref().unwrap_or(&b_auto);
     if whole_map_unit(spec, &ev) || !in_map.iter().any(|x| x.to_bits() == b.to_bits()) {
@@ -430,10 +510,17 @@ pub fn area(boundary: &[BoundaryPoint]) -> f64 {
 fn bisect_column(ev: &Classifier, spec: &MapSpec, b: f64) -> (BoundaryPoint, Vec<Point>) {
     let mut pts = Vec::new();
     let robust = spec.search == SearchKind::RobustBisect;
-    let k = ev.bisect_k(b, ev.res.k_step, spec.k_max, robust, &mut pts);
+    let start = prediction_of(spec).map(|p| p.start(b, ev.res.k_rel_tol));
+    let k = ev.bisect_k(b, ev.res.k_step, spec.k_max, robust, start, &mut pts);
     let mut bp = BoundaryPoint::new(b, k.unwrap_or(0.0));
     if ev.noisy() {
-        ev.interval(&mut bp, ev.res.k_step, spec.k_max, &mut pts);
+        ev.interval(
+            &mut bp,
+            ev.res.k_step,
+            spec.k_max,
+            start.is_some(),
+            &mut pts,
+        );
     }
     (bp, pts)
 }

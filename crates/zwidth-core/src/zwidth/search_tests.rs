@@ -131,6 +131,7 @@ pub(super) fn auto_b_map(search: SearchKind) -> MapSpec {
         b: None,
         b_max: 5000.0,
         k_max: 1e6,
+        prior: None,
     }
 }
 
@@ -257,6 +258,7 @@ fn grid_progress_is_the_share_of_points_done() {
         b: Some(vec![0.0, 10.0, 20.0]),
         b_max: 1000.0,
         k_max: 10_000.0,
+        prior: None,
     };
     let o = std::sync::Arc::new(Observer::default());
     o.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
@@ -333,6 +335,7 @@ fn verdicts_are_noisy_with_friction_or_quantization_in_the_frequency_engine() {
         b: Some(vec![0.0]),
         b_max: 1000.0,
         k_max: 1e7,
+        prior: None,
     };
     let f = Method::Frequency;
     assert!(noisy(&spec(r#"{"coulomb":0,"quantization":1e-6}"#, f)).unwrap());
@@ -366,6 +369,7 @@ fn replicate_hits_give_majority_verdicts_and_intervals() {
         b: Some(vec![20.0]),
         b_max: 1000.0,
         k_max: 1e7,
+        prior: None,
     };
     let r = map(&spec).unwrap();
     assert!(
@@ -400,6 +404,142 @@ fn replicate_hits_give_majority_verdicts_and_intervals() {
     );
 }
 
+/// The seed device at 1 kHz, three short hits per verdict (as in
+/// `replicate_hits_give_majority_verdicts_and_intervals`), over three B,
+/// its handle of `mass` (kg; the seed device's is 0.52).
+fn replicated_map(mass: f64) -> MapSpec {
+    let mut scene = SceneSpec::from_json(
+        r#"{"loop":{"sample_hz":1000,"render_hz":1000},"hit":{"home_distance":0.001,"settle_s":0.3,"measure_s":0.2,"replicates":3}}"#,
+    )
+    .unwrap();
+    scene.device.mass = mass;
+    MapSpec {
+        criterion: Criterion::Stability,
+        scene,
+        method: Method::Time,
+        search: SearchKind::Bisect,
+        accuracy: Default::default(),
+        b: Some(vec![0.0, 20.0, 40.0]),
+        b_max: 1000.0,
+        k_max: 1e7,
+        prior: None,
+    }
+}
+
+#[test]
+fn a_right_prior_brackets_each_column_in_a_few_trials() {
+    // Issue 46: a map seeded by its own device's prediction lands inside
+    // the unseeded map's intervals with at least 3× fewer trials.
+    let spec = replicated_map(0.52);
+    let cold = map(&spec).unwrap();
+    let seeded = map(&MapSpec {
+        prior: Some(Prior::Boundary(cold.boundary.clone())),
+        ..spec.clone()
+    })
+    .unwrap();
+    assert!(
+        3 * seeded.trials <= cold.trials,
+        "{} against {}",
+        seeded.trials,
+        cold.trials
+    );
+    for (c, s) in cold.boundary.iter().zip(&seeded.boundary) {
+        let (lo, hi) = (c.k_lo.unwrap(), c.k_hi.unwrap());
+        assert!(lo <= s.k_max && s.k_max <= hi, "{s:?} outside {c:?}");
+    }
+    let report = seeded.prior.as_ref().unwrap();
+    assert_eq!((report.disagreements, report.trials), (0, seeded.trials));
+    assert_eq!(report.source, "the boundary given");
+    // A scene to simulate first gives the same prediction, so the same map
+    // (the same trials, to the bit).
+    let simulated = map(&MapSpec {
+        prior: Some(Prior::Scene(Box::new(spec.scene.clone()))),
+        ..spec.clone()
+    })
+    .unwrap();
+    assert_eq!(simulated.points, seeded.points);
+    assert_eq!(
+        simulated.prior.unwrap().source,
+        "a simulation of the prior's scene"
+    );
+    // Without a prior, no report.
+    assert!(cold.prior.is_none());
+}
+
+#[test]
+fn a_wrong_prior_is_flagged_and_the_map_stays_its_own() {
+    // The device 30 % heavier than the prediction's: the columns'
+    // boundaries move, the report says where, and each boundary point is
+    // the map's own verdicts' (a K that renders, with a failure within
+    // the resolution above it).
+    let light = replicated_map(0.52);
+    let heavy = replicated_map(0.676);
+    let cold = map(&heavy).unwrap();
+    let seeded = map(&MapSpec {
+        prior: Some(Prior::Scene(Box::new(light.scene.clone()))),
+        ..heavy.clone()
+    })
+    .unwrap();
+    let report = seeded.prior.as_ref().unwrap();
+    assert!(report.disagreements >= 1, "{report:?}");
+    for (col, bp) in report.columns.iter().zip(&seeded.boundary) {
+        assert_eq!(col.b, bp.b);
+        let ok_at = |k: f64| {
+            seeded
+                .points
+                .iter()
+                .any(|p| p.b == bp.b && p.k == k && p.ok())
+        };
+        assert!(bp.k_max == 0.0 || ok_at(bp.k_max), "{bp:?}");
+        let fails_above = seeded
+            .points
+            .iter()
+            .any(|p| p.b == bp.b && !p.ok() && p.k > bp.k_max && p.k <= bp.k_max * 1.011 + 1e-9);
+        assert!(bp.k_max == 0.0 || fails_above, "{bp:?}");
+    }
+    // Not more than 1.3× the unseeded map's trials (issue 46).
+    assert!(
+        10 * seeded.trials <= 13 * cold.trials,
+        "{} against {}",
+        seeded.trials,
+        cold.trials
+    );
+}
+
+#[test]
+fn a_prior_is_refused_where_it_cannot_seed_the_search() {
+    let spec = replicated_map(0.52);
+    let with = |prior: Prior, search: SearchKind| {
+        validate(&MapSpec {
+            prior: Some(prior),
+            search,
+            ..spec.clone()
+        })
+        .map(|_| ())
+        .map_err(|e| e.field)
+    };
+    let given = || Prior::Boundary(vec![BoundaryPoint::new(0.0, 1000.0)]);
+    assert_eq!(with(given(), SearchKind::Bisect), Ok(()));
+    assert_eq!(with(given(), SearchKind::RobustBisect), Ok(()));
+    for search in [SearchKind::Trace, SearchKind::Grid, SearchKind::Psi] {
+        assert_eq!(with(given(), search), Err("prior".to_string()));
+    }
+    assert_eq!(
+        with(Prior::Run("abc".into()), SearchKind::Bisect),
+        Err("prior.run".to_string())
+    );
+    assert_eq!(
+        with(Prior::Boundary(vec![]), SearchKind::Bisect),
+        Err("prior.boundary".to_string())
+    );
+    let mut bad = spec.scene.clone();
+    bad.device.mass = -1.0;
+    assert_eq!(
+        with(Prior::Scene(Box::new(bad)), SearchKind::Bisect),
+        Err("prior.scene.device.mass".to_string())
+    );
+}
+
 #[test]
 fn observer_fraction_averages_the_maps() {
     let o = Observer::default();
@@ -431,6 +571,7 @@ fn analytic(device: &str, criterion: Criterion, search: SearchKind, accuracy: &s
         b: None,
         b_max: 1000.0,
         k_max: 1e7,
+        prior: None,
     }
 }
 

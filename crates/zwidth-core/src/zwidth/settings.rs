@@ -290,6 +290,12 @@ pub struct MapSpec {
     /// Largest stiffness considered (N/m).
     #[serde(default = "default_k_max")]
     pub k_max: f64,
+    /// A prediction of the boundary each column's bisection starts from
+    /// (`{"scene": …}`, `{"run": "<id>"}` or `{"boundary": […]}`): on a
+    /// rig, hardware trials go where the prediction is uncertain. The
+    /// result is the map's own; `prior` in it sets the prediction beside.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior: Option<super::prior::Prior>,
 }
 
 fn default_b_max() -> f64 {

@@ -120,6 +120,7 @@ fn run_on(
                 b: None,
                 b_max: 1000.0,
                 k_max: 1e7,
+                prior: None,
             };
             let t = Instant::now();
             let r = map(&spec)?;

@@ -48,6 +48,7 @@ fn one(vary: &'static str, value: f64, scene: SceneSpec) -> Result<TrustRow, Spe
         b: None,
         b_max: 1000.0,
         k_max: 1e7,
+        prior: None,
     };
     let t = Instant::now();
     let r = map(&spec)?;

@@ -57,6 +57,7 @@ fn run_search(
         b: Some(b.to_vec()),
         b_max: 1000.0,
         k_max: 1e7,
+        prior: None,
     })
     .unwrap()
 }
@@ -124,6 +125,7 @@ fn strict_passivity_over_the_automatic_b_range_stops_where_colgate_does() {
         b: None,
         b_max: 40.0,
         k_max: 1e7,
+        prior: None,
     })
     .unwrap();
     let bs: Vec<f64> = r.boundary.iter().map(|p| p.b).collect();
@@ -381,6 +383,7 @@ fn an_automatic_b_range_stops_after_two_empty_columns() {
         b: None,
         b_max: 1000.0,
         k_max: 1e7,
+        prior: None,
     })
     .unwrap();
     let mut columns: Vec<f64> = r.points.iter().map(|p| p.b).collect();
@@ -408,6 +411,7 @@ fn a_map_states_its_resolution_and_search() {
             b: Some(vec![0.0]),
             b_max: 1000.0,
             k_max: 1e7,
+            prior: None,
         })
         .unwrap()
         .resolution
@@ -433,6 +437,7 @@ fn a_trace_stops_at_k_max() {
         b: Some(vec![40.0]),
         b_max: 1000.0,
         k_max: 30_000.0,
+        prior: None,
     })
     .unwrap();
     assert_eq!(r.k_width, 30_000.0);
@@ -992,6 +997,7 @@ fn no_width_exceeds_k_max_even_below_the_first_step() {
         b: Some(vec![0.0, 20.0]),
         b_max: 1000.0,
         k_max: 1000.0,
+        prior: None,
     };
     for search in [SearchKind::Bisect, SearchKind::RobustBisect] {
         let r = map(&spec(search)).unwrap();

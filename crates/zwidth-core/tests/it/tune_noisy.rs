@@ -66,6 +66,7 @@ fn plain(cutoff: f64, seed: u64) -> zwidth_core::zwidth::search::MapResult {
         b: Some(vec![20.0]),
         b_max: 1000.0,
         k_max: 1e7,
+        prior: None,
     })
     .unwrap()
 }
