@@ -115,6 +115,7 @@ fn bench(c: &mut Criterion) {
                 b: None,
                 b_max: 1000.0,
                 k_max: 1e7,
+                prior: None,
             })
             .unwrap()
         })

@@ -73,6 +73,29 @@ def test_a_map_equals_the_cli_s(scene, method, criterion, accuracy, bs):
     assert got.trials["ok"].dtype == bool and len(got.trials["ok"]) == want["trials"]
 
 
+def test_a_map_seeded_by_a_prior_equals_the_cli_s(tmp_path):
+    # Issue 46: a map and its prediction, from Python as from the CLI.
+    scene = EX / "seed_2011.json"
+    args = ["map", "--scene", str(scene), "--method", "time", "--criterion", "stability",
+            "--accuracy", "draft", "--b", "0,300"]
+    first = zwidth.map(scene, method="time", criterion="stability", accuracy="draft", b=[0, 300])
+    (tmp_path / "first.json").write_text(json.dumps(first.raw))
+    want = cli_json(*args, "--prior-map", str(tmp_path / "first.json"))
+    got = zwidth.map(scene, method="time", criterion="stability", accuracy="draft", b=[0, 300],
+                     prior_map=first)
+    assert without_elapsed(got.to_dict()) == without_elapsed(want)
+    # The map's own device as the prediction: every column agrees, in
+    # fewer trials than the first map's.
+    assert got.raw["prior"]["disagreements"] == 0
+    assert got.raw["trials"] < first.raw["trials"]
+    # A scene to simulate first gives the same prediction, so the same trials.
+    by_scene = zwidth.map(scene, method="time", criterion="stability", accuracy="draft",
+                          b=[0, 300], prior_scene=scene)
+    want = cli_json(*args, "--prior-scene", str(scene))
+    assert without_elapsed(by_scene.to_dict()) == without_elapsed(want)
+    assert by_scene.raw["points"] == got.raw["points"]
+
+
 def test_a_scene_may_be_a_scene_a_dict_json_text_or_a_path():
     text = (EX / "seed_2011.json").read_text()
     sources = (zwidth.Scene(EX / "seed_2011.json"), json.loads(text), text,
@@ -137,6 +160,11 @@ def test_a_trial_and_an_impedance_equal_the_cli_s():
         (lambda: zwidth.impedance(EX / "linear_1khz.json", 1000, 1, method=None), "method", "None"),
         (lambda: zwidth.map(EX / "seed_2018.json", b="12"), "b", "'12'"),
         (lambda: zwidth.map(EX / "seed_2018.json", b=5), "b", "5"),
+        (lambda: zwidth.map(EX / "seed_2011.json", prior_map=[]), "prior.boundary", "[]"),
+        (lambda: zwidth.map(EX / "seed_2011.json", prior_map=[], prior_scene=EX / "seed_2011.json"),
+         "prior_map", "(given)"),
+        (lambda: zwidth.map(EX / "seed_2011.json", search="grid", prior_scene=EX / "seed_2011.json"),
+         "prior", "grid"),
         (lambda: zwidth.trial(EX / "seed_2011.json", 10**400, 1), "k", "1000"),
         (lambda: zwidth.Scene("[1, 2]"), "scene", "JSON object"),
         # A NaN inside a dict, named by its path (the package's own JSON).

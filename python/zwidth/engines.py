@@ -310,6 +310,8 @@ def map(  # noqa: A001 - the product's word for it
     b: Optional[Sequence[float]] = None,
     b_max: float = 1000.0,
     k_max: float = 1e7,
+    prior_scene: Optional[SceneLike] = None,
+    prior_map: Optional[Any] = None,
 ) -> MapResult:
     """The Z-width map of `scene`: the (K, B) region it renders.
 
@@ -318,9 +320,16 @@ def map(  # noqa: A001 - the product's word for it
     grid | psi; `accuracy`: draft | standard | reference, or a dict of knobs
     (`{"preset": "draft", "k_rel_tol": 0.02}`); `b`: only these dampings
     (N·s/m); `b_max` (N·s/m) and `k_max` (N/m) bound the search.
+
+    A prediction seeds each column's bisection (`zwidth map --prior-scene`,
+    `--prior-map`): `prior_scene`, a scene simulated first, or `prior_map`,
+    a `MapResult` (or its list of boundary points). The result is the
+    map's own; `raw["prior"]` sets the prediction beside each column.
     """
     _finite("b_max", b_max, "N·s/m")
     _finite("k_max", k_max, "N/m")
+    if prior_scene is not None and prior_map is not None:
+        raise ValueError("prior_map = (given) is not allowed with prior_scene: give one prediction")
     spec: Dict[str, Any] = {
         "scene": _scene_dict(scene),
         "method": _word("method", method),
@@ -332,6 +341,11 @@ def map(  # noqa: A001 - the product's word for it
     }
     if b is not None:
         spec["b"] = _numbers("b", b, "N·s/m")
+    if prior_scene is not None:
+        spec["prior"] = {"scene": _scene_dict(prior_scene)}
+    elif prior_map is not None:
+        boundary = prior_map.raw["boundary"] if isinstance(prior_map, MapResult) else prior_map
+        spec["prior"] = {"boundary": boundary}
     return MapResult._from(_zwidth.loads(_zwidth.map_json(_zwidth.dumps(spec, ""))))
 
 

@@ -34,10 +34,13 @@ pub trait Driver: Send {
 }
 
 /// The simulated plant of the trial's own scene (what the server would
-/// compute in process), paced to take at least `trial_ms`.
+/// compute in process), paced to take at least `trial_ms`; with `device`,
+/// that device in place of the scene's (hardware that differs from its
+/// model, `zwidth agent --sim --sim-device FILE`).
 pub struct SimDriver {
     pub capabilities: Capabilities,
     pub trial_ms: u64,
+    pub device: Option<crate::zwidth::scene::DeviceSpec>,
 }
 
 /// Peak force, speed and penetration over a simulated wall hit.
@@ -72,6 +75,16 @@ impl Driver for SimDriver {
         cancel: &AtomicBool,
     ) -> Result<(Point, Measured), String> {
         let start = Instant::now();
+        let simulated;
+        let request = match &self.device {
+            Some(device) => {
+                let mut r = request.clone();
+                r.scene.device = device.clone();
+                simulated = r;
+                &simulated
+            }
+            None => request,
+        };
         let point = trial::run(request).map_err(|e| e.to_string())?;
         // What the hardware would have measured: one wall hit's peaks (the
         // verdict's own hits for the time engine; the force bound for a

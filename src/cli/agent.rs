@@ -26,6 +26,7 @@ pub(super) fn run(command: Command) -> Result<(), CliError> {
         pace,
         trial_ms,
         capabilities,
+        sim_device,
         faults,
         max_force_n,
         max_k,
@@ -74,9 +75,21 @@ pub(super) fn run(command: Command) -> Result<(), CliError> {
                 .validate()
                 .map_err(|e| CliError::Input(format!("--capabilities: {e}")))?;
             let trial_ms = trial_ms.unwrap_or(if pace == "realtime" { 10_000 } else { 0 });
+            let device = match &sim_device {
+                Some(p) => {
+                    let scene = super::common::read_scene(p)
+                        .map_err(|e| CliError::Input(format!("--sim-device: {e}")))?;
+                    scene.validate().map_err(|e| {
+                        CliError::Input(format!("--sim-device {}: {e}", p.display()))
+                    })?;
+                    Some(scene.device)
+                }
+                None => None,
+            };
             Box::new(SimDriver {
                 capabilities,
                 trial_ms,
+                device,
             })
         }
         (false, Some(cmd)) => Box::new(StdioDriver::start(&cmd).map_err(CliError::Input)?),

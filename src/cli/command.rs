@@ -427,6 +427,11 @@ pub enum Command {
         /// --sim: the capabilities to advertise (JSON; default a 10 N bench device).
         #[arg(long)]
         capabilities: Option<PathBuf>,
+        /// --sim: simulate the device of this scene file instead of each
+        /// trial's own (hardware that differs from its model: a prior's
+        /// disagreement, a night rehearsed).
+        #[arg(long, requires = "sim")]
+        sim_device: Option<PathBuf>,
         /// --sim: faults to inject (JSON, docs/rigs.md), for tests.
         #[arg(long)]
         faults: Option<PathBuf>,

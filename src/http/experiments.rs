@@ -195,7 +195,8 @@ pub async fn submit(
     authorize(&st, &headers)?;
     let q = QueryArgs::parse(query.as_deref(), &["priority", "not_before_ms", "rig"])?;
     require_json(&headers)?;
-    let spec = experiment_body(&body)?;
+    let mut spec = experiment_body(&body)?;
+    super::prior::resolve_run_prior(&st, &mut spec).await?;
     let estimate = spec.validate()?;
     let rig = match q.str("rig") {
         None => st.rig_list()[0].clone(),

@@ -11,6 +11,7 @@ pub mod experiments;
 pub mod guard;
 pub mod limits;
 pub mod openapi;
+pub mod prior;
 pub mod problem;
 pub mod queue;
 pub mod rigs;

@@ -74,6 +74,7 @@ fn k_at_accuracy(cutoff: f64, preset: Preset) -> f64 {
         b: Some(vec![20.0]),
         b_max: 1000.0,
         k_max: 1e7,
+        prior: None,
     };
     map(&m).unwrap().k_width
 }
@@ -466,6 +467,7 @@ fn weighted_objective_is_the_weighted_sum_of_plain_map_metrics() {
             b: Some(vec![0.0, 10.0, 20.0]),
             b_max: 1000.0,
             k_max: 1e7,
+            prior: None,
         })
         .unwrap();
         let want = 1e-5 * m.k_width + 1e-2 * m.b_width - 1e-3 * m.max_fidelity_error.unwrap();

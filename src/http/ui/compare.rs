@@ -86,7 +86,7 @@ pub async fn page(
             )
         })
         .collect();
-    let figure = map_panels(&panels, true)?;
+    let figure = map_panels(&panels, true, &[])?;
     let overlay = c
         .svg_named(|m| format!("{} {}", letter(&m.run), m.label))
         .map_err(no_plot)?;

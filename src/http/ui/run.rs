@@ -296,7 +296,8 @@ async fn maps_markup(
             )
         })
         .collect();
-    let figure = map_panels(&panels, !finished.is_empty())?;
+    let prediction = predicted(spec, result);
+    let figure = map_panels(&panels, !finished.is_empty(), &prediction)?;
     let pager = pager(n, page, &format!("/runs/{}?", r.id));
     let table = html! {
         @if !finished.is_empty() {
@@ -319,7 +320,69 @@ async fn maps_markup(
             }
         }
     };
-    Ok(html! { (table) (pager) (figure) })
+    let against = prior_table(result);
+    Ok(html! { (table) (against) (pager) (figure) })
+}
+
+/// A map's predicted boundary (its `prior`): the result's report once it
+/// has one, else a boundary given in the spec; empty for anything else.
+fn predicted(spec: &ExperimentSpec, result: Option<&Value>) -> Vec<BoundaryPoint> {
+    let from_result = result
+        .and_then(|r| r["prior"]["columns"].as_array())
+        .map(|cols| {
+            cols.iter()
+                .filter_map(|c| {
+                    Some(BoundaryPoint {
+                        b: c["b"].as_f64()?,
+                        k_max: c["predicted_k_max"].as_f64()?,
+                        k_lo: c["predicted_k_lo"].as_f64(),
+                        k_hi: c["predicted_k_hi"].as_f64(),
+                    })
+                })
+                .collect()
+        });
+    match (from_result, spec) {
+        (Some(p), _) => p,
+        (None, ExperimentSpec::Map(m)) => match &m.prior {
+            Some(crate::zwidth::prior::Prior::Boundary(b)) => b.clone(),
+            _ => Vec::new(),
+        },
+        _ => Vec::new(),
+    }
+}
+
+/// The prediction beside the map's own boundary, column by column (a map
+/// with a `prior`, once finished).
+fn prior_table(result: Option<&Value>) -> Markup {
+    let Some(report) = result.map(|r| &r["prior"]).filter(|p| p.is_object()) else {
+        return html! {};
+    };
+    let columns = report["columns"].as_array().cloned().unwrap_or_default();
+    let boundary = result
+        .and_then(|r| r["boundary"].as_array())
+        .cloned()
+        .unwrap_or_default();
+    let k = |v: &Value| v.as_f64().map_or("–".to_string(), |x| format!("{x:.0}"));
+    html! {
+        table class="figures prior" {
+            caption {
+                "The prediction (" (report["source"].as_str().unwrap_or("prior")) ") against the map: "
+                (report["disagreements"].as_u64().unwrap_or(0)) " of " (columns.len()) " columns disagree"
+            }
+            thead { tr { th { "B (N·s/m)" } th { "predicted K_max (N/m)" } th { "the map's K_max (N/m)" } th { "agrees" } } }
+            tbody {
+                @for c in &columns {
+                    @let own = boundary.iter().find(|p| p["b"] == c["b"]).cloned().unwrap_or(Value::Null);
+                    tr class=(if c["agrees"] == true { "" } else { "warn" }) {
+                        td class="num" { (c["b"].as_f64().map_or("–".into(), |b| format!("{b:.2}"))) }
+                        td class="num" { (k(&c["predicted_k_max"])) br; span class="small muted" { "[" (k(&c["predicted_k_lo"])) ", " (k(&c["predicted_k_hi"])) "]" } }
+                        td class="num" { (k(&own["k_max"])) @if own["k_lo"].is_number() { br; span class="small muted" { "[" (k(&own["k_lo"])) ", " (k(&own["k_hi"])) "]" } } }
+                        td { (if c["agrees"] == true { "yes" } else { "no" }) }
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// The maps page `page` (1-based) of `n` maps draws; a page past the last
@@ -381,12 +444,14 @@ fn interval(v: &Value, digits: usize) -> Markup {
 pub fn map_panels(
     panels: &[(String, Vec<MapPlotPoint>, Vec<BoundaryPoint>, String)],
     finished: bool,
+    prediction: &[BoundaryPoint],
 ) -> Result<Markup, Problem> {
     if panels.iter().all(|p| p.1.is_empty() && p.2.is_empty()) {
         return Ok(html! { p class="muted" { "No trials stored yet." } });
     }
     let extent = panels.iter().fold((1.0f64, 1.0f64), |acc, (_, pts, b, _)| {
-        let e = map_extent(pts, b);
+        let drawn: Vec<BoundaryPoint> = b.iter().chain(prediction).copied().collect();
+        let e = map_extent(pts, &drawn);
         (acc.0.max(e.0), acc.1.max(e.1))
     });
     let scale = panels.iter().fold(None, |acc, p| {
@@ -417,6 +482,7 @@ pub fn map_panels(
             extent: Some(extent),
             size: if single { (900, 600) } else { (620, 440) },
             tooltip_limit: per_map,
+            prediction: prediction.to_vec(),
         };
         let title = format!("{name} ({} trials)", all.len());
         let s = zwidth_map_svg_styled(&title, pts, boundary, &style).map_err(Problem::internal)?;
@@ -449,6 +515,65 @@ pub fn map_panels(
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// A map spec with `prior` (JSON) and nothing else of note.
+    fn map_spec(prior: &str) -> ExperimentSpec {
+        serde_json::from_str(&format!(
+            r#"{{"kind":"map","scene":{{}},"method":"time","criterion":"stability","prior":{prior}}}"#
+        ))
+        .unwrap()
+    }
+
+    #[test]
+    fn a_map_s_prediction_comes_from_its_report_else_from_its_spec() {
+        let spec = map_spec(r#"{"boundary":[{"b":0,"k_max":100}]}"#);
+        // Before a result: the boundary the spec gives.
+        assert_eq!(predicted(&spec, None), vec![BoundaryPoint::new(0.0, 100.0)]);
+        // With one: the report's columns, intervals included.
+        let result = serde_json::json!({"prior": {"columns": [
+            {"b": 0.0, "predicted_k_max": 90.0, "predicted_k_lo": 80.0, "predicted_k_hi": 95.0, "agrees": false}
+        ]}});
+        let p = predicted(&spec, Some(&result));
+        assert_eq!(
+            p,
+            vec![BoundaryPoint {
+                b: 0.0,
+                k_max: 90.0,
+                k_lo: Some(80.0),
+                k_hi: Some(95.0)
+            }]
+        );
+        // A scene to simulate: nothing to draw until the report.
+        assert!(predicted(&map_spec(r#"{"scene":{}}"#), None).is_empty());
+    }
+
+    #[test]
+    fn the_prior_table_marks_the_columns_that_disagree() {
+        let result = serde_json::json!({
+            "boundary": [{"b": 0.0, "k_max": 1000.0, "k_lo": 990.0, "k_hi": 1010.0}, {"b": 10.0, "k_max": 500.0}],
+            "prior": {"source": "the boundary given", "disagreements": 1, "trials": 9, "columns": [
+                {"b": 0.0, "predicted_k_max": 1000.0, "predicted_k_lo": 995.0, "predicted_k_hi": 1005.0, "agrees": true},
+                {"b": 10.0, "predicted_k_max": 800.0, "predicted_k_lo": 792.0, "predicted_k_hi": 808.0, "agrees": false}
+            ]}
+        });
+        let html = prior_table(Some(&result)).into_string();
+        assert!(
+            html.contains(
+                "The prediction (the boundary given) against the map: 1 of 2 columns disagree"
+            ),
+            "{html}"
+        );
+        assert_eq!(html.matches("<tr class=\"warn\">").count(), 1, "{html}");
+        assert!(
+            html.contains("[990, 1010]") && html.contains("800"),
+            "{html}"
+        );
+        // No prior: no table.
+        assert!(prior_table(Some(&serde_json::json!({"boundary": []})))
+            .into_string()
+            .is_empty());
+        assert!(prior_table(None).into_string().is_empty());
+    }
 
     proptest! {
         /// Issue 30: accepted ⇒ bounded. Any page a run accepts draws at

@@ -57,6 +57,7 @@ fn score(cutoff: i64, probe_seed: Option<u64>, preset: Preset) -> (f64, f64) {
         b: None,
         b_max: 1000.0,
         k_max: K_MAX,
+        prior: None,
     })
     .unwrap();
     let s = match m.k_width_interval {

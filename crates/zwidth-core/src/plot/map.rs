@@ -131,6 +131,9 @@ pub struct MapStyle {
     /// with more is drawn compactly (one path per colour, a tooltip per
     /// colour band), so a page with 20 000 trials stays small.
     pub tooltip_limit: usize,
+    /// A predicted boundary (a map's `prior`) drawn over the map's own, as
+    /// a blue line; empty: none.
+    pub prediction: Vec<BoundaryPoint>,
 }
 
 impl Default for MapStyle {
@@ -141,6 +144,7 @@ impl Default for MapStyle {
             extent: None,
             size: (900, 640),
             tooltip_limit: 4000,
+            prediction: Vec::new(),
         }
     }
 }
@@ -164,6 +168,9 @@ pub fn map_extent(points: &[MapPlotPoint], boundary: &[BoundaryPoint]) -> (f64, 
         * 1.08;
     (bmax, kmax)
 }
+
+/// The predicted boundary's colour (a map's prior).
+const PREDICTION: RGBColor = RGBColor(30, 90, 200);
 
 /// Colour bands of the compact drawing: points whose colour falls in one
 /// band share one path.
@@ -197,7 +204,10 @@ pub fn zwidth_map_svg_styled(
     boundary: &[BoundaryPoint],
     style: &MapStyle,
 ) -> Result<String, String> {
-    let (bmax, kmax) = style.extent.unwrap_or_else(|| map_extent(points, boundary));
+    let (bmax, kmax) = style.extent.unwrap_or_else(|| {
+        let drawn: Vec<BoundaryPoint> = boundary.iter().chain(&style.prediction).copied().collect();
+        map_extent(points, &drawn)
+    });
     let scale = style.scale.or_else(|| FidelityScale::of(points));
     let ok_label = style.ok_label.as_str();
     let (w, h) = style.size;
@@ -248,6 +258,14 @@ pub fn zwidth_map_svg_styled(
         chart
             .draw_series(LineSeries::new(line, BLACK.stroke_width(2)))
             .map_err(|e| e.to_string())?;
+        if !style.prediction.is_empty() {
+            let mut predicted: Vec<(f64, f64)> =
+                style.prediction.iter().map(|p| (p.b, p.k_max)).collect();
+            predicted.sort_by(|a, b| a.0.total_cmp(&b.0));
+            chart
+                .draw_series(LineSeries::new(predicted, PREDICTION.stroke_width(2)))
+                .map_err(|e| e.to_string())?;
+        }
         // Colour bar: fidelity error (N·s/m).
         if let Some(sc) = scale {
             let (top, bottom) = (60i32, h as i32 - 80);
@@ -307,6 +325,7 @@ pub fn zwidth_map_svg_styled(
             ok_label,
             points.iter().any(|p| !p.decided),
             intervals,
+            !style.prediction.is_empty(),
         ));
     }
     match svg.rfind("</svg>") {
@@ -322,6 +341,7 @@ pub(super) fn legend(
     ok_label: &str,
     undecided: bool,
     intervals: bool,
+    predicted: bool,
 ) -> String {
     let ok = xml_escape(ok_label);
     let mut rows: Vec<(String, String)> = vec![
@@ -351,6 +371,15 @@ pub(super) fn legend(
         rows.push((
             "<path d=\"M9 -6v12\" stroke=\"#c81e1e\" stroke-width=\"2\"/>".into(),
             "boundary interval (k_lo to k_hi)".into(),
+        ));
+    }
+    if predicted {
+        rows.push((
+            format!(
+                "<path d=\"M0 0h18\" stroke=\"{}\" stroke-width=\"2\"/>",
+                hex(PREDICTION)
+            ),
+            "prediction (the map's prior)".into(),
         ));
     }
     legend_box(corner, &rows)

@@ -195,6 +195,22 @@ mod tests {
         assert!(c.contains("1 points passive, fidelity error 1.000 to"));
         assert_eq!(c.matches("class=\"pts no\"").count(), 1);
         assert_eq!(c.matches("class=\"pts undecided\"").count(), 1);
+        // A prediction (a map's prior): a blue line in the legend and on
+        // the chart.
+        assert!(!c.contains("prediction"));
+        let high = vec![
+            BoundaryPoint::new(0.0, 4000.0),
+            BoundaryPoint::new(20.0, 5000.0),
+        ];
+        let style = MapStyle {
+            prediction: high,
+            ..MapStyle::default()
+        };
+        let p = zwidth_map_svg_styled("t", &pts, &b, &style).unwrap();
+        assert!(p.contains("prediction (the map's prior)"));
+        // RGB (30, 90, 200): the line and its key.
+        assert!(p.to_lowercase().matches("#1e5ac8").count() >= 2);
+        assert!(!c.to_lowercase().contains("#1e5ac8"));
     }
 
     #[test]

@@ -717,7 +717,7 @@ mod resolution_tests {
         // …, 2560) and seven to bisect [1280, 2560] to 1 %.
         let mut cold = Vec::new();
         let k_cold = bisect_k(below(1500.0), TOL, false, None, &mut cold).unwrap();
-        assert!(k_cold < 1500.0 && k_cold >= 1500.0 * 0.99, "{k_cold}");
+        assert!((1500.0 * 0.99..1500.0).contains(&k_cold), "{k_cold}");
         assert_eq!(cold.len(), 16);
         // A predicted interval 4 % wide: the two ends, then bisection to
         // 1 % (2 steps: 4 % → 2 % → 1 %).
@@ -741,7 +741,7 @@ mod resolution_tests {
         };
         let mut pts = Vec::new();
         let k = bisect_k(below(1500.0), TOL, false, Some(start), &mut pts).unwrap();
-        assert!(k < 1500.0 && k >= 1500.0 * 0.99, "{k}");
+        assert!((1500.0 * 0.99..1500.0).contains(&k), "{k}");
         let w = 1.01f64.ln();
         let mut expect = vec![1000.0, 1010.0];
         let (mut last, mut step) = (1010.0, w);
@@ -761,7 +761,7 @@ mod resolution_tests {
         };
         let mut pts = Vec::new();
         let k = bisect_k(below(1500.0), TOL, false, Some(start), &mut pts).unwrap();
-        assert!(k < 1500.0 && k >= 1500.0 * 0.99, "{k}");
+        assert!((1500.0 * 0.99..1500.0).contains(&k), "{k}");
         let w = (4040.0f64 / 4000.0).ln();
         assert_eq!(pts[1].k, 4000.0 * (-w).exp());
         assert_eq!(pts[2].k, pts[1].k * (-2.0 * w).exp());
@@ -784,11 +784,11 @@ mod resolution_tests {
         // and k0.
         let mut pts = Vec::new();
         let k = bisect_k(below(3.0), TOL, false, Some(Start::Empty), &mut pts).unwrap();
-        assert!(k < 3.0 && k >= 3.0 * 0.99, "{k}");
+        assert!((3.0 * 0.99..3.0).contains(&k), "{k}");
         // And above k0: up from it by doubling, then faster.
         let mut pts = Vec::new();
         let k = bisect_k(below(50.0), TOL, false, Some(Start::Empty), &mut pts).unwrap();
-        assert!(k < 50.0 && k >= 50.0 * 0.99, "{k}");
+        assert!((50.0 * 0.99..50.0).contains(&k), "{k}");
         assert_eq!(ks(&pts)[..3], [10.0, 20.0, 80.0]);
     }
 
