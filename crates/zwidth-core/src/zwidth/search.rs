@@ -153,7 +153,26 @@ fn prepare(spec: &MapSpec) -> Result<(Evaluator, Cost), SpecError> {
     } else {
         super::cost::of_map(spec, &ev.res, exact)?
     };
-    Ok((ev, cost))
+    Ok((ev, cost.plus(prior_cost(spec)?)))
+}
+
+/// What simulating a scene prior costs (its map's trials, run in this
+/// process and not stored); nothing for any other prior.
+fn prior_cost(spec: &MapSpec) -> Result<Cost, SpecError> {
+    let Some(Prior::Scene(scene)) = &spec.prior else {
+        return Ok(Cost::default());
+    };
+    let predicting = MapSpec {
+        scene: (**scene).clone(),
+        prior: None,
+        ..spec.clone()
+    };
+    let (_, c) = prepare(&predicting).map_err(|e| e.within("prior"))?;
+    Ok(Cost {
+        stored_rows: 0,
+        stored_bytes: 0,
+        ..c
+    })
 }
 
 /// Whether the map's boundary is defined by its trial (the Psi search on

@@ -532,6 +532,25 @@ fn a_prior_is_refused_where_it_cannot_seed_the_search() {
         with(Prior::Boundary(vec![]), SearchKind::Bisect),
         Err("prior.boundary".to_string())
     );
+    // A scene prior is a second map's trials, run here and not stored.
+    let alone = validate(&spec).unwrap();
+    let with_scene = validate(&MapSpec {
+        prior: Some(Prior::Scene(Box::new(spec.scene.clone()))),
+        ..spec.clone()
+    })
+    .unwrap();
+    assert_eq!(
+        (with_scene.maps, with_scene.trials, with_scene.stored_rows),
+        (2, 2 * alone.trials, alone.stored_rows)
+    );
+    assert_eq!(
+        validate(&MapSpec {
+            prior: Some(given()),
+            ..spec.clone()
+        })
+        .unwrap(),
+        alone
+    );
     let mut bad = spec.scene.clone();
     bad.device.mass = -1.0;
     assert_eq!(
