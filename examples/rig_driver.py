@@ -6,14 +6,20 @@ line from our stdout (docs/rigs.md, "the driver protocol"):
   {"type":"capabilities"}            -> {"type":"capabilities", ...}
   {"type":"trial","request":…,"limits":…} -> {"type":"result","point":…,"measured":…}
                                         or {"type":"error","message":…}
-  {"type":"abort"}                   -> (no answer: end the running trial early,
-                                        answering it with an error)
+  {"type":"abort"}                   -> (no answer of its own: the running trial
+                                        stops and is answered {"type":"error",
+                                        "message":"aborted"}; between trials it
+                                        is ignored)
 Replace `wall_hit` with your controller's (QuaRC, a microcontroller bridge…).
 Here it is a toy device: a mass with viscous and Coulomb friction, an
 encoder of 1 µm, the trial's own velocity estimator, one sample of
 computation delay, the wall
 F = -K x - B v̂ for x > 0 (2011 paper §2.4: push into the wall, settle,
 then judge the last seconds), the force clamped to the trial's limit.
+During a trial the driver watches stdin every 10 ms of the device's time
+for an abort, as a real controller must (ramp the force down, answer).
+`--realtime` paces the toy like hardware: each sample waits for its time,
+so a trial takes its 6 s (what the abort test uses).
 
 The estimator is zwidth's own through the Python package (`pip install
 ./python`, README "The estimators outside Rust"): every kind, bit for bit
@@ -24,7 +30,10 @@ are not known to be its own).
 """
 import json
 import math
+import os
+import select
 import sys
+import time
 
 try:
     import zwidth
@@ -58,7 +67,53 @@ def estimator(scene, rate_hz, q):
     return zwidth.Estimator(scene.get("estimator", {"kind": "fdm"}), rate_hz, q)
 
 
-def wall_hit(req, limits):
+class Lines:
+    """Lines from the agent on fd 0, read without blocking a trial:
+    `next()` waits for one (None at the end), `abort_waiting()` says
+    whether an abort has arrived since (and takes it)."""
+
+    def __init__(self, fd=0):
+        self.fd, self.buf, self.eof = fd, b"", False
+
+    def _fill(self, timeout):
+        if self.eof:
+            return
+        ready, _, _ = select.select([self.fd], [], [], timeout)
+        if ready:
+            chunk = os.read(self.fd, 65536)
+            self.buf += chunk
+            self.eof = not chunk
+
+    def next(self):
+        while b"\n" not in self.buf and not self.eof:
+            self._fill(None)
+        if b"\n" not in self.buf:
+            return None
+        line, self.buf = self.buf.split(b"\n", 1)
+        return line.decode()
+
+    def abort_waiting(self):
+        self._fill(0)
+        if b"\n" not in self.buf:
+            return False
+        first = self.buf.split(b"\n", 1)[0]
+        try:
+            is_abort = json.loads(first).get("type") == "abort"
+        except ValueError:
+            return False
+        if is_abort:
+            self.buf = self.buf.split(b"\n", 1)[1]
+        return is_abort
+
+
+class Aborted(Exception):
+    """The agent asked the running trial to stop."""
+
+
+REALTIME = "--realtime" in sys.argv[1:]
+
+
+def wall_hit(req, limits, lines):
     dev, loop = req["scene"]["device"], req["scene"]["loop"]
     m, b, fc = dev["mass"], dev["damping"], dev.get("coulomb", 0.0)
     T, K, B = 1.0 / loop["sample_hz"], req["k"], req["b"]
@@ -70,7 +125,14 @@ def wall_hit(req, limits):
     peak_f = peak_v = depth = 0.0
     settle, measure = int(4.0 / T), int(2.0 / T)
     lo, hi = math.inf, -math.inf
+    every = max(1, int(0.01 / T))                 # samples in 10 ms
+    start = time.monotonic()
     for n in range(settle + measure):
+        if n % every == 0:
+            if REALTIME:                          # hardware's pace
+                time.sleep(max(0.0, start + n * T - time.monotonic()))
+            if lines.abort_waiting():
+                raise Aborted()
         y = round(x / q) * q                      # the encoder
         v_hat = est.step(y)                       # the trial's estimator
         f = -K * y - B * v_hat if y > 0 else 0.0  # the virtual wall
@@ -88,16 +150,24 @@ def wall_hit(req, limits):
     return stable, {"peak_force_n": peak_f, "peak_speed_m_s": peak_v, "penetration_m": depth}
 
 
-for line in sys.stdin:
+if any(a != "--realtime" for a in sys.argv[1:]):
+    sys.exit(f"usage: {sys.argv[0]} [--realtime]")
+lines = Lines()
+while (line := lines.next()) is not None:
+    if not line.strip():
+        continue
     msg = json.loads(line)
     if msg["type"] == "capabilities":
         out = dict(CAPS, type="capabilities")
     elif msg["type"] == "trial":
         req = msg["request"]
         try:
-            stable, measured = wall_hit(req, msg["limits"])
+            stable, measured = wall_hit(req, msg["limits"], lines)
         except ValueError as e:  # the estimator refused its spec, naming the field
             print(json.dumps({"type": "error", "message": f"estimator: {e}"}), flush=True)
+            continue
+        except Aborted:  # a real driver ramps its force down here
+            print(json.dumps({"type": "error", "message": "aborted"}), flush=True)
             continue
         if stable is None:
             out = {"type": "error", "message": "aborted: past the speed or travel limit"}
@@ -105,9 +175,6 @@ for line in sys.stdin:
             out = {"type": "result", "point": {"k": req["k"], "b": req["b"], "stable": stable},
                    "measured": measured}
     else:
-        # An abort: this toy runs each trial to its end before it reads the
-        # next line, so there is nothing left to abort. A real driver
-        # watches stdin during a trial, ramps the force down and answers
-        # the trial with {"type":"error","message":"aborted"}.
+        # An abort between trials: nothing is running.
         continue
     print(json.dumps(out), flush=True)

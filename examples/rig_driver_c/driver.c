@@ -12,7 +12,9 @@
  * line from our stdout (docs/rigs.md, "the driver protocol"):
  *   {"type":"capabilities"}                 -> {"type":"capabilities", …, "dsp":{…}}
  *   {"type":"trial","request":…,"limits":…} -> {"type":"result",…} or {"type":"error",…}
- *   {"type":"abort"}                        -> nothing (each toy trial runs to its end)
+ *   {"type":"abort"}                        -> the running trial stops, answered
+ *                                              {"type":"error","message":"aborted"}
+ *                                              (between trials: ignored)
  *
  * The device: a mass with viscous and Coulomb friction, an encoder of the
  * scene's quantization, one sample of computation delay, the wall
@@ -21,15 +23,23 @@
  * force clamped to the trial's limit. Replace `wall_hit` with your
  * controller's loop; keep `zw_init_json` and `zw_step`.
  *
+ * During a trial the driver polls stdin every 10 ms of the device's time
+ * for an abort, as a real controller must (ramp the force down, answer).
+ * `--realtime` paces the toy like hardware: each sample waits for its
+ * time, so a trial takes its 6 s (what the abort test uses).
+ *
  * `--trace FILE`: after each trial that ran to its end, FILE holds its
  * positions and the velocities the estimator gave, one "y v" pair a line (%.17g: exact), so
  * they can be checked against `zwidth estimate`. */
 #define _POSIX_C_SOURCE 200809L
 #include <math.h>
+#include <poll.h>
 #include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
+#include <unistd.h>
 
 #include "zwidth.h"
 
@@ -118,6 +128,75 @@ static char *copy(const char *p) {
     return out;
 }
 
+/* ---- lines from the agent, read without blocking a trial ----------------- */
+
+static char *in_buf = NULL;
+static size_t in_len = 0, in_cap = 0;
+static bool in_eof = false;
+
+/* Read what fd 0 has within `timeout_ms` (-1: wait) into the buffer. */
+static void fill(int timeout_ms) {
+    if (in_eof) return;
+    struct pollfd pfd = {.fd = 0, .events = POLLIN};
+    if (poll(&pfd, 1, timeout_ms) <= 0) return;
+    if (in_cap - in_len < 65536) {
+        size_t cap = in_cap * 2 + 65536;
+        char *grown = realloc(in_buf, cap);
+        if (!grown) { in_eof = true; return; }
+        in_buf = grown;
+        in_cap = cap;
+    }
+    ssize_t n = read(0, in_buf + in_len, in_cap - in_len - 1);
+    if (n <= 0) in_eof = true;
+    else in_len += (size_t)n;
+    in_buf[in_len] = 0;
+}
+
+static char *newline(void) { return in_len ? memchr(in_buf, '\n', in_len) : NULL; }
+
+/* The next line (malloc'd, NUL-terminated, without its newline), waiting
+ * for it; NULL at the end of the input. */
+static char *next_line(void) {
+    while (!newline() && !in_eof) fill(-1);
+    char *nl = newline();
+    if (!nl) return NULL;
+    size_t n = (size_t)(nl - in_buf);
+    char *line = malloc(n + 1);
+    if (!line) return NULL;
+    memcpy(line, in_buf, n);
+    line[n] = 0;
+    memmove(in_buf, nl + 1, in_len - n - 1);
+    in_len -= n + 1;
+    in_buf[in_len] = 0;
+    return line;
+}
+
+/* Whether an abort has arrived (taken off the input if so). */
+static bool abort_waiting(void) {
+    fill(0);
+    char *nl = newline();
+    if (!nl) return false;
+    *nl = 0;
+    const char *type = member(in_buf, "type");
+    bool is_abort = type && strncmp(type, "\"abort\"", 7) == 0;
+    *nl = '\n';
+    if (is_abort) {
+        size_t n = (size_t)(nl - in_buf) + 1;
+        memmove(in_buf, nl + 1, in_len - n);
+        in_len -= n;
+        in_buf[in_len] = 0;
+    }
+    return is_abort;
+}
+
+static bool realtime = false;
+
+static double now_s(void) {
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
 /* ---- the toy device ----------------------------------------------------- */
 
 static const char *trace_path = NULL;
@@ -127,7 +206,8 @@ typedef struct {
 } measured;
 
 /* One wall hit at (k, b). Returns 1 stable, 0 not, -1 aborted past a limit,
- * -2 the estimator refused its spec (`why` says which parameter). */
+ * -2 the estimator refused its spec (`why` says which parameter), -3
+ * aborted by the agent. */
 static int wall_hit(const char *req, const char *limits, double k, double b, measured *m,
                     char *why, size_t why_len) {
     const char *dev = AT(req, "scene", "device");
@@ -156,7 +236,22 @@ static int wall_hit(const char *req, const char *limits, double k, double b, mea
     long settle = (long)(4.0 / T), measure = (long)(2.0 / T);
     double lo = INFINITY, hi = -INFINITY;
     *m = (measured){0, 0, 0};
+    long every = (long)(0.01 / T) > 0 ? (long)(0.01 / T) : 1; /* samples in 10 ms */
+    double start = now_s();
     for (long n = 0; n < settle + measure; n++) {
+        if (n % every == 0) {
+            if (realtime) { /* hardware's pace */
+                double wait = start + (double)n * T - now_s();
+                if (wait > 0) {
+                    struct timespec d = {(time_t)wait, (long)((wait - floor(wait)) * 1e9)};
+                    nanosleep(&d, NULL);
+                }
+            }
+            if (abort_waiting()) { /* a real driver ramps its force down here */
+                if (trace) fclose(trace);
+                return -3;
+            }
+        }
         double y = round(x / q) * q, v_hat; /* the encoder */
         zw_step(&est, y, &v_hat);           /* the trial's own estimator */
         if (trace) fprintf(trace, "%.17g %.17g\n", y, v_hat);
@@ -191,8 +286,10 @@ int main(int argc, char **argv) {
     for (int i = 1; i < argc; i++) {
         if (strcmp(argv[i], "--trace") == 0 && i + 1 < argc) {
             trace_path = argv[++i];
+        } else if (strcmp(argv[i], "--realtime") == 0) {
+            realtime = true;
         } else {
-            fprintf(stderr, "usage: %s [--trace FILE]\n", argv[0]);
+            fprintf(stderr, "usage: %s [--trace FILE] [--realtime]\n", argv[0]);
             return 2;
         }
     }
@@ -201,9 +298,8 @@ int main(int argc, char **argv) {
         fprintf(stderr, "zw_dsp_identity: 512 bytes were not enough\n");
         return 1;
     }
-    char *line = NULL;
-    size_t cap = 0;
-    while (getline(&line, &cap, stdin) > 0) {
+    char *line;
+    while ((line = next_line()) != NULL) {
         const char *type = member(line, "type");
         if (type && strncmp(type, "\"capabilities\"", 14) == 0) {
             printf("{\"type\":\"capabilities\",\"peak_force_n\":10.0,\"continuous_force_n\":4.0,"
@@ -227,6 +323,8 @@ int main(int argc, char **argv) {
                     for (char *c = why; *c; c++)
                         if (*c == '"' || *c == '\\') *c = '\'';
                     printf("{\"type\":\"error\",\"message\":\"%s\"}\n", why);
+                } else if (stable == -3) {
+                    printf("{\"type\":\"error\",\"message\":\"aborted\"}\n");
                 } else if (stable < 0) {
                     printf("{\"type\":\"error\",\"message\":\"aborted: past the speed or travel limit\"}\n");
                 } else {
@@ -239,10 +337,10 @@ int main(int argc, char **argv) {
                 }
             }
         }
-        /* An abort: nothing to do, each toy trial has ended before the
-         * next line is read (see examples/rig_driver.py). */
+        /* An abort between trials: nothing is running. */
         fflush(stdout);
+        free(line);
     }
-    free(line);
+    free(in_buf);
     return 0;
 }

@@ -1713,3 +1713,40 @@ fn a_rig_map_seeded_by_a_prediction_takes_fewer_trials_and_says_where_the_rig_di
         }
     }
 }
+
+#[test]
+fn an_abort_reaches_each_reference_driver_mid_trial_and_the_rig_is_idle_at_once() {
+    // Issue 46: both reference drivers watch stdin during a trial. Paced
+    // like hardware (`--realtime`: 6 s a wall hit), a trial aborted half
+    // a second in is answered at once, where a driver that ran it to its
+    // end would keep the rig busy for 5 s more.
+    let s = serve();
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/rig_driver.py");
+    let c = c_driver(&s._dir);
+    let drivers = [
+        ("python", format!("python3 {script} --realtime")),
+        ("c", format!("{} --realtime", c.display())),
+    ];
+    for (name, cmd) in drivers {
+        let a = agent(&s, name, &["--driver", &cmd]);
+        wait_for("the agent", 20, || connected(&s));
+        let id = submit(&s, "bench", MAP);
+        wait_for("a trial out", 20, || {
+            rig(&s, "bench")["attached"]["trial_out"].is_string()
+        });
+        std::thread::sleep(Duration::from_millis(500));
+        let t0 = std::time::Instant::now();
+        let (code, v, _) = post(&format!("{}/v1/rigs/bench/stop?mode=abort", s.base), "");
+        assert_eq!(code, 202, "{v}");
+        wait_for("the rig idle", 10, || {
+            rig(&s, "bench")["attached"]["trial_out"].is_null()
+        });
+        let idle_ms = t0.elapsed().as_millis();
+        eprintln!("{name} driver: abort to idle {idle_ms} ms");
+        assert!(idle_ms < 3000, "{name}: {idle_ms} ms: the trial ran on");
+        let (code, v, _) = post(&format!("{}/v1/experiments/{id}/cancel", s.base), "");
+        assert_eq!(code, 200, "{v}");
+        drop(a);
+        wait_for("the agent gone", 20, || !connected(&s));
+    }
+}
