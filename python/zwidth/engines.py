@@ -323,7 +323,8 @@ def map(  # noqa: A001 - the product's word for it
 
     A prediction seeds each column's bisection (`zwidth map --prior-scene`,
     `--prior-map`): `prior_scene`, a scene simulated first, or `prior_map`,
-    a `MapResult` (or its list of boundary points). The result is the
+    a `MapResult`, the dict of `zwidth map --json`, or a list of boundary
+    points `{"b", "k_max", "k_lo", "k_hi"}`. The result is the
     map's own; `raw["prior"]` sets the prediction beside each column.
     """
     _finite("b_max", b_max, "N·s/m")
@@ -344,7 +345,12 @@ def map(  # noqa: A001 - the product's word for it
     if prior_scene is not None:
         spec["prior"] = {"scene": _scene_dict(prior_scene)}
     elif prior_map is not None:
-        boundary = prior_map.raw["boundary"] if isinstance(prior_map, MapResult) else prior_map
+        if isinstance(prior_map, MapResult):
+            boundary = prior_map.raw["boundary"]
+        elif isinstance(prior_map, dict) and "boundary" in prior_map:  # `zwidth map --json`
+            boundary = prior_map["boundary"]
+        else:
+            boundary = prior_map
         spec["prior"] = {"boundary": boundary}
     return MapResult._from(_zwidth.loads(_zwidth.map_json(_zwidth.dumps(spec, ""))))
 

@@ -77,8 +77,7 @@ pub(super) fn run(command: Command) -> Result<(), CliError> {
             let trial_ms = trial_ms.unwrap_or(if pace == "realtime" { 10_000 } else { 0 });
             let device = match &sim_device {
                 Some(p) => {
-                    let scene = super::common::read_scene(p)
-                        .map_err(|e| CliError::Input(format!("--sim-device: {e}")))?;
+                    let scene = super::common::read_scene_of("--sim-device", p)?;
                     scene.validate().map_err(|e| {
                         CliError::Input(format!("--sim-device {}: {e}", p.display()))
                     })?;

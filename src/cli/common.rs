@@ -110,9 +110,15 @@ pub(super) fn read_boundary(
 }
 
 pub(super) fn read_scene(path: &std::path::Path) -> Result<SceneSpec, CliError> {
+    read_scene_of("--scene", path)
+}
+
+/// The scene file `path` given to `flag` (`--prior-scene`, `--sim-device`).
+pub(super) fn read_scene_of(flag: &str, path: &std::path::Path) -> Result<SceneSpec, CliError> {
     let text = std::fs::read_to_string(path)
-        .map_err(|e| CliError::Input(format!("--scene {} cannot be read: {e}", path.display())))?;
-    SceneSpec::from_json(&text).map_err(|e| CliError::Input(format!("{}: {e}", path.display())))
+        .map_err(|e| CliError::Input(format!("{flag} {} cannot be read: {e}", path.display())))?;
+    SceneSpec::from_json(&text)
+        .map_err(|e| CliError::Input(format!("{flag} {}: {e}", path.display())))
 }
 
 /// Run `work` while drawing a progress bar on stderr from `observer` (only

@@ -156,7 +156,10 @@ pub(super) fn run(
             prior_map,
         } => {
             let prior = match (prior_scene, prior_map) {
-                (Some(path), _) => Some(Prior::Scene(Box::new(read_scene(&path)?))),
+                (Some(path), _) => Some(Prior::Scene(Box::new(read_scene_of(
+                    "--prior-scene",
+                    &path,
+                )?))),
                 (None, Some(path)) => Some(Prior::Boundary(read_boundary(&path)?)),
                 (None, None) => None,
             };

@@ -49,17 +49,46 @@ pub(super) fn bisect_k(
             });
         let Some(fail) = below else { return Some(k) };
         // Bisect between the highest pass below the failure and it.
-        let lo = points
+        let mut lo = points
             .iter()
             .filter(|p| p.ok() && p.k < fail)
             .map(|p| p.k)
             .fold(0.0, f64::max);
-        if lo < k0 {
+        if lo < k0 && start.is_some() {
+            // From a prediction nothing below the bracket was tried (a
+            // search from k0 passed k0, 2·k0, …): halve down from the
+            // failure for a pass, as a search from k0 would have met one.
+            lo = pass_below(&mut classify, fail, k0.min(bounds.k_cap) / 1024.0, points);
+            if lo == 0.0 {
+                return None;
+            }
+        } else if lo < k0 {
             return None;
         }
         k = bisect_between(&mut classify, lo, fail, bounds.rel_tol, points);
     }
     Some(k)
+}
+
+/// The first K that renders halving down from `fail`, not below `floor`
+/// (0: none).
+fn pass_below(
+    classify: &mut impl FnMut(f64) -> Point,
+    fail: f64,
+    floor: f64,
+    points: &mut Vec<Point>,
+) -> f64 {
+    let mut k = fail;
+    while k / 2.0 >= floor {
+        k /= 2.0;
+        let p = classify(k);
+        let ok = p.ok();
+        points.push(p);
+        if ok {
+            return k;
+        }
+    }
+    0.0
 }
 
 fn bisect_between(
@@ -169,9 +198,18 @@ fn bisect_from(
         ok
     };
     let (lo0, hi0) = match start {
-        Start::Bracket { lo, hi } => (lo.clamp(floor, k_cap), hi.min(k_cap)),
+        // A predicted bracket wider than a factor of 2 (an interval whose
+        // upper end was never decided) is searched from its lower half:
+        // the gallop finds the rest, bisection's midpoints are arithmetic.
+        Start::Bracket { lo, hi } => {
+            let lo = lo.clamp(floor, k_cap);
+            (lo, hi.min(2.0 * lo).min(k_cap))
+        }
         // Predicted empty: from the first step, as a search from k0 would.
-        Start::Empty => (k0.min(k_cap), k0.min(k_cap) * 2.0),
+        Start::Empty => {
+            let k = k0.min(k_cap);
+            (k, (2.0 * k).min(k_cap))
+        }
     };
     // The gallop's first step: the predicted bracket's log width, at least
     // the resolution's.
@@ -243,7 +281,7 @@ pub(super) fn anchor_below(
     }
     let floor = bounds.k0.min(bounds.k_cap) / 1024.0;
     let mut k = points.iter().map(|p| p.k).fold(first_fail, f64::min);
-    while k / 2.0 >= floor {
+    while k.is_finite() && k / 2.0 >= floor {
         k /= 2.0;
         let p = classify(k);
         let ok = p.surely_ok();
@@ -849,5 +887,80 @@ mod resolution_tests {
         anchor_below(undecided, TOL, &mut pts);
         assert!(pts.iter().all(|p| p.k >= 10.0 / 1024.0));
         assert_eq!(pts.len(), 1 + 12);
+    }
+
+    #[test]
+    fn a_prediction_never_tries_past_the_cap_nor_reports_past_it() {
+        // Predicted empty where everything renders and the cap (15) is
+        // below twice the first step (10): 10, then the cap itself.
+        let capped = Bracket { k_cap: 15.0, ..TOL };
+        let mut pts = Vec::new();
+        let k = bisect_k(
+            below(f64::INFINITY),
+            capped,
+            false,
+            Some(Start::Empty),
+            &mut pts,
+        );
+        assert_eq!((k, ks(&pts)), (Some(15.0), vec![10.0, 15.0]));
+        // Renders below 12: bisected between 10 and the cap, never above it.
+        let mut pts = Vec::new();
+        let k = bisect_k(below(12.0), capped, false, Some(Start::Empty), &mut pts).unwrap();
+        assert!((12.0 * 0.99..12.0).contains(&k), "{k}");
+        assert!(pts.iter().all(|p| p.k <= 15.0), "{:?}", ks(&pts));
+        // A predicted bracket wider than a factor of 2 is searched from its
+        // lower half: [1000, 1e7] tries 1000, then 2000.
+        let wide = Start::Bracket {
+            lo: 1000.0,
+            hi: 1e7,
+        };
+        let mut pts = Vec::new();
+        let k = bisect_k(below(1500.0), TOL, false, Some(wide), &mut pts).unwrap();
+        assert_eq!(ks(&pts)[..2], [1000.0, 2000.0]);
+        assert!((1500.0 * 0.99..1500.0).contains(&k), "{k}");
+        // Nothing tried at all: no lower end to look for, and no loop.
+        let mut none = Vec::new();
+        anchor_below(below(1.0), TOL, &mut none);
+        assert!(none.is_empty());
+    }
+
+    #[test]
+    fn robust_bisection_from_a_prediction_finds_the_first_failure_from_below() {
+        // Renders below 100 N/m and again on [2000, 4000): predicted at
+        // [3900, 3950], the bracket finds the upper edge (~3975); its check
+        // at 0.3 of it (~1193) fails with nothing tried below, so the search
+        // halves down from there for a pass (1193/16 ≈ 74.5) and bisects to
+        // the first failure from below, as a robust search from k0 does.
+        let two_bands = |k: f64| Point {
+            k,
+            b: 0.0,
+            stable: Some(k < 100.0 || (2000.0..4000.0).contains(&k)),
+            ..Point::default()
+        };
+        let start = Start::Bracket {
+            lo: 3900.0,
+            hi: 3950.0,
+        };
+        let mut pts = Vec::new();
+        let seeded = bisect_k(two_bands, TOL, true, Some(start), &mut pts).unwrap();
+        let mut cold = Vec::new();
+        let from_k0 = bisect_k(two_bands, TOL, true, None, &mut cold).unwrap();
+        assert!((99.0..100.0).contains(&seeded), "{seeded}");
+        assert!((99.0..100.0).contains(&from_k0), "{from_k0}");
+        let halved = pts[5].k / 16.0;
+        assert!(
+            pts.iter().any(|p| p.k == halved && p.ok()),
+            "{:?}",
+            ks(&pts)
+        );
+        // Nothing renders below the upper band: robust says so (None), as
+        // from k0.
+        let upper = |k: f64| Point {
+            stable: Some((2000.0..4000.0).contains(&k)),
+            ..two_bands(k)
+        };
+        let mut pts = Vec::new();
+        assert_eq!(bisect_k(upper, TOL, true, Some(start), &mut pts), None);
+        assert_eq!(bisect_k(upper, TOL, true, None, &mut Vec::new()), None);
     }
 }

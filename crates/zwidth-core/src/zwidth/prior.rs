@@ -75,7 +75,7 @@ impl Prediction {
                     "a finite damping, |B| ≤ 1e7 N·s/m",
                 ));
             }
-            if points[..i].iter().any(|q| q.b.to_bits() == p.b.to_bits()) {
+            if points[..i].iter().any(|q| q.b == p.b) {
                 return Err(SpecError::new(
                     field(i, "b"),
                     p.b,
@@ -313,6 +313,10 @@ mod tests {
         );
         assert_eq!(
             err(vec![bp(0.0, 1.0, None, None), bp(0.0, 2.0, None, None)]),
+            "prior.boundary[1].b"
+        );
+        assert_eq!(
+            err(vec![bp(0.0, 1.0, None, None), bp(-0.0, 2.0, None, None)]),
             "prior.boundary[1].b"
         );
         assert_eq!(

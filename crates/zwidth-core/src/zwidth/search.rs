@@ -142,6 +142,13 @@ fn prepare(spec: &MapSpec) -> Result<(Evaluator, Cost), SpecError> {
         (ev.res.probe, ev.res.hit) = (trial.probe, trial.hit);
     }
     let exact = ev.criterion == Criterion::StrictPassivity && ev.model.is_some();
+    if exact && spec.prior.is_some() {
+        return Err(SpecError::new(
+            "prior",
+            "(given)",
+            "no search to seed: strict passivity on the analytic model is solved per B exactly",
+        ));
+    }
     // Planned as the search that runs: Psi where verdicts are random
     // draws, the bisection for a Psi map elsewhere (`Evaluator::runs_psi`).
     let cost = if spec.search == SearchKind::Psi && !ev.runs_psi(spec.search) {
@@ -206,28 +213,52 @@ fn check_prior(spec: &MapSpec) -> Result<(), SpecError> {
 }
 
 /// `spec` with its prior's prediction at hand: a scene simulated now (in
-/// this process, never on the map's rig) and given to the columns as its
-/// boundary, so that a farm's workers and a resumed run search from the
-/// same bits without simulating again.
-fn with_prediction(
-    spec: &MapSpec,
-) -> Result<(std::borrow::Cow<'_, MapSpec>, Option<Prediction>), SpecError> {
+/// this process, never on the map's rig; cancelled with the run
+/// `observer` watches) and given to the columns as its boundary, so that a
+/// farm's workers search from the same bits without simulating again. The
+/// map's own spec is checked first, so its faults are named as its own.
+fn with_prediction<'a>(
+    spec: &'a MapSpec,
+    observer: Option<&std::sync::Arc<Observer>>,
+) -> Result<(std::borrow::Cow<'a, MapSpec>, Option<Prediction>), SpecError> {
     let Some(prior) = &spec.prior else {
         return Ok((std::borrow::Cow::Borrowed(spec), None));
     };
-    check_prior(spec)?;
+    prepare(spec)?;
     let points = match prior {
         Prior::Scene(scene) => {
-            let predicted = map(&MapSpec {
+            let predicting = MapSpec {
                 scene: (**scene).clone(),
                 prior: None,
                 ..spec.clone()
+            };
+            let sub = std::sync::Arc::new(Observer::default());
+            let done = std::sync::atomic::AtomicBool::new(false);
+            let predicted = std::thread::scope(|s| {
+                if let Some(o) = observer {
+                    s.spawn(|| {
+                        while !done.load(std::sync::atomic::Ordering::Relaxed) {
+                            if o.cancelled() {
+                                sub.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+                                return;
+                            }
+                            std::thread::sleep(std::time::Duration::from_millis(20));
+                        }
+                    });
+                }
+                let r = map_observed(&predicting, Some(sub.clone()), 0);
+                done.store(true, std::sync::atomic::Ordering::Relaxed);
+                r
             })
-            .map_err(|e| e.within("prior.scene"))?;
+            .map_err(|e| e.within("prior"))?;
+            if sub.cancelled() {
+                // The run was cancelled meanwhile: its map ends at once.
+                return Ok((std::borrow::Cow::Borrowed(spec), None));
+            }
             predicted.boundary
         }
         Prior::Boundary(points) => points.clone(),
-        Prior::Run(_) => unreachable!("refused by check_prior"),
+        Prior::Run(_) => unreachable!("refused by prepare (check_prior)"),
     };
     let prediction = Prediction::new(points.clone())?;
     let resolved = MapSpec {
@@ -285,7 +316,7 @@ pub fn map_observed(
 ) -> Result<MapResult, SpecError> {
     let start = Instant::now();
     let source = spec.prior.as_ref().map(Prior::source);
-    let (spec, prediction) = with_prediction(spec)?;
+    let (spec, prediction) = with_prediction(spec, observer.as_ref())?;
     let spec = spec.as_ref();
     let (ev, b_auto) = map_evaluator(spec, observer, scope)?;
     let res = ev.res;
@@ -437,7 +468,7 @@ pub fn column_observed(
     observer: std::sync::Arc<Observer>,
     scope: u32,
 ) -> Result<(), SpecError> {
-    let (spec, _) = with_prediction(spec)?;
+    let (spec, _) = with_prediction(spec, Some(&observer))?;
     let spec = spec.as_ref();
     let (ev, b_auto) = map_evaluator(spec, Some(observer), scope)?;
     let in_map = spec.b.as_deref().unwrap_or(&b_auto);

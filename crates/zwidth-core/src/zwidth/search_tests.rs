@@ -551,6 +551,26 @@ fn a_prior_is_refused_where_it_cannot_seed_the_search() {
         .unwrap(),
         alone
     );
+    // The map's own faults are named as its own, before any prior runs.
+    let twice = MapSpec {
+        b: Some(vec![0.0, 0.0]),
+        prior: Some(Prior::Scene(Box::new(spec.scene.clone()))),
+        ..spec.clone()
+    };
+    assert_eq!(map(&twice).unwrap_err().field, "b");
+    assert_eq!(validate(&twice).unwrap_err().field, "b");
+    // No search to seed: strict passivity on the analytic model.
+    let exact = MapSpec {
+        criterion: Criterion::StrictPassivity,
+        method: Method::Analytic,
+        scene: SceneSpec::from_json(
+            r#"{"device":{"coulomb":0,"quantization":0},"loop":{"sample_hz":1000,"render_hz":1000}}"#,
+        )
+        .unwrap(),
+        prior: Some(given()),
+        ..spec.clone()
+    };
+    assert_eq!(validate(&exact).unwrap_err().field, "prior");
     let mut bad = spec.scene.clone();
     bad.device.mass = -1.0;
     assert_eq!(

@@ -145,6 +145,13 @@ impl SweepSpec {
 
     /// Every variant, validated, and what they cost together.
     pub fn checked(&self) -> Result<(Vec<Variant>, Cost), SpecError> {
+        if self.map.prior.is_some() {
+            return Err(SpecError::new(
+                "map.prior",
+                "(given)",
+                "absent: a sweep's variants are different devices or estimators, one prediction fits none of them; submit maps with a prior instead",
+            ));
+        }
         let out = self.variant_specs()?;
         let mut cost = Cost::default();
         for (i, (_, _, m)) in out.iter().enumerate() {
@@ -373,6 +380,12 @@ mod tests {
         );
         let none: SweepSpec = serde_json::from_str(r#"{"map":{"scene":{}}}"#).unwrap();
         assert_eq!(none.variants().unwrap_err().field, "sweep");
+        // A prediction fits one device: a sweep's maps take none.
+        let seeded: SweepSpec = serde_json::from_str(
+            r#"{"map":{"scene":{},"prior":{"boundary":[{"b":0,"k_max":1000}]}},"parameter":{"path":"device.mass","values":[0.1]}}"#,
+        )
+        .unwrap();
+        assert_eq!(seeded.variants().unwrap_err().field, "map.prior");
     }
 
     #[test]
