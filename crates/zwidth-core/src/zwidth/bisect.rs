@@ -963,4 +963,107 @@ mod resolution_tests {
         assert_eq!(bisect_k(upper, TOL, true, Some(start), &mut pts), None);
         assert_eq!(bisect_k(upper, TOL, true, None, &mut Vec::new()), None);
     }
+
+    #[test]
+    fn robust_bisection_halves_down_only_when_nothing_below_was_tried() {
+        // From a prediction, a check that fails above a pass already tried
+        // bisects from that pass (no halving): renders below 1000 and on
+        // [1300, 4000) but not on [1000, 1300); predicted at [3900, 3950]
+        // the checks at 0.3 (~1193, fails) finds no pass below at first…
+        let gap = |k: f64| Point {
+            k,
+            b: 0.0,
+            stable: Some(k < 1000.0 || (1300.0..4000.0).contains(&k)),
+            ..Point::default()
+        };
+        let start = Start::Bracket {
+            lo: 3900.0,
+            hi: 3950.0,
+        };
+        let mut pts = Vec::new();
+        let k = bisect_k(gap, TOL, true, Some(start), &mut pts).unwrap();
+        assert!((990.0..1000.0).contains(&k), "{k}");
+        // … and halves once, to ~596 (renders), then bisects [596, 1193].
+        let halved: Vec<f64> = ks(&pts).into_iter().filter(|&x| x < 990.0 * 0.3).collect();
+        assert!(
+            halved.is_empty(),
+            "no halving below the first pass: {halved:?}"
+        );
+        // Where a check fails above a pass already tried (its own check at
+        // 0.3), the bisection starts from that pass, without halving:
+        // renders below 1000 and on [1400, 3000); predicted [1500, 1510],
+        // the bracket finds 3000, the check at 0.3 (~900) renders, the one
+        // at 0.45 (~1350) fails: bisected from ~900, never from its half.
+        let two = |k: f64| Point {
+            stable: Some(k < 1000.0 || (1400.0..3000.0).contains(&k)),
+            ..gap(k)
+        };
+        let start_low = Start::Bracket {
+            lo: 1500.0,
+            hi: 1510.0,
+        };
+        let mut pts = Vec::new();
+        let k = bisect_k(two, TOL, true, Some(start_low), &mut pts).unwrap();
+        assert!((990.0..1000.0).contains(&k), "{k}");
+        let failed_check = pts
+            .iter()
+            .find(|p| !p.ok() && p.k < 1400.0)
+            .map(|p| p.k)
+            .unwrap();
+        assert!(
+            !pts.iter().any(|p| p.k == failed_check / 2.0),
+            "no halving from {failed_check}: {:?}",
+            ks(&pts)
+        );
+        // A pass below k0 itself: renders below 5 N/m only and on [2000,
+        // 4000); k0 = 10. Halving goes below k0 (to its floor k0/1024) and
+        // finds the first failure from below, 5, as from k0.
+        let low = |k: f64| Point {
+            stable: Some(k < 5.0 || (2000.0..4000.0).contains(&k)),
+            ..gap(k)
+        };
+        let mut pts = Vec::new();
+        let seeded = bisect_k(low, TOL, true, Some(start), &mut pts).unwrap();
+        let from_k0 = bisect_k(low, TOL, true, None, &mut Vec::new()).unwrap();
+        assert!((4.95..5.0).contains(&seeded), "{seeded}");
+        assert!((4.95..5.0).contains(&from_k0), "{from_k0}");
+        // Halving never tries below the floor.
+        let upper = |k: f64| Point {
+            stable: Some((2000.0..4000.0).contains(&k)),
+            ..gap(k)
+        };
+        let mut pts = Vec::new();
+        assert_eq!(bisect_k(upper, TOL, true, Some(start), &mut pts), None);
+        assert!(pts.iter().all(|p| p.k >= 10.0 / 1024.0), "{:?}", ks(&pts));
+    }
+
+    #[test]
+    fn robust_bisection_from_k0_bisects_from_k0_itself() {
+        // Renders on [0, 12) and [15, 45): from k0 = 10 the bracket finds 45;
+        // its check at 0.3 (13.5) fails, and the highest pass below it is k0
+        // itself, so the first failure from below is 12 (not "no boundary").
+        let v = |k: f64| Point {
+            k,
+            b: 0.0,
+            stable: Some(k < 12.0 || (15.0..45.0).contains(&k)),
+            ..Point::default()
+        };
+        let mut pts = Vec::new();
+        let k = bisect_k(v, TOL, true, None, &mut pts).unwrap();
+        assert!((12.0 * 0.99..12.0).contains(&k), "{k}");
+    }
+
+    #[test]
+    fn a_prediction_of_no_width_is_widened_by_the_resolution() {
+        // lo = hi = 1000 for a boundary at 1500: 1000, then 1000·1.01, and
+        // the gallop from there.
+        let start = Start::Bracket {
+            lo: 1000.0,
+            hi: 1000.0,
+        };
+        let mut pts = Vec::new();
+        let k = bisect_k(below(1500.0), TOL, false, Some(start), &mut pts).unwrap();
+        assert_eq!(ks(&pts)[..2], [1000.0, 1000.0 * 1.01f64.ln().exp()]);
+        assert!((1500.0 * 0.99..1500.0).contains(&k), "{k}");
+    }
 }

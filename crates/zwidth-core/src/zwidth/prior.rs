@@ -239,7 +239,8 @@ mod tests {
         ])
         .unwrap();
         // Sorted by B; the interval where given.
-        assert_eq!(p.points()[0].b, 0.0);
+        let bs: Vec<f64> = p.points().iter().map(|q| q.b).collect();
+        assert_eq!(bs, [0.0, 10.0, 20.0, 30.0, 40.0]);
         assert_eq!(
             p.start(10.0, 0.01),
             Start::Bracket {
