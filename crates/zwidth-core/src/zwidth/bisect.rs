@@ -1051,6 +1051,13 @@ mod resolution_tests {
         let mut pts = Vec::new();
         let k = bisect_k(v, TOL, true, None, &mut pts).unwrap();
         assert!((12.0 * 0.99..12.0).contains(&k), "{k}");
+        // The same from a column predicted empty (k0 first, then up): the
+        // pass at k0 is the bisection's lower end, no halving below it.
+        let mut pts = Vec::new();
+        let k = bisect_k(v, TOL, true, Some(Start::Empty), &mut pts).unwrap();
+        assert!((12.0 * 0.99..12.0).contains(&k), "{k}");
+        let failed = pts.iter().find(|p| !p.ok() && p.k < 15.0).unwrap().k;
+        assert!(!pts.iter().any(|p| p.k == failed / 2.0), "{:?}", ks(&pts));
     }
 
     #[test]

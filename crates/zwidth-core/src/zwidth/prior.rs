@@ -236,11 +236,20 @@ mod tests {
             bp(20.0, 0.0, None, Some(5.0)),
             bp(30.0, 3000.0, Some(2999.0), Some(3000.5)),
             bp(40.0, 4000.0, Some(4000.0), Some(4000.0)),
+            bp(50.0, 500.0, Some(0.0), Some(600.0)),
         ])
         .unwrap();
         // Sorted by B; the interval where given.
         let bs: Vec<f64> = p.points().iter().map(|q| q.b).collect();
-        assert_eq!(bs, [0.0, 10.0, 20.0, 30.0, 40.0]);
+        assert_eq!(bs, [0.0, 10.0, 20.0, 30.0, 40.0, 50.0]);
+        // No lower end decided (k_lo 0): from k_max, not from 0.
+        assert_eq!(
+            p.start(50.0, 0.01),
+            Start::Bracket {
+                lo: 500.0,
+                hi: 600.0
+            }
+        );
         assert_eq!(
             p.start(10.0, 0.01),
             Start::Bracket {
@@ -296,7 +305,7 @@ mod tests {
             }
         );
         assert_eq!(
-            p.start(99.0, 0.01),
+            p.start(44.0, 0.01),
             Start::Bracket {
                 lo: 4000.0,
                 hi: 4040.0

@@ -225,6 +225,9 @@ fn with_prediction<'a>(
         return Ok((std::borrow::Cow::Borrowed(spec), None));
     };
     prepare(spec)?;
+    if observer.is_some_and(|o| o.cancelled()) {
+        return Ok((std::borrow::Cow::Borrowed(spec), None));
+    }
     let points = match prior {
         Prior::Scene(scene) => {
             let predicting = MapSpec {

@@ -507,6 +507,44 @@ fn a_wrong_prior_is_flagged_and_the_map_stays_its_own() {
 }
 
 #[test]
+fn a_cancel_stops_a_scene_prior_s_simulation() {
+    // The prior's map runs in this process before the map's own trials:
+    // cancelling the run stops it there, and the map ends without a
+    // prediction (its report absent). The example rig's standard wall hits
+    // (6 s each at 10 kHz, three a trial) are seconds of a debug build.
+    let spec = MapSpec {
+        scene: SceneSpec::from_json(include_str!(
+            "../../../../examples/rig_2011_motor_encoder.json"
+        ))
+        .unwrap(),
+        b: Some(vec![0.0, 14.88, 29.76]),
+        ..replicated_map(0.52)
+    };
+    let seeded = MapSpec {
+        prior: Some(Prior::Scene(Box::new(spec.scene.clone()))),
+        ..spec.clone()
+    };
+    // Cancelled before it starts: nothing simulated, nothing mapped.
+    let o = std::sync::Arc::new(Observer::default());
+    o.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+    let r = map_observed(&seeded, Some(o), 0).unwrap();
+    assert!(r.prior.is_none());
+    // Cancelled a moment into the prior's simulation.
+    let o = std::sync::Arc::new(Observer::default());
+    let canceller = {
+        let o = o.clone();
+        std::thread::spawn(move || {
+            std::thread::sleep(std::time::Duration::from_millis(100));
+            o.cancel.store(true, std::sync::atomic::Ordering::Relaxed);
+        })
+    };
+    let r = map_observed(&seeded, Some(o.clone()), 0).unwrap();
+    canceller.join().unwrap();
+    assert!(r.prior.is_none(), "{:?}", r.prior);
+    assert!(o.cancelled());
+}
+
+#[test]
 fn a_prior_is_refused_where_it_cannot_seed_the_search() {
     let spec = replicated_map(0.52);
     let with = |prior: Prior, search: SearchKind| {
@@ -540,8 +578,13 @@ fn a_prior_is_refused_where_it_cannot_seed_the_search() {
     })
     .unwrap();
     assert_eq!(
-        (with_scene.maps, with_scene.trials, with_scene.stored_rows),
-        (2, 2 * alone.trials, alone.stored_rows)
+        (
+            with_scene.maps,
+            with_scene.trials,
+            with_scene.stored_rows,
+            with_scene.stored_bytes
+        ),
+        (2, 2 * alone.trials, alone.stored_rows, alone.stored_bytes)
     );
     assert_eq!(
         validate(&MapSpec {
