@@ -4,7 +4,7 @@ use std::io::{BufRead, Write};
 
 use crate::plot::{zwidth_map_svg_styled, FidelityScale, MapPlotPoint, MapStyle};
 use crate::zwidth::scene::SceneSpec;
-use crate::zwidth::search::{BoundaryPoint, MapResult};
+use crate::zwidth::search::MapResult;
 use crate::zwidth::settings::Criterion;
 
 use super::CliError;
@@ -239,23 +239,14 @@ pub fn map_svg(
     let style = MapStyle {
         ok_label: label.into(),
         scale,
-        prediction: r.prior.as_ref().map(predicted_boundary).unwrap_or_default(),
+        prediction: r
+            .prior
+            .as_ref()
+            .map(|p| p.predicted_boundary())
+            .unwrap_or_default(),
         ..MapStyle::default()
     };
     zwidth_map_svg_styled(title, &plot_points(r), &r.boundary, &style).map_err(CliError::Failure)
-}
-
-/// The predicted boundary a map's prior report holds, as boundary points.
-pub fn predicted_boundary(p: &crate::zwidth::prior::PriorReport) -> Vec<BoundaryPoint> {
-    p.columns
-        .iter()
-        .map(|c| BoundaryPoint {
-            b: c.b,
-            k_max: c.predicted_k_max,
-            k_lo: Some(c.predicted_k_lo),
-            k_hi: Some(c.predicted_k_hi),
-        })
-        .collect()
 }
 
 /// A text summary of a map.

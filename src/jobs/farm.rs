@@ -169,15 +169,7 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let store = Store::open(&dir.join("z.db")).await.unwrap();
         store
-            .insert(NewExperiment {
-                id: "e",
-                kind: "map",
-                spec: "{}",
-                priority: 0,
-                key: None,
-                not_before_ms: None,
-                rig: "sim",
-            })
+            .insert(NewExperiment::queued("e", "map", "{}", "sim"))
             .await
             .unwrap();
         let row = store.claim("sim", "driver", 60_000).await.unwrap().unwrap();

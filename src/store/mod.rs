@@ -88,6 +88,22 @@ pub struct NewExperiment<'a> {
     pub rig: &'a str,
 }
 
+impl<'a> NewExperiment<'a> {
+    /// A queued experiment at priority 0, with no idempotency key and no
+    /// earliest start.
+    pub fn queued(id: &'a str, kind: &'a str, spec: &'a str, rig: &'a str) -> Self {
+        Self {
+            id,
+            kind,
+            spec,
+            priority: 0,
+            key: None,
+            not_before_ms: None,
+            rig,
+        }
+    }
+}
+
 pub use crate::clock::now_ms;
 
 impl Store {

@@ -251,15 +251,9 @@ fn a_stored_spec_beyond_the_limits_fails_instead_of_taking_the_server_down() {
         let st = zwidth::store::Store::open(&dir.join("test.db"))
             .await
             .unwrap();
-        st.insert(zwidth::store::NewExperiment {
-            id: "old-1",
-            kind: "map",
-            spec: &spec,
-            priority: 0,
-            key: None,
-            not_before_ms: None,
-            rig: "sim",
-        })
+        st.insert(zwidth::store::NewExperiment::queued(
+            "old-1", "map", &spec, "sim",
+        ))
         .await
         .unwrap();
         st.close().await.unwrap();
@@ -282,15 +276,12 @@ fn stored_work_that_cannot_be_read_fails_the_experiment_saying_so() {
         let st = zwidth::store::Store::open(&dir.join("test.db"))
             .await
             .unwrap();
-        st.insert(zwidth::store::NewExperiment {
-            id: "unreadable-1",
-            kind: "map",
-            spec: SMALL,
-            priority: 0,
-            key: None,
-            not_before_ms: None,
-            rig: "sim",
-        })
+        st.insert(zwidth::store::NewExperiment::queued(
+            "unreadable-1",
+            "map",
+            SMALL,
+            "sim",
+        ))
         .await
         .unwrap();
         st.close().await.unwrap();
@@ -636,15 +627,12 @@ fn a_corrupt_database_is_reported_and_refuses_writes() {
     let (page, root) = rt.block_on(async {
         let st = zwidth::store::Store::open(&db).await.unwrap();
         for i in 0..50 {
-            st.insert(zwidth::store::NewExperiment {
-                id: &format!("e{i}"),
-                kind: "map",
-                spec: &"x".repeat(500),
-                priority: 0,
-                key: None,
-                not_before_ms: None,
-                rig: "sim",
-            })
+            st.insert(zwidth::store::NewExperiment::queued(
+                &format!("e{i}"),
+                "map",
+                &"x".repeat(500),
+                "sim",
+            ))
             .await
             .unwrap();
         }

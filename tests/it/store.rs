@@ -1112,17 +1112,9 @@ async fn the_workers_registry_keeps_what_each_worker_says() {
 async fn purging_a_rig_removes_its_experiments_and_trials_only() {
     for (store, _dir) in stores("purge").await {
         let st = &store;
-        st.insert(NewExperiment {
-            id: "b1",
-            kind: "map",
-            spec: "{}",
-            priority: 0,
-            key: None,
-            not_before_ms: None,
-            rig: "bench-1",
-        })
-        .await
-        .unwrap();
+        st.insert(NewExperiment::queued("b1", "map", "{}", "bench-1"))
+            .await
+            .unwrap();
         let run = claim(st).await;
         st.add_trials(&run, &[trial(0, 0, 0, 100.0, true)], &[], (1, 0.0))
             .await

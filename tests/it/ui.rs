@@ -534,15 +534,7 @@ async fn a_refined_compare_draws_each_row_once_with_its_latest_map() {
         .await
         .unwrap();
     store
-        .insert(NewExperiment {
-            id: "c1",
-            kind: "compare",
-            spec: r#"{"kind":"compare","accuracy":"draft","estimators":[{"kind":"fdm"},{"kind":"fdm"}],"resolve_rounds":1}"#,
-            priority: 0,
-            key: None,
-            not_before_ms: None,
-            rig: "sim",
-        })
+        .insert(NewExperiment::queued("c1", "compare", r#"{"kind":"compare","accuracy":"draft","estimators":[{"kind":"fdm"},{"kind":"fdm"}],"resolve_rounds":1}"#, "sim"))
         .await
         .unwrap();
     let row = store.claim("sim", "w1", 60_000).await.unwrap().unwrap();

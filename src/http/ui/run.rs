@@ -327,22 +327,11 @@ async fn maps_markup(
 /// A map's predicted boundary (its `prior`): the result's report once it
 /// has one, else a boundary given in the spec; empty for anything else.
 fn predicted(spec: &ExperimentSpec, result: Option<&Value>) -> Vec<BoundaryPoint> {
-    let from_result = result
-        .and_then(|r| r["prior"]["columns"].as_array())
-        .map(|cols| {
-            cols.iter()
-                .filter_map(|c| {
-                    Some(BoundaryPoint {
-                        b: c["b"].as_f64()?,
-                        k_max: c["predicted_k_max"].as_f64()?,
-                        k_lo: c["predicted_k_lo"].as_f64(),
-                        k_hi: c["predicted_k_hi"].as_f64(),
-                    })
-                })
-                .collect()
-        });
-    match (from_result, spec) {
-        (Some(p), _) => p,
+    let report = result.and_then(|r| {
+        serde_json::from_value::<crate::zwidth::prior::PriorReport>(r["prior"].clone()).ok()
+    });
+    match (report, spec) {
+        (Some(p), _) => p.predicted_boundary(),
         (None, ExperimentSpec::Map(m)) => match &m.prior {
             Some(crate::zwidth::prior::Prior::Boundary(b)) => b.clone(),
             _ => Vec::new(),
@@ -530,7 +519,7 @@ mod tests {
         // Before a result: the boundary the spec gives.
         assert_eq!(predicted(&spec, None), vec![BoundaryPoint::new(0.0, 100.0)]);
         // With one: the report's columns, intervals included.
-        let result = serde_json::json!({"prior": {"columns": [
+        let result = serde_json::json!({"prior": {"source": "the boundary given", "disagreements": 1, "trials": 3, "columns": [
             {"b": 0.0, "predicted_k_max": 90.0, "predicted_k_lo": 80.0, "predicted_k_hi": 95.0, "agrees": false}
         ]}});
         let p = predicted(&spec, Some(&result));

@@ -150,7 +150,7 @@ impl Prediction {
 }
 
 /// One column's prediction beside the map's own boundary.
-#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct PriorColumn {
     /// Damping (N·s/m).
     pub b: f64,
@@ -164,7 +164,7 @@ pub struct PriorColumn {
 }
 
 /// The prediction beside the map's boundary, column by column.
-#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct PriorReport {
     /// Where the prediction came from, in words.
     pub source: String,
@@ -173,6 +173,21 @@ pub struct PriorReport {
     pub disagreements: usize,
     /// The search's trials, for the saving against a map without a prior.
     pub trials: usize,
+}
+
+impl PriorReport {
+    /// The predicted boundary, as boundary points (for a plot).
+    pub fn predicted_boundary(&self) -> Vec<BoundaryPoint> {
+        self.columns
+            .iter()
+            .map(|c| BoundaryPoint {
+                b: c.b,
+                k_max: c.predicted_k_max,
+                k_lo: Some(c.predicted_k_lo),
+                k_hi: Some(c.predicted_k_hi),
+            })
+            .collect()
+    }
 }
 
 /// A boundary point's interval, `k_max` ± `rel_tol` where it has none.

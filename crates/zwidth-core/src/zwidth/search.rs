@@ -271,14 +271,6 @@ fn with_prediction<'a>(
     Ok((std::borrow::Cow::Owned(resolved), Some(prediction)))
 }
 
-/// The prediction of a spec whose prior is a boundary (`with_prediction`).
-fn prediction_of(spec: &MapSpec) -> Option<Prediction> {
-    match &spec.prior {
-        Some(Prior::Boundary(points)) => Prediction::new(points.clone()).ok(),
-        _ => None,
-    }
-}
-
 /// Which trials the force limit clipped, and how many boundary points such
 /// a trial decided (a boundary point is set by the first failure above its
 /// `k_max`: limited by the actuator when that trial saturated). None when
@@ -355,7 +347,7 @@ pub fn map_observed(
             (m.boundary, m.points)
         }
         (SearchKind::Bisect | SearchKind::RobustBisect | SearchKind::Psi, _, _) => {
-            bisect_all(&ev, spec, &b_auto)
+            bisect_all(&ev, spec, &b_auto, prediction.as_ref())
         }
         (SearchKind::Trace, _, _) => trace(&ev, spec, &b_auto),
         (SearchKind::Grid, _, _) => grid(&ev, spec, &b_auto),
@@ -471,7 +463,7 @@ pub fn column_observed(
     observer: std::sync::Arc<Observer>,
     scope: u32,
 ) -> Result<(), SpecError> {
-    let (spec, _) = with_prediction(spec, Some(&observer))?;
+    let (spec, prediction) = with_prediction(spec, Some(&observer))?;
     let spec = spec.as_ref();
     let (ev, b_auto) = map_evaluator(spec, Some(observer), scope)?;
     let in_map = spec.b.as_deref().unwrap_or(&b_auto);
@@ -489,7 +481,7 @@ pub fn column_observed(
             }
         }
         _ => {
-            bisect_column(&ev, spec, b);
+            bisect_column(&ev, spec, b, prediction.as_ref());
         }
     }
     ev.report(1.0);
@@ -560,10 +552,15 @@ pub fn area(boundary: &[BoundaryPoint]) -> f64 {
 
 /// One column of a bisection map: the largest K that renders at `b`, with
 /// its interval on a noisy scene, and the trials that found it.
-fn bisect_column(ev: &Classifier, spec: &MapSpec, b: f64) -> (BoundaryPoint, Vec<Point>) {
+fn bisect_column(
+    ev: &Classifier,
+    spec: &MapSpec,
+    b: f64,
+    prediction: Option<&Prediction>,
+) -> (BoundaryPoint, Vec<Point>) {
     let mut pts = Vec::new();
     let robust = spec.search == SearchKind::RobustBisect;
-    let start = prediction_of(spec).map(|p| p.start(b, ev.res.k_rel_tol));
+    let start = prediction.map(|p| p.start(b, ev.res.k_rel_tol));
     let k = ev.bisect_k(b, ev.res.k_step, spec.k_max, robust, start, &mut pts);
     let mut bp = BoundaryPoint::new(b, k.unwrap_or(0.0));
     if ev.noisy() {
@@ -578,8 +575,13 @@ fn bisect_column(ev: &Classifier, spec: &MapSpec, b: f64) -> (BoundaryPoint, Vec
     (bp, pts)
 }
 
-fn bisect_all(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>, Vec<Point>) {
-    let one = |b: f64| bisect_column(ev, spec, b);
+fn bisect_all(
+    ev: &Classifier,
+    spec: &MapSpec,
+    b_auto: &[f64],
+    prediction: Option<&Prediction>,
+) -> (Vec<BoundaryPoint>, Vec<Point>) {
+    let one = |b: f64| bisect_column(ev, spec, b, prediction);
     if let Some(bs) = &spec.b {
         // With a farm, every column is computed elsewhere first (in
         // parallel), then replayed here.
@@ -719,6 +721,9 @@ fn grid(ev: &Classifier, spec: &MapSpec, b_auto: &[f64]) -> (Vec<BoundaryPoint>,
 #[cfg(test)]
 #[path = "in_order_tests.rs"]
 mod in_order_tests;
+#[cfg(test)]
+#[path = "search_prior_tests.rs"]
+mod prior_tests;
 #[cfg(test)]
 #[path = "search_tests.rs"]
 mod tests;
